@@ -1,0 +1,89 @@
+//! Firmware for an Arduino Mega 2560 with a RAMPS 1.4 shield.
+//!
+//! This crate is the board: pins, clocks, interrupt vectors and the main
+//! loop. Every decision is made by the `firmware` core; the interrupt
+//! handlers here only move bytes and ticks into it.
+//!
+//! Boot order matters for safety: heaters off and drivers disabled before
+//! anything else, then the watchdog, then the peripherals.
+#![no_std]
+#![no_main]
+#![feature(abi_avr_interrupt)]
+#![deny(unsafe_op_in_unsafe_fn)]
+
+mod adc;
+mod clock;
+mod pins;
+mod serial;
+mod watchdog;
+
+use avr_device::atmega2560::Peripherals;
+use firmware::line::LineAssembler;
+use firmware::machine::Machine;
+use firmware::rx::{self, RxQueue};
+use firmware::thermal::thermistor::{celsius_from_adc, NTC100K_B3950_4K7};
+use firmware::thermal::Celsius;
+
+/// How often the thermistors are read, in milliseconds.
+const THERMAL_PERIOD_MS: u32 = 100;
+
+static mut RX_QUEUE: RxQueue = RxQueue::new();
+
+#[avr_device::entry]
+fn main() -> ! {
+    // SAFETY: the only call to steal(); `take()` would cost a flag in RAM.
+    let dp = unsafe { Peripherals::steal() };
+    pins::all_outputs_safe(&dp);
+    watchdog::start(&dp);
+
+    // SAFETY: the queue is split exactly once, here, before interrupts are
+    // enabled; afterwards only its two ends are used.
+    let queue = unsafe { &mut *core::ptr::addr_of_mut!(RX_QUEUE) };
+    let (producer, mut consumer) = rx::split(queue);
+    serial::init(&dp, producer);
+    clock::init(&dp);
+    adc::init(&dp);
+    // SAFETY: everything the interrupts touch is initialised.
+    unsafe { avr_device::interrupt::enable() };
+
+    let mut tx = serial::Tx;
+    let mut machine = Machine::new();
+    let mut assembler = LineAssembler::new();
+    let _ = machine.write_banner(&mut tx);
+    let mut next_thermal_ms = 0u32;
+
+    // The loop never sleeps: QEMU's AVR machine does not wake from `sleep`
+    // on its timer interrupt and avr-tester stops at the first `sleep`, and
+    // a printer board has no battery to save.
+    loop {
+        watchdog::feed();
+        if serial::take_dropped() > 0 {
+            assembler.mark_damaged();
+        }
+        while let Some(byte) = consumer.pop() {
+            if let Some(line) = assembler.push(byte) {
+                let _ = machine.handle_line(line, &mut tx);
+            }
+        }
+        let now = clock::millis();
+        if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
+            next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
+            let read = |channel| celsius_from_adc(&NTC100K_B3950_4K7, adc::read(&dp, channel)).unwrap_or(Celsius(0));
+            machine.set_measured(read(pins::HOTEND_THERMISTOR_CHANNEL), read(pins::BED_THERMISTOR_CHANNEL));
+        }
+    }
+}
+
+#[panic_handler]
+fn panic(_info: &core::panic::PanicInfo) -> ! {
+    avr_device::interrupt::disable();
+    // SAFETY: interrupts are off; nothing else runs from here on.
+    let dp = unsafe { Peripherals::steal() };
+    pins::all_outputs_safe(&dp);
+    watchdog::stop(&dp);
+    let mut tx = serial::Tx;
+    let _ = ufmt::uwrite!(tx, "Error:Firmware panic: heaters off, motors disabled. Reset the board.\n");
+    loop {
+        avr_device::asm::sleep();
+    }
+}

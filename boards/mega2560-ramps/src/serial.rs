@@ -1,0 +1,78 @@
+//! USART0 (the USB bridge): interrupt-driven receive, polled transmit.
+//!
+//! The receive interrupt does one thing: move the byte (and the UART's own
+//! overrun flag) into the core's receive ring. Transmit waits for the data
+//! register; the receive interrupt keeps running meanwhile, so waiting to
+//! send never loses input.
+
+use avr_device::atmega2560::{Peripherals, USART0};
+use avr_device::interrupt::Mutex;
+use core::cell::RefCell;
+use firmware::rx::RxProducer;
+
+/// Baud rate: Marlin's default 115200, or 250000 with `--features baud-250000`.
+#[cfg(not(feature = "baud-250000"))]
+pub const BAUD: u32 = 115_200;
+#[cfg(feature = "baud-250000")]
+pub const BAUD: u32 = 250_000;
+
+const CPU_HZ: u32 = 16_000_000;
+/// Double-speed mode divisor (U2X0 = 1): UBRR = f/(8·baud) − 1, rounded.
+/// 115200 → 16 (117647 baud, +2.1 %, as on every Arduino); 250000 → 7 (exact).
+const UBRR: u16 = ((CPU_HZ + 4 * BAUD) / (8 * BAUD) - 1) as u16;
+
+/// The interrupt's end of the receive ring, installed once by [`init`].
+pub static RX_PRODUCER: Mutex<RefCell<Option<RxProducer<'static>>>> = Mutex::new(RefCell::new(None));
+
+/// Set up 8N1 at [`BAUD`] with the receive interrupt on.
+pub fn init(dp: &Peripherals, producer: RxProducer<'static>) {
+    avr_device::interrupt::free(|cs| RX_PRODUCER.borrow(cs).replace(Some(producer)));
+    let usart = &dp.USART0;
+    usart.ubrr0.write(|w| w.bits(UBRR));
+    // SAFETY: U2X0 (bit 1) only; the other bits are flags or zero.
+    usart.ucsr0a.write(|w| unsafe { w.bits(1 << 1) });
+    // 8 data bits, no parity, one stop bit: UCSZ01 | UCSZ00.
+    // SAFETY: a valid frame format.
+    usart.ucsr0c.write(|w| unsafe { w.bits(0b0000_0110) });
+    usart.ucsr0b.write(|w| w.rxen0().set_bit().txen0().set_bit().rxcie0().set_bit());
+}
+
+/// Bytes lost in reception since the last call (ring full or UART overrun).
+pub fn take_dropped() -> u8 {
+    avr_device::interrupt::free(|cs| RX_PRODUCER.borrow(cs).borrow_mut().as_mut().map_or(0, |p| p.take_dropped()))
+}
+
+#[avr_device::interrupt(atmega2560)]
+fn USART0_RX() {
+    // SAFETY: read-only access to USART0's status and data registers; the
+    // main loop only ever writes to the transmit side.
+    let usart = unsafe { &*USART0::ptr() };
+    let overrun = usart.ucsr0a.read().dor0().bit_is_set();
+    let byte = usart.udr0.read().bits();
+    avr_device::interrupt::free(|cs| {
+        if let Some(producer) = RX_PRODUCER.borrow(cs).borrow_mut().as_mut() {
+            producer.push(byte, overrun);
+        }
+    });
+}
+
+/// The transmit side, as a `ufmt` writer.
+pub struct Tx;
+
+impl Tx {
+    fn write_byte(byte: u8) {
+        // SAFETY: only the main loop transmits; UDR0 and UDRE0 are its own.
+        let usart = unsafe { &*USART0::ptr() };
+        while usart.ucsr0a.read().udre0().bit_is_clear() {}
+        usart.udr0.write(|w| w.bits(byte));
+    }
+}
+
+impl ufmt::uWrite for Tx {
+    type Error = core::convert::Infallible;
+
+    fn write_str(&mut self, s: &str) -> Result<(), Self::Error> {
+        s.bytes().for_each(Self::write_byte);
+        Ok(())
+    }
+}

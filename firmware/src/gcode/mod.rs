@@ -1,0 +1,213 @@
+//! The G-code lexer and parser: one line of text → one [`Command`].
+//!
+//! Grammar (RS274/NGC as RepRap firmware speaks it):
+//! - a word is a letter and a number: `X-1.25`; letters may be lower case;
+//!   whitespace may stand anywhere between words (`G1X10 Y 5` is fine);
+//! - `;` starts a comment that runs to the end of the line; `( … )` is a
+//!   comment inside the line and must be closed;
+//! - the first word names the command (`G`, `M` or `T` and a whole number);
+//!   a line that starts with an axis word repeats the modal motion (Grbl);
+//! - a letter with no number is a flag (`G28 X`); commands that need a value
+//!   report [`ParseError::WordWithoutValue`] when they read it;
+//! - `M117`/`M118` take the rest of the line as text.
+//!
+//! Line numbers (`N`) and checksums (`*`) belong to the host protocol and are
+//! removed by [`crate::protocol`] before this parser sees the line.
+//!
+//! Nothing here allocates, and no float is used (see [`number`]).
+
+pub mod number;
+
+pub use number::{Decimal, NumberError};
+
+/// Most parameter words one command may carry (`G1 X Y Z E F` is 5).
+pub const MAX_WORDS: usize = 12;
+
+/// Why a line is not valid G-code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ParseError {
+    /// A number that cannot be read (`X1.2.3`, `X-`, `x1e30`).
+    BadNumber(u8),
+    /// A number whose integer part does not fit (`X99999999999`).
+    NumberOutOfRange(u8),
+    /// A parameter without the value its command needs (`G1 X`).
+    WordWithoutValue(u8),
+    /// A `(` comment that is never closed.
+    UnterminatedComment,
+    /// A byte that is neither a letter, a number, a space nor a comment
+    /// (NUL, non-ASCII, `#`, ...).
+    UnexpectedByte(u8),
+    /// The same letter twice (`G1 X1 X2`).
+    DuplicateWord(u8),
+    /// More than [`MAX_WORDS`] parameters.
+    TooManyWords,
+    /// The command number is not a whole number in range (`G1.5`, `M-3`).
+    BadCommandNumber,
+    /// Only comments and spaces: nothing to execute.
+    Empty,
+}
+
+/// A parameter word; `value` is `None` for a bare flag (`G28 X`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Word {
+    pub letter: u8,
+    pub value: Option<Decimal>,
+}
+
+/// What the line asks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Code {
+    G(u16),
+    M(u16),
+    T(u16),
+    /// Axis words with no command: repeat the modal motion (`G0`/`G1`).
+    Modal,
+}
+
+/// One parsed line.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Command {
+    pub code: Code,
+    words: heapless::Vec<Word, MAX_WORDS>,
+}
+
+impl Command {
+    pub fn new(code: Code) -> Self {
+        Self { code, words: heapless::Vec::new() }
+    }
+
+    /// Add a word (tests and generated commands).
+    pub fn with(mut self, letter: u8, value: Decimal) -> Self {
+        let _ = self.words.push(Word { letter, value: Some(value) });
+        self
+    }
+
+    /// Whether `letter` appears, with or without a value.
+    pub fn has(&self, letter: u8) -> bool {
+        self.words.iter().any(|w| w.letter == letter)
+    }
+
+    /// The value of `letter`: `Ok(None)` if absent, an error if it is a flag.
+    pub fn value(&self, letter: u8) -> Result<Option<Decimal>, ParseError> {
+        match self.words.iter().find(|w| w.letter == letter) {
+            None => Ok(None),
+            Some(Word { value: Some(v), .. }) => Ok(Some(*v)),
+            Some(Word { value: None, .. }) => Err(ParseError::WordWithoutValue(letter)),
+        }
+    }
+
+    pub fn words(&self) -> &[Word] {
+        &self.words
+    }
+}
+
+/// Parse one line (without `N` and `*checksum`) into a command.
+pub fn parse(text: &[u8]) -> Result<Command, ParseError> {
+    let mut lexer = Lexer { text, index: 0 };
+    let first = lexer.next_word()?.ok_or(ParseError::Empty)?;
+    let code = match first.letter {
+        b'G' | b'M' | b'T' => {
+            let value = first.value.ok_or(ParseError::WordWithoutValue(first.letter))?;
+            if value.fraction_digits() != 0 || value.is_negative() {
+                return Err(ParseError::BadCommandNumber);
+            }
+            let number = u16::try_from(value.mantissa()).map_err(|_| ParseError::BadCommandNumber)?;
+            match first.letter {
+                b'G' => Code::G(number),
+                b'M' => Code::M(number),
+                _ => Code::T(number),
+            }
+        }
+        _ => Code::Modal,
+    };
+    let mut command = Command::new(code);
+    if matches!(code, Code::M(117) | Code::M(118)) {
+        return Ok(command); // the rest is free text
+    }
+    if code == Code::Modal {
+        command.words.push(first).map_err(|_| ParseError::TooManyWords)?;
+    }
+    while let Some(word) = lexer.next_word()? {
+        if command.has(word.letter) {
+            return Err(ParseError::DuplicateWord(word.letter));
+        }
+        command.words.push(word).map_err(|_| ParseError::TooManyWords)?;
+    }
+    Ok(command)
+}
+
+/// The free text of an `M117`/`M118` line: everything after the code.
+pub fn text_argument(text: &[u8]) -> &[u8] {
+    let mut index = 0;
+    // Skip spaces, the letter, and the code's digits, then one space.
+    while index < text.len() && text[index] == b' ' {
+        index += 1;
+    }
+    index += 1;
+    while index < text.len() && text[index].is_ascii_digit() {
+        index += 1;
+    }
+    if index < text.len() && text[index] == b' ' {
+        index += 1;
+    }
+    let rest = &text[index.min(text.len())..];
+    match rest.iter().position(|&b| b == b';') {
+        Some(end) => &rest[..end],
+        None => rest,
+    }
+}
+
+struct Lexer<'a> {
+    text: &'a [u8],
+    index: usize,
+}
+
+impl Lexer<'_> {
+    /// Skip spaces and comments; `Ok(None)` at the end of the line.
+    fn skip_blank(&mut self) -> Result<Option<u8>, ParseError> {
+        loop {
+            let Some(&byte) = self.text.get(self.index) else { return Ok(None) };
+            match byte {
+                b' ' | b'\t' => self.index += 1,
+                b';' => {
+                    self.index = self.text.len();
+                    return Ok(None);
+                }
+                b'(' => {
+                    let rest = &self.text[self.index..];
+                    let close = rest.iter().position(|&b| b == b')').ok_or(ParseError::UnterminatedComment)?;
+                    self.index += close + 1;
+                }
+                _ => return Ok(Some(byte)),
+            }
+        }
+    }
+
+    fn next_word(&mut self) -> Result<Option<Word>, ParseError> {
+        let Some(byte) = self.skip_blank()? else { return Ok(None) };
+        if !byte.is_ascii_alphabetic() {
+            return Err(ParseError::UnexpectedByte(byte));
+        }
+        let letter = byte.to_ascii_uppercase();
+        self.index += 1;
+        // Spaces may separate a letter from its number (`X 10`).
+        while matches!(self.text.get(self.index), Some(b' ' | b'\t')) {
+            self.index += 1;
+        }
+        let starts_number = matches!(self.text.get(self.index), Some(b'0'..=b'9' | b'-' | b'+' | b'.'));
+        if !starts_number {
+            return Ok(Some(Word { letter, value: None }));
+        }
+        match Decimal::parse(&self.text[self.index..]) {
+            Ok((value, used)) => {
+                self.index += used;
+                Ok(Some(Word { letter, value: Some(value) }))
+            }
+            Err(NumberError::Malformed) => Err(ParseError::BadNumber(letter)),
+            Err(NumberError::OutOfRange) => Err(ParseError::NumberOutOfRange(letter)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,32 @@
+//! The control core of the firmware: everything that decides something.
+//!
+//! This crate is `no_std` and allocation-free. It never touches a register:
+//! boards hand it bytes, ADC samples and timer events through small traits and
+//! plain function calls, so the very same code runs on the Mega 2560, on the
+//! ARM board and on the PC against `hal-sim`.
+//!
+//! Layout (one concept per module):
+//! - [`rx`]: the serial receive ring between the RX interrupt and the main loop;
+//! - [`line`]: assembling received bytes into bounded lines;
+//! - [`gcode`]: the allocation-free G-code lexer/parser and its number format;
+//! - [`protocol`]: Marlin's host protocol (line numbers, checksums, resends);
+//! - [`reply`]: the exact reply strings hosts parse, and decimal formatting;
+//! - [`machine`]: the command executor and the machine's modal state.
+#![no_std]
+#![deny(unsafe_op_in_unsafe_fn)]
+
+#[cfg(test)]
+extern crate std;
+
+pub mod gcode;
+pub mod line;
+pub mod machine;
+pub mod protocol;
+pub mod reply;
+pub mod rx;
+pub mod thermal;
+
+/// Name and version reported in the boot banner and by `M115`.
+pub const FIRMWARE_NAME: &str = "Ferrostep";
+/// Crate version, reported beside the name.
+pub const FIRMWARE_VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -1,0 +1,225 @@
+//! Marlin's host protocol: line numbers, checksums and resend requests.
+//!
+//! A host may prefix a line with `N<n>` and suffix it with `*<checksum>`,
+//! the XOR of every byte before the `*`. A numbered line is accepted only if
+//! its checksum matches and `n` is one more than the last accepted number
+//! (or the line is an `M110`, which sets the numbering). Anything else is
+//! answered with Marlin's error, `Resend: <last+1>` and `ok`, so Printrun,
+//! OctoPrint and Repetier-Host resend from the right line. An unnumbered
+//! line is accepted as is (plain terminals), and a numbered line without a
+//! checksum is refused (a number without a checksum protects nothing).
+//!
+//! A line that lost bytes in reception is refused the same way once the host
+//! has used line numbers; without them there is nothing to resend, and the
+//! error alone tells the user that a line was lost.
+
+use crate::line::Line;
+use ufmt::uWrite;
+
+/// Why a received line was refused before any G-code was parsed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LineRejection {
+    ChecksumMismatch,
+    LineNumberOutOfOrder,
+    NoChecksum,
+    NoLineNumberWithChecksum,
+    /// `N` not followed by a valid number, or `*` by a valid checksum.
+    MalformedHeader,
+    TooLong,
+    /// Bytes of the line were lost in reception.
+    Damaged,
+}
+
+impl LineRejection {
+    /// Marlin's text for the rejection (the part after `Error:`).
+    pub fn message(self) -> &'static str {
+        match self {
+            Self::ChecksumMismatch => "checksum mismatch",
+            Self::LineNumberOutOfOrder => "Line Number is not Last Line Number+1",
+            Self::NoChecksum => "No Checksum with line number",
+            Self::NoLineNumberWithChecksum => "No Line Number with checksum",
+            Self::MalformedHeader => "Malformed line number or checksum",
+            Self::TooLong => "Line too long",
+            Self::Damaged => "Serial receive overrun, line lost",
+        }
+    }
+}
+
+/// Line-numbering state of the host connection.
+pub struct HostProtocol {
+    last_line: i32,
+    /// The host has sent numbered lines: lost lines can be resent.
+    numbered: bool,
+}
+
+impl Default for HostProtocol {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl HostProtocol {
+    pub const fn new() -> Self {
+        Self { last_line: 0, numbered: false }
+    }
+
+    pub fn last_line(&self) -> i32 {
+        self.last_line
+    }
+
+    /// Set the last line number (`M110 N<n>`): the next line is `n + 1`.
+    pub fn set_last_line(&mut self, number: i32) {
+        self.last_line = number;
+    }
+
+    /// Check a received line; returns the G-code body (without `N` and
+    /// `*checksum`) or why it was refused.
+    pub fn accept<'a>(&mut self, line: Line<'a>) -> Result<&'a [u8], LineRejection> {
+        let text = match line {
+            Line::Text(text) => text,
+            Line::TooLong => return Err(LineRejection::TooLong),
+            Line::Damaged => return Err(LineRejection::Damaged),
+        };
+        let star = text.iter().position(|&b| b == b'*');
+        let start = text.iter().position(|&b| b != b' ').unwrap_or(text.len());
+        let numbered = matches!(text.get(start), Some(b'N' | b'n'));
+        if !numbered {
+            return match star {
+                Some(_) => Err(LineRejection::NoLineNumberWithChecksum),
+                None => Ok(text),
+            };
+        }
+        self.numbered = true;
+        let star = star.ok_or(LineRejection::NoChecksum)?;
+        let expected = parse_checksum(&text[star + 1..]).ok_or(LineRejection::MalformedHeader)?;
+        let actual = text[..star].iter().fold(0u8, |sum, &b| sum ^ b);
+        if actual != expected {
+            return Err(LineRejection::ChecksumMismatch);
+        }
+        let (number, used) = parse_line_number(&text[start + 1..star]).ok_or(LineRejection::MalformedHeader)?;
+        let body = &text[start + 1 + used..star];
+        if is_m110(body) {
+            self.last_line = number;
+        } else if Some(number) != self.last_line.checked_add(1) {
+            return Err(LineRejection::LineNumberOutOfOrder);
+        } else {
+            self.last_line = number;
+        }
+        Ok(body)
+    }
+
+    /// Write the reply to a refused line: the error, a resend request when
+    /// the host numbers its lines, and `ok` (Marlin's order).
+    pub fn write_rejection<W: uWrite + ?Sized>(&self, rejection: LineRejection, out: &mut W) -> Result<(), W::Error> {
+        out.write_str("Error:")?;
+        out.write_str(rejection.message())?;
+        if self.numbered {
+            ufmt::uwrite!(out, ", Last Line: {}\nResend: {}\n", self.last_line, self.last_line.wrapping_add(1))?;
+        } else {
+            out.write_str("\n")?;
+        }
+        out.write_str("ok\n")
+    }
+}
+
+fn parse_line_number(text: &[u8]) -> Option<(i32, usize)> {
+    match crate::gcode::Decimal::parse(text) {
+        Ok((value, used)) if value.fraction_digits() == 0 => Some((value.mantissa(), used)),
+        _ => None,
+    }
+}
+
+fn parse_checksum(text: &[u8]) -> Option<u8> {
+    let digits = text.iter().take_while(|b| b.is_ascii_digit()).count();
+    if digits == 0 || digits > 3 || text[digits..].iter().any(|&b| b != b' ') {
+        return None;
+    }
+    text[..digits].iter().try_fold(0u8, |sum, &b| sum.checked_mul(10)?.checked_add(b - b'0'))
+}
+
+/// Whether the body's command is `M110` (the numbering reset exempts the
+/// line from the order check, as in Marlin).
+fn is_m110(body: &[u8]) -> bool {
+    matches!(crate::gcode::parse(body), Ok(c) if c.code == crate::gcode::Code::M(110))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reply::test_support::Text;
+    use std::format;
+    use std::string::String;
+
+    fn with_checksum(line: &str) -> String {
+        let sum = line.bytes().fold(0u8, |s, b| s ^ b);
+        format!("{line}*{sum}")
+    }
+
+    fn accept(protocol: &mut HostProtocol, line: &str) -> Result<String, LineRejection> {
+        protocol.accept(Line::Text(line.as_bytes())).map(|body| String::from_utf8(body.to_vec()).unwrap())
+    }
+
+    #[test]
+    fn numbered_lines_in_order_are_accepted_and_stripped() {
+        let mut p = HostProtocol::new();
+        assert_eq!(accept(&mut p, &with_checksum("N1 G1 X5")), Ok(" G1 X5".into()));
+        assert_eq!(accept(&mut p, &with_checksum("N2 M105")), Ok(" M105".into()));
+        assert_eq!(p.last_line(), 2);
+    }
+
+    #[test]
+    fn printcore_starts_with_m110_at_minus_one() {
+        let mut p = HostProtocol::new();
+        p.set_last_line(41);
+        assert!(accept(&mut p, &with_checksum("N-1 M110")).is_ok());
+        assert_eq!(p.last_line(), -1);
+        assert!(accept(&mut p, &with_checksum("N0 G28")).is_ok());
+    }
+
+    #[test]
+    fn a_wrong_checksum_is_refused_and_resent() {
+        let mut p = HostProtocol::new();
+        accept(&mut p, &with_checksum("N1 G28")).unwrap();
+        let err = accept(&mut p, "N2 G1 X5*0").unwrap_err();
+        assert_eq!(err, LineRejection::ChecksumMismatch);
+        let mut out = Text::default();
+        p.write_rejection(err, &mut out).unwrap();
+        assert_eq!(out.0, "Error:checksum mismatch, Last Line: 1\nResend: 2\nok\n");
+    }
+
+    #[test]
+    fn a_skipped_line_number_is_refused() {
+        let mut p = HostProtocol::new();
+        accept(&mut p, &with_checksum("N1 G28")).unwrap();
+        assert_eq!(accept(&mut p, &with_checksum("N3 G28")), Err(LineRejection::LineNumberOutOfOrder));
+        let mut out = Text::default();
+        p.write_rejection(LineRejection::LineNumberOutOfOrder, &mut out).unwrap();
+        assert_eq!(out.0, "Error:Line Number is not Last Line Number+1, Last Line: 1\nResend: 2\nok\n");
+    }
+
+    #[test]
+    fn a_number_without_checksum_and_a_checksum_without_number_are_refused() {
+        let mut p = HostProtocol::new();
+        assert_eq!(accept(&mut p, "N1 G28"), Err(LineRejection::NoChecksum));
+        assert_eq!(accept(&mut p, "G28*18"), Err(LineRejection::NoLineNumberWithChecksum));
+        let mut out = Text::default();
+        p.write_rejection(LineRejection::NoChecksum, &mut out).unwrap();
+        assert_eq!(out.0, "Error:No Checksum with line number, Last Line: 0\nResend: 1\nok\n");
+    }
+
+    #[test]
+    fn unnumbered_lines_pass_and_errors_have_no_resend() {
+        let mut p = HostProtocol::new();
+        assert_eq!(accept(&mut p, "M105"), Ok("M105".into()));
+        let mut out = Text::default();
+        p.write_rejection(LineRejection::TooLong, &mut out).unwrap();
+        assert_eq!(out.0, "Error:Line too long\nok\n");
+    }
+
+    #[test]
+    fn a_garbled_checksum_field_is_refused() {
+        let mut p = HostProtocol::new();
+        assert_eq!(accept(&mut p, "N1 G28*1x"), Err(LineRejection::MalformedHeader));
+        assert_eq!(accept(&mut p, "N1 G28*999"), Err(LineRejection::MalformedHeader));
+    }
+}
