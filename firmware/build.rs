@@ -37,11 +37,12 @@ fn main() {
         let rows: Vec<(u32, i64)> =
             (1..1023 / STEP).map(|i| i * STEP).map(|adc| (adc, (celsius(d, adc as f64) * 100.0).round() as i64)).collect();
         writeln!(out, "/// β-equation table for {}: (ADC count, hundredths of °C).", d.name).unwrap();
-        writeln!(out, "pub const {}: [(u16, i32); {}] = [", d.name, rows.len()).unwrap();
+        writeln!(out, "#[cfg_attr(target_arch = \"avr\", link_section = \".progmem.data\")]").unwrap();
+        writeln!(out, "pub static {}: crate::progmem::Flash<[(u16, i32); {}]> = crate::progmem::Flash::new([", d.name, rows.len()).unwrap();
         for (adc, centi) in rows {
             writeln!(out, "    ({adc}, {centi}),").unwrap();
         }
-        writeln!(out, "];").unwrap();
+        writeln!(out, "]);").unwrap();
     }
     let path = std::path::Path::new(&std::env::var("OUT_DIR").unwrap()).join("thermistor_tables.rs");
     std::fs::write(path, out).unwrap();

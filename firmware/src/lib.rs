@@ -11,9 +11,12 @@
 //! - [`gcode`]: the allocation-free G-code lexer/parser and its number format;
 //! - [`protocol`]: Marlin's host protocol (line numbers, checksums, resends);
 //! - [`reply`]: the exact reply strings hosts parse, and decimal formatting;
-//! - [`machine`]: the command executor and the machine's modal state.
+//! - [`machine`]: the command executor and the machine's modal state;
+//! - [`thermal`]: thermistors and heaters;
+//! - [`progmem`]: constant tables kept in flash on the AVR.
 #![no_std]
 #![deny(unsafe_op_in_unsafe_fn)]
+#![cfg_attr(target_arch = "avr", feature(asm_experimental_arch))]
 
 #[cfg(test)]
 extern crate std;
@@ -21,6 +24,7 @@ extern crate std;
 pub mod gcode;
 pub mod line;
 pub mod machine;
+pub mod progmem;
 pub mod protocol;
 pub mod reply;
 pub mod rx;

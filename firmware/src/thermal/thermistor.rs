@@ -10,8 +10,8 @@ use super::Celsius;
 
 include!(concat!(env!("OUT_DIR"), "/thermistor_tables.rs"));
 
-/// A table of (ADC count ascending, hundredths of °C descending).
-pub type Table = &'static [(u16, i32)];
+/// A table of (ADC count ascending, hundredths of °C descending), in flash.
+pub type Table<const N: usize> = &'static crate::progmem::Flash<[(u16, i32); N]>;
 
 /// Why an ADC reading is not a temperature.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -23,8 +23,9 @@ pub enum SensorFault {
 }
 
 /// Convert a 10-bit ADC reading with `table`.
-pub fn celsius_from_adc(table: Table, adc: u16) -> Result<Celsius, SensorFault> {
-    let (first, last) = (table[0], table[table.len() - 1]);
+pub fn celsius_from_adc<const N: usize>(table: Table<N>, adc: u16) -> Result<Celsius, SensorFault> {
+    let row = |index: usize| table.get(index).unwrap_or((0, 0));
+    let (first, last) = (row(0), row(N - 1));
     if adc < first.0 {
         return Err(SensorFault::Shorted);
     }
@@ -32,10 +33,10 @@ pub fn celsius_from_adc(table: Table, adc: u16) -> Result<Celsius, SensorFault> 
         return Err(SensorFault::Open);
     }
     // Rows are evenly spaced, so the interval is found by division.
-    let spacing = table[1].0 - first.0;
-    let index = usize::from((adc - first.0) / spacing).min(table.len() - 2);
-    let (adc0, t0) = table[index];
-    let (adc1, t1) = table[index + 1];
+    let spacing = row(1).0 - first.0;
+    let index = usize::from((adc - first.0) / spacing).min(N - 2);
+    let (adc0, t0) = row(index);
+    let (adc1, t1) = row(index + 1);
     let offset = i32::from(adc - adc0);
     let span = i32::from(adc1 - adc0);
     Ok(Celsius(t0 + (t1 - t0) * offset / span))

@@ -1,0 +1,100 @@
+//! Constant tables in flash on the AVR.
+//!
+//! The ATmega2560 is a Harvard machine: a `static` is copied into the 8 KiB
+//! of SRAM at boot unless it is placed in program memory and read with the
+//! `lpm` instruction. Tables (thermistors, lookup tables) therefore live in
+//! [`Flash`], which puts them in `.progmem.data` on the AVR and reads them
+//! byte by byte with `elpm`; on every other target it is an ordinary static.
+//!
+//! Only `Copy` data without pointers belongs in here (integers and arrays of
+//! them): a pointer stored in flash would be read back as a RAM address.
+
+/// A value of type `T` that lives in flash on the AVR.
+#[repr(transparent)]
+pub struct Flash<T: Copy>(T);
+
+impl<T: Copy> Flash<T> {
+    /// Wrap a value; use in a `static` marked with
+    /// `#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]`.
+    pub const fn new(value: T) -> Self {
+        Self(value)
+    }
+
+    /// A copy of the whole value.
+    pub fn load(&self) -> T {
+        load(&self.0)
+    }
+}
+
+impl<T: Copy, const N: usize> Flash<[T; N]> {
+    /// Number of elements.
+    pub const fn len(&self) -> usize {
+        N
+    }
+
+    pub const fn is_empty(&self) -> bool {
+        N == 0
+    }
+
+    /// A copy of element `index`; `None` past the end.
+    pub fn get(&self, index: usize) -> Option<T> {
+        self.0.get(index).map(load)
+    }
+}
+
+/// Copy `*source` out of flash (AVR) or memory (elsewhere).
+#[cfg(not(target_arch = "avr"))]
+fn load<T: Copy>(source: &T) -> T {
+    *source
+}
+
+#[cfg(target_arch = "avr")]
+fn load<T: Copy>(source: &T) -> T {
+    let mut value = core::mem::MaybeUninit::<T>::uninit();
+    let destination = value.as_mut_ptr().cast::<u8>();
+    let address = (source as *const T).cast::<u8>() as u16;
+    for offset in 0..core::mem::size_of::<T>() {
+        // SAFETY: `source` is a `Flash` static in `.progmem.data`, so its
+        // bytes are in program memory at the same address (below 64 KiB:
+        // avr-gcc's linker script puts `.progmem*` first in `.text`).
+        let byte = unsafe { read_flash_byte(address.wrapping_add(offset as u16)) };
+        // SAFETY: `offset` is within the size of `T`.
+        unsafe { destination.add(offset).write(byte) };
+    }
+    // SAFETY: every byte of the `Copy` value has been copied.
+    unsafe { value.assume_init() }
+}
+
+/// Read one byte of program memory with `lpm`.
+///
+/// # Safety
+/// `address` must be inside the first 64 KiB of flash.
+#[cfg(target_arch = "avr")]
+unsafe fn read_flash_byte(address: u16) -> u8 {
+    let byte: u8;
+    // SAFETY: `lpm` only reads program memory; Z is the address.
+    unsafe {
+        core::arch::asm!(
+            "lpm {byte}, Z",
+            byte = out(reg) byte,
+            in("Z") address,
+            options(pure, readonly, nostack, preserves_flags),
+        );
+    }
+    byte
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    static ROWS: Flash<[(u16, i32); 3]> = Flash::new([(1, -1), (2, -2), (3, -3)]);
+
+    #[test]
+    fn elements_read_back_unchanged() {
+        assert_eq!(ROWS.len(), 3);
+        assert_eq!(ROWS.get(1), Some((2, -2)));
+        assert_eq!(ROWS.get(3), None);
+        assert_eq!(ROWS.load()[2], (3, -3));
+    }
+}
