@@ -1,0 +1,65 @@
+#!/usr/bin/env bash
+# Install what the build, the emulators and the tests need, if missing.
+# Idempotent: a second run installs nothing. Sourced by main.sh and test.sh.
+#
+#   SETUP_PROFILE=run   : AVR toolchain + QEMU (+ avrdude when flashing)
+#   SETUP_PROFILE=test  : everything the test command uses
+set -euo pipefail
+
+say() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }
+die() { printf '\033[1;31m[setup] error:\033[0m %s\n' "$*" >&2; exit 1; }
+
+profile=${SETUP_PROFILE:-test}
+
+# --- Rust toolchains -------------------------------------------------------
+command -v rustup >/dev/null || die "rustup is not installed: see https://rustup.rs, then run this again."
+if ! rustup toolchain list | grep -q '^nightly'; then
+  say "installing the nightly toolchain (the AVR target needs it)"
+  rustup toolchain install nightly --profile minimal || die "could not install the nightly toolchain"
+fi
+if ! rustup component list --toolchain nightly --installed 2>/dev/null | grep -q '^rust-src'; then
+  say "adding rust-src to nightly (for -Z build-std=core on avr-none)"
+  rustup component add rust-src --toolchain nightly || die "could not add rust-src to nightly"
+fi
+
+# --- Debian packages -------------------------------------------------------
+# avr-gcc links the AVR firmware and avr-size measures it; QEMU runs it;
+# the simavr-based bench builds simavr from source (libelf, clang for bindgen);
+# avrdude flashes a real board; python3-venv hosts Printrun's printcore.
+packages=(gcc-avr avr-libc binutils-avr qemu-system-misc)
+if [ "$profile" = test ]; then
+  packages+=(libelf-dev libclang-dev pkg-config libzstd-dev zlib1g-dev python3-venv)
+fi
+if [ "${SETUP_FLASH:-0}" = 1 ]; then
+  packages+=(avrdude)
+fi
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  command -v apt-get >/dev/null || die "missing packages (${missing[*]}) and no apt-get: install them by hand."
+  sudo=""
+  if [ "$(id -u)" != 0 ]; then
+    command -v sudo >/dev/null || die "missing packages (${missing[*]}): run as root or install sudo."
+    sudo="sudo"
+  fi
+  say "installing Debian packages: ${missing[*]}"
+  # QEMU packages and the AVR ones are installed in separate calls: together
+  # they can fail on machines that ship a newer qemu-utils (DESIGN.md).
+  install() { DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y --no-install-recommends "$@"; }
+  for group in "qemu" "other"; do
+    if [ $group = qemu ]; then
+      set -- $(printf '%s\n' "${missing[@]}" | grep '^qemu' || true)
+    else
+      set -- $(printf '%s\n' "${missing[@]}" | grep -v '^qemu' || true)
+    fi
+    [ $# -gt 0 ] || continue
+    if ! install "$@" >/tmp/ferrostep-apt.log 2>&1; then
+      say "apt-get install failed; refreshing the package lists and retrying"
+      $sudo apt-get update >/tmp/ferrostep-apt-update.log 2>&1 || die "apt-get update failed (see /tmp/ferrostep-apt-update.log)"
+      install "$@" >/tmp/ferrostep-apt.log 2>&1 || die "could not install $* (see /tmp/ferrostep-apt.log)"
+    fi
+  done
+fi
+say "toolchains and packages are in place"

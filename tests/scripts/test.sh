@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Command two: set up what is missing, then run every test.
+#   bash tests/scripts/test.sh
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+SETUP_PROFILE=test source tests/scripts/setup.sh
+
+target=${CARGO_TARGET_DIR:-target}
+elf=$target/avr-none/release/mega2560-ramps.elf
+
+say "building the Mega 2560 release firmware once: cargo +nightly avr"
+cargo +nightly avr
+
+say "checking the firmware against its budgets"
+bash tests/scripts/size-check.sh "$elf"
+
+say "running every test: cargo test (host crates, the emulated Mega 2560, the simavr bench)"
+FERROSTEP_ELF="$PWD/$elf" cargo test
+say "all tests passed"

@@ -1,0 +1,84 @@
+//! The Mega 2560 ELF on QEMU's `mega2560` machine, with USART0 on pipes.
+//!
+//! QEMU is not cycle-accurate and has no ADC (thermistors read as shorted):
+//! it checks that the real build boots and talks. Timing and pins are the
+//! simavr bench's job (`tests/avr-bench`).
+
+use std::io::{BufRead, BufReader, Write};
+use std::path::Path;
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::time::{Duration, Instant};
+
+/// A running emulated board.
+pub struct QemuBoard {
+    child: Child,
+    input: ChildStdin,
+    lines: Receiver<String>,
+}
+
+impl QemuBoard {
+    /// Boot `elf` on an emulated Mega 2560.
+    pub fn boot(elf: &Path) -> Self {
+        let mut child = Command::new("qemu-system-avr")
+            .args(["-M", "mega2560", "-display", "none", "-serial", "stdio", "-monitor", "none", "-bios"])
+            .arg(elf)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("cannot start qemu-system-avr (run bash tests/scripts/test.sh, which installs qemu-system-misc)");
+        let input = child.stdin.take().expect("piped stdin");
+        let output = child.stdout.take().expect("piped stdout");
+        let (sender, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(output).lines() {
+                let Ok(line) = line else { break };
+                if sender.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        Self { child, input, lines }
+    }
+
+    /// Send raw bytes to the board's serial port.
+    pub fn send(&mut self, bytes: &[u8]) {
+        self.input.write_all(bytes).expect("write to QEMU");
+        self.input.flush().expect("flush to QEMU");
+    }
+
+    /// Collect reply lines until one satisfies `last` (inclusive); panics
+    /// with everything received if that takes longer than `timeout`.
+    pub fn read_until(&mut self, timeout: Duration, last: impl Fn(&str) -> bool) -> Vec<String> {
+        let deadline = Instant::now() + timeout;
+        let mut received = Vec::new();
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(line) => {
+                    let done = last(&line);
+                    received.push(line);
+                    if done {
+                        return received;
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => panic!("no matching reply within {timeout:?}; received {received:?}"),
+                Err(RecvTimeoutError::Disconnected) => panic!("QEMU exited; received {received:?}"),
+            }
+        }
+    }
+
+    /// Send one command line and return its replies up to the final `ok`.
+    pub fn command(&mut self, line: &str) -> Vec<String> {
+        self.send(format!("{line}\n").as_bytes());
+        self.read_until(Duration::from_secs(10), |l| l == "ok" || l.starts_with("ok "))
+    }
+}
+
+impl Drop for QemuBoard {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
