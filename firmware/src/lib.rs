@@ -7,11 +7,13 @@
 //!
 //! Layout (one concept per module):
 //! - [`rx`]: the serial receive ring between the RX interrupt and the main loop;
+//! - [`emergency`]: `M112`/`M108`/`M410` recognised inside the RX interrupt;
 //! - [`line`]: assembling received bytes into bounded lines;
 //! - [`gcode`]: the allocation-free G-code lexer/parser and its number format;
 //! - [`protocol`]: Marlin's host protocol (line numbers, checksums, resends);
 //! - [`reply`]: the exact reply strings hosts parse, and decimal formatting;
-//! - [`machine`]: the command executor and the machine's modal state;
+//! - [`machine`]: the command queue, the executor and the modal state;
+//! - [`settings`]: tunable values (`M92`, `M201`–`M205`, ...), `M503`;
 //! - [`thermal`]: thermistors and heaters;
 //! - [`progmem`]: constant tables kept in flash on the AVR.
 #![no_std]
@@ -21,6 +23,7 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod emergency;
 pub mod gcode;
 pub mod line;
 pub mod machine;
@@ -28,6 +31,7 @@ pub mod progmem;
 pub mod protocol;
 pub mod reply;
 pub mod rx;
+pub mod settings;
 pub mod thermal;
 
 /// Name and version reported in the boot banner and by `M115`.

@@ -84,10 +84,13 @@ impl HostProtocol {
         let start = text.iter().position(|&b| b != b' ').unwrap_or(text.len());
         let numbered = matches!(text.get(start), Some(b'N' | b'n'));
         if !numbered {
-            return match star {
-                Some(_) => Err(LineRejection::NoLineNumberWithChecksum),
-                None => Ok(text),
-            };
+            if star.is_some() {
+                return Err(LineRejection::NoLineNumberWithChecksum);
+            }
+            if let Some(Some(number)) = m110_argument(text) {
+                self.last_line = number;
+            }
+            return Ok(text);
         }
         self.numbered = true;
         let star = star.ok_or(LineRejection::NoChecksum)?;
@@ -98,8 +101,9 @@ impl HostProtocol {
         }
         let (number, used) = parse_line_number(&text[start + 1..star]).ok_or(LineRejection::MalformedHeader)?;
         let body = &text[start + 1 + used..star];
-        if is_m110(body) {
-            self.last_line = number;
+        if let Some(argument) = m110_argument(body) {
+            // `N<n> M110 N<m>` numbers from m; `N<n> M110` from n.
+            self.last_line = argument.unwrap_or(number);
         } else if Some(number) != self.last_line.checked_add(1) {
             return Err(LineRejection::LineNumberOutOfOrder);
         } else {
@@ -137,10 +141,14 @@ fn parse_checksum(text: &[u8]) -> Option<u8> {
     text[..digits].iter().try_fold(0u8, |sum, &b| sum.checked_mul(10)?.checked_add(b - b'0'))
 }
 
-/// Whether the body's command is `M110` (the numbering reset exempts the
-/// line from the order check, as in Marlin).
-fn is_m110(body: &[u8]) -> bool {
-    matches!(crate::gcode::parse(body), Ok(c) if c.code == crate::gcode::Code::M(110))
+/// `Some(N argument)` when the body's command is `M110` (the numbering
+/// reset, which exempts its line from the order check, as in Marlin).
+fn m110_argument(body: &[u8]) -> Option<Option<i32>> {
+    let command = crate::gcode::parse(body).ok()?;
+    if command.code != crate::gcode::Code::M(110) {
+        return None;
+    }
+    Some(command.value(b'N').ok().flatten().and_then(|n| n.to_int()))
 }
 
 #[cfg(test)]
@@ -174,6 +182,16 @@ mod tests {
         assert!(accept(&mut p, &with_checksum("N-1 M110")).is_ok());
         assert_eq!(p.last_line(), -1);
         assert!(accept(&mut p, &with_checksum("N0 G28")).is_ok());
+    }
+
+    #[test]
+    fn m110_with_an_argument_sets_the_numbering_numbered_or_not() {
+        let mut p = HostProtocol::new();
+        assert!(accept(&mut p, &with_checksum("N7 M110 N100")).is_ok());
+        assert_eq!(p.last_line(), 100);
+        assert!(accept(&mut p, "M110 N5").is_ok());
+        assert_eq!(p.last_line(), 5);
+        assert!(accept(&mut p, &with_checksum("N6 G28")).is_ok());
     }
 
     #[test]

@@ -8,6 +8,7 @@
 //! Built on `heapless::spsc`, which is lock-free (single producer, single
 //! consumer). On the AVR it needs heapless' `portable-atomic` feature.
 
+use crate::emergency::{Emergency, EmergencyScanner};
 use heapless::spsc::{Consumer, Producer, Queue};
 
 /// Bytes the ring holds (one slot of the queue stays empty by design).
@@ -20,6 +21,7 @@ pub type RxQueue = Queue<u8, RX_RING_SLOTS>;
 pub struct RxProducer<'a> {
     queue: Producer<'a, u8, RX_RING_SLOTS>,
     dropped: u8,
+    emergency: EmergencyScanner,
 }
 
 /// Main-loop side of the ring.
@@ -30,19 +32,22 @@ pub struct RxConsumer<'a> {
 /// Split a queue into its two ends.
 pub fn split(queue: &mut RxQueue) -> (RxProducer<'_>, RxConsumer<'_>) {
     let (producer, consumer) = queue.split();
-    (RxProducer { queue: producer, dropped: 0 }, RxConsumer { queue: consumer })
+    (RxProducer { queue: producer, dropped: 0, emergency: EmergencyScanner::new() }, RxConsumer { queue: consumer })
 }
 
 impl RxProducer<'_> {
     /// Store one received byte; O(1), never blocks. A byte that does not fit
-    /// (or that the UART itself lost, `hardware_overrun`) is counted.
-    pub fn push(&mut self, byte: u8, hardware_overrun: bool) {
+    /// (or that the UART itself lost, `hardware_overrun`) is counted. Returns
+    /// the emergency command this byte completes, which the interrupt acts
+    /// on at once (it sees every byte, even those the ring has no room for).
+    pub fn push(&mut self, byte: u8, hardware_overrun: bool) -> Option<Emergency> {
         if hardware_overrun {
             self.dropped = self.dropped.saturating_add(1);
         }
         if self.queue.enqueue(byte).is_err() {
             self.dropped = self.dropped.saturating_add(1);
         }
+        self.emergency.push(byte)
     }
 
     /// Take (and reset) the count of bytes lost since the last call.
@@ -88,6 +93,17 @@ mod tests {
         // heapless keeps one slot free: capacity is SLOTS - 1.
         assert_eq!(p.take_dropped(), 10);
         assert_eq!(p.take_dropped(), 0);
+    }
+
+    #[test]
+    fn an_emergency_command_is_reported_even_when_the_ring_is_full() {
+        let mut q = RxQueue::new();
+        let (mut p, _c) = split(&mut q);
+        for _ in 0..RX_RING_SLOTS {
+            p.push(b'\n', false);
+        }
+        let found: std::vec::Vec<_> = b"M112\n".iter().filter_map(|&b| p.push(b, false)).collect();
+        assert_eq!(found, [Emergency::Kill]);
     }
 
     #[test]

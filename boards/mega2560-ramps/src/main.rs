@@ -49,6 +49,9 @@ fn main() -> ! {
     let mut tx = serial::Tx;
     let mut machine = Machine::new();
     let mut assembler = LineAssembler::new();
+    for endstop in pins::ENDSTOPS {
+        pins::make_input_pulled_up(&dp, endstop);
+    }
     let _ = machine.write_banner(&mut tx);
     let mut next_thermal_ms = 0u32;
 
@@ -57,21 +60,44 @@ fn main() -> ! {
     // a printer board has no battery to save.
     loop {
         watchdog::feed();
+        let emergencies = serial::take_emergencies();
+        if emergencies & serial::KILL != 0 {
+            let _ = machine.kill(&mut tx);
+        }
+        if emergencies & serial::CANCEL_WAIT != 0 {
+            machine.cancel_wait();
+        }
         if serial::take_dropped() > 0 {
             assembler.mark_damaged();
         }
-        while let Some(byte) = consumer.pop() {
+        // Take bytes only while the command queue has room for a line; the
+        // rest waits in the receive ring (hosts wait for `ok` anyway).
+        while machine.can_accept_line() {
+            let Some(byte) = consumer.pop() else { break };
             if let Some(line) = assembler.push(byte) {
-                let _ = machine.handle_line(line, &mut tx);
+                let _ = machine.receive_line(line, &mut tx);
             }
         }
         let now = clock::millis();
+        let _ = machine.poll(now, &mut tx);
         if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
             next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
             let read = |channel| celsius_from_adc(&NTC100K_B3950_4K7, adc::read(&dp, channel)).unwrap_or(Celsius(0));
             machine.set_measured(read(pins::HOTEND_THERMISTOR_CHANNEL), read(pins::BED_THERMISTOR_CHANNEL));
+            machine.set_endstop_levels(pins::endstop_levels(&dp));
         }
+        apply_outputs(&dp, &machine);
     }
+}
+
+/// Drive the outputs the core decides: all off once halted.
+fn apply_outputs(dp: &Peripherals, machine: &Machine) {
+    if machine.is_halted() {
+        pins::all_outputs_safe(dp);
+        return;
+    }
+    pins::set_steppers_enabled(dp, machine.steppers_enabled());
+    pins::make_output(dp, pins::FAN, machine.fan_duty() > 0);
 }
 
 #[panic_handler]

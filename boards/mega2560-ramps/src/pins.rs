@@ -19,8 +19,10 @@ pub enum Port {
     B,
     C,
     D,
+    E,
     F,
     H,
+    J,
     K,
 }
 
@@ -39,6 +41,11 @@ pub const STEPPER_ENABLES: [Pin; 5] =
     [pin(Port::D, 7), pin(Port::F, 2), pin(Port::K, 0), pin(Port::A, 2), pin(Port::C, 7)];
 /// Heater and fan MOSFET gates (high = on).
 pub const HEATER_OUTPUTS: [Pin; 3] = [pin(Port::B, 4), pin(Port::H, 5), pin(Port::H, 6)];
+/// The part-cooling fan (D9).
+pub const FAN: Pin = pin(Port::H, 6);
+/// Endstops in the core's bit order: X_MIN, X_MAX, Y_MIN, Y_MAX, Z_MIN, Z_MAX.
+pub const ENDSTOPS: [Pin; 6] =
+    [pin(Port::E, 5), pin(Port::E, 4), pin(Port::J, 1), pin(Port::J, 0), pin(Port::D, 3), pin(Port::D, 2)];
 
 /// The ADC channel of the hot-end thermistor (T0).
 pub const HOTEND_THERMISTOR_CHANNEL: u8 = 13;
@@ -61,10 +68,64 @@ pub fn make_output(dp: &Peripherals, pin: Pin, high: bool) {
         Port::B => drive!(PORTB, portb, ddrb),
         Port::C => drive!(PORTC, portc, ddrc),
         Port::D => drive!(PORTD, portd, ddrd),
+        Port::E => drive!(PORTE, porte, ddre),
         Port::F => drive!(PORTF, portf, ddrf),
         Port::H => drive!(PORTH, porth, ddrh),
+        Port::J => drive!(PORTJ, portj, ddrj),
         Port::K => drive!(PORTK, portk, ddrk),
     }
+}
+
+/// Make `pin` an input with its pull-up on (endstops switch to ground or
+/// are open-collector; an open wire then reads high).
+pub fn make_input_pulled_up(dp: &Peripherals, pin: Pin) {
+    let mask = 1u8 << pin.bit;
+    macro_rules! input {
+        ($port:ident, $out:ident, $ddr:ident) => {{
+            // SAFETY: every bit pattern is valid for DDRx and PORTx.
+            dp.$port.$ddr.modify(|r, w| unsafe { w.bits(r.bits() & !mask) });
+            dp.$port.$out.modify(|r, w| unsafe { w.bits(r.bits() | mask) });
+        }};
+    }
+    match pin.port {
+        Port::A => input!(PORTA, porta, ddra),
+        Port::B => input!(PORTB, portb, ddrb),
+        Port::C => input!(PORTC, portc, ddrc),
+        Port::D => input!(PORTD, portd, ddrd),
+        Port::E => input!(PORTE, porte, ddre),
+        Port::F => input!(PORTF, portf, ddrf),
+        Port::H => input!(PORTH, porth, ddrh),
+        Port::J => input!(PORTJ, portj, ddrj),
+        Port::K => input!(PORTK, portk, ddrk),
+    }
+}
+
+/// The level of an input pin.
+pub fn read(dp: &Peripherals, pin: Pin) -> bool {
+    let bits = match pin.port {
+        Port::A => dp.PORTA.pina.read().bits(),
+        Port::B => dp.PORTB.pinb.read().bits(),
+        Port::C => dp.PORTC.pinc.read().bits(),
+        Port::D => dp.PORTD.pind.read().bits(),
+        Port::E => dp.PORTE.pine.read().bits(),
+        Port::F => dp.PORTF.pinf.read().bits(),
+        Port::H => dp.PORTH.pinh.read().bits(),
+        Port::J => dp.PORTJ.pinj.read().bits(),
+        Port::K => dp.PORTK.pink.read().bits(),
+    };
+    bits & (1 << pin.bit) != 0
+}
+
+/// Drive every stepper driver's enable (active low).
+pub fn set_steppers_enabled(dp: &Peripherals, enabled: bool) {
+    for enable in STEPPER_ENABLES {
+        make_output(dp, enable, !enabled);
+    }
+}
+
+/// Endstop levels packed in the core's bit order.
+pub fn endstop_levels(dp: &Peripherals) -> u8 {
+    ENDSTOPS.iter().enumerate().fold(0, |bits, (i, &pin)| bits | (u8::from(read(dp, pin)) << i))
 }
 
 /// The safe state: every heater and fan off, every stepper driver disabled.

@@ -8,6 +8,8 @@
 use avr_device::atmega2560::{Peripherals, USART0};
 use avr_device::interrupt::Mutex;
 use core::cell::RefCell;
+use core::cell::Cell;
+use firmware::emergency::Emergency;
 use firmware::rx::RxProducer;
 
 /// Baud rate: Marlin's default 115200, or 250000 with `--features baud-250000`.
@@ -23,6 +25,19 @@ const UBRR: u16 = ((CPU_HZ + 4 * BAUD) / (8 * BAUD) - 1) as u16;
 
 /// The interrupt's end of the receive ring, installed once by [`init`].
 pub static RX_PRODUCER: Mutex<RefCell<Option<RxProducer<'static>>>> = Mutex::new(RefCell::new(None));
+
+/// Emergencies seen by the receive interrupt, for the main loop to report
+/// (bit 0: M112 kill, bit 1: M108 cancel wait, bit 2: M410 quick stop).
+static EMERGENCIES: Mutex<Cell<u8>> = Mutex::new(Cell::new(0));
+
+/// Take (and clear) the emergencies seen since the last call.
+pub fn take_emergencies() -> u8 {
+    avr_device::interrupt::free(|cs| EMERGENCIES.borrow(cs).replace(0))
+}
+
+pub const KILL: u8 = 1;
+pub const CANCEL_WAIT: u8 = 2;
+pub const QUICK_STOP: u8 = 4;
 
 /// Set up 8N1 at [`BAUD`] with the receive interrupt on.
 pub fn init(dp: &Peripherals, producer: RxProducer<'static>) {
@@ -50,9 +65,23 @@ fn USART0_RX() {
     let overrun = usart.ucsr0a.read().dor0().bit_is_set();
     let byte = usart.udr0.read().bits();
     avr_device::interrupt::free(|cs| {
-        if let Some(producer) = RX_PRODUCER.borrow(cs).borrow_mut().as_mut() {
-            producer.push(byte, overrun);
+        let Some(producer) = RX_PRODUCER.borrow(cs).borrow_mut().as_mut().map(|p| p.push(byte, overrun)) else {
+            return;
+        };
+        let Some(emergency) = producer else { return };
+        if emergency == Emergency::Kill {
+            // M112 acts here and now, whatever the main loop is doing.
+            // SAFETY: the pin writes are single read-modify-writes of port
+            // registers, and interrupts are off inside this handler.
+            crate::pins::all_outputs_safe(unsafe { &avr_device::atmega2560::Peripherals::steal() });
         }
+        let bit = match emergency {
+            Emergency::Kill => KILL,
+            Emergency::CancelWait => CANCEL_WAIT,
+            Emergency::QuickStop => QUICK_STOP,
+        };
+        let flags = EMERGENCIES.borrow(cs);
+        flags.set(flags.get() | bit);
     });
 }
 

@@ -1,0 +1,54 @@
+//! Why a well-formed line could not be executed.
+
+use crate::gcode::ParseError;
+use ufmt::uWrite;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CommandError {
+    /// The line is not valid G-code.
+    Parse(ParseError),
+    /// `F` is zero, negative or absurdly large.
+    InvalidFeedRate,
+    /// A value outside what the named word accepts.
+    OutOfRange(u8),
+    /// A required word is missing.
+    Missing(u8),
+    /// The firmware is halted (`M112`, or a safety fault): nothing runs
+    /// until the board is reset.
+    Halted,
+}
+
+impl From<ParseError> for CommandError {
+    fn from(error: ParseError) -> Self {
+        Self::Parse(error)
+    }
+}
+
+impl CommandError {
+    /// Write the `Error:` line for this error.
+    pub fn write<W: uWrite + ?Sized>(self, out: &mut W) -> Result<(), W::Error> {
+        out.write_str("Error:")?;
+        match self {
+            Self::Parse(error) => write_parse_error(error, out),
+            Self::InvalidFeedRate => out.write_str("Invalid feed rate (F must be > 0)"),
+            Self::OutOfRange(letter) => ufmt::uwrite!(out, "Value out of range for {}", char::from(letter)),
+            Self::Missing(letter) => ufmt::uwrite!(out, "Missing {} word", char::from(letter)),
+            Self::Halted => out.write_str("Printer halted. kill() called!"),
+        }?;
+        out.write_str("\n")
+    }
+}
+
+fn write_parse_error<W: uWrite + ?Sized>(error: ParseError, out: &mut W) -> Result<(), W::Error> {
+    match error {
+        ParseError::BadNumber(letter) => ufmt::uwrite!(out, "Bad number after {}", char::from(letter)),
+        ParseError::NumberOutOfRange(letter) => ufmt::uwrite!(out, "Number out of range after {}", char::from(letter)),
+        ParseError::WordWithoutValue(letter) => ufmt::uwrite!(out, "Missing value after {}", char::from(letter)),
+        ParseError::UnterminatedComment => out.write_str("Unterminated comment"),
+        ParseError::UnexpectedByte(byte) => ufmt::uwrite!(out, "Unexpected character (byte {})", byte),
+        ParseError::DuplicateWord(letter) => ufmt::uwrite!(out, "Repeated word {}", char::from(letter)),
+        ParseError::TooManyWords => out.write_str("Too many words"),
+        ParseError::BadCommandNumber => out.write_str("Bad command number"),
+        ParseError::Empty => out.write_str("Empty command"),
+    }
+}

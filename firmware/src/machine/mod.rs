@@ -1,0 +1,628 @@
+//! The command executor: from received lines to actions and replies.
+//!
+//! Lines travel in two steps, as in Marlin:
+//! 1. [`Machine::receive_line`] (as soon as a line is complete): the host
+//!    protocol checks line number and checksum; a refused line is answered
+//!    at once (`Error:`, `Resend:`, `ok`); an accepted one is queued as
+//!    text in the command queue ([`COMMAND_QUEUE_DEPTH`] lines).
+//! 2. [`Machine::poll`] (every pass of the main loop): the next queued line
+//!    is parsed and executed. Its `ok` goes out when it is done — at once
+//!    for most commands, later for the blocking ones (`G4`, `M400`, ...),
+//!    which report `echo:busy: processing` every 2 s while they wait.
+//!
+//! Every line gets exactly one `ok`, after its error or report, so a host
+//! that waits for `ok` never stalls, and nothing that was acknowledged is
+//! dropped. The board stops taking bytes out of its receive ring while the
+//! queue is full ([`Machine::can_accept_line`]); `M112`, `M108` and `M410`
+//! still act from the receive interrupt (see [`crate::emergency`]).
+
+pub mod error;
+pub mod modal;
+
+use crate::gcode::{self, Code, Command, ParseError};
+use crate::line::{Line, MAX_LINE};
+use crate::protocol::HostProtocol;
+use crate::reply::{Fixed, Printable};
+use crate::settings::Settings;
+use crate::thermal::{Celsius, Heater};
+use error::CommandError;
+use modal::{Distance, ModalState, MotionMode, Units, AXES, AXIS_LETTERS};
+use ufmt::uWrite;
+
+/// Lines the command queue holds (Marlin's BUFSIZE is 4).
+pub const COMMAND_QUEUE_DEPTH: usize = 4;
+/// Interval of `echo:busy: processing` while a command blocks, ms.
+pub const BUSY_INTERVAL_MS: u32 = 2_000;
+
+/// Number of extruders (`T0` only).
+pub const EXTRUDERS: u16 = 1;
+
+type LineText = heapless::Vec<u8, MAX_LINE>;
+
+/// A command that has started and not yet finished.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Running {
+    Idle,
+    /// `G4`: wait until `until_ms`.
+    Dwell { until_ms: u32 },
+}
+
+/// Raw endstop levels as the board reads them, one bit per switch:
+/// bit 0 X_MIN, 1 X_MAX, 2 Y_MIN, 3 Y_MAX, 4 Z_MIN, 5 Z_MAX.
+pub type EndstopLevels = u8;
+
+/// The endstop names `M119` reports, in bit order.
+const ENDSTOP_NAMES: [&str; 6] = ["x_min", "x_max", "y_min", "y_max", "z_min", "z_max"];
+
+/// Everything the executor remembers between lines.
+pub struct Machine {
+    protocol: HostProtocol,
+    queue: heapless::Deque<LineText, COMMAND_QUEUE_DEPTH>,
+    modal: ModalState,
+    settings: Settings,
+    running: Running,
+    /// `M108` arrived while a command waited: it finishes at the next poll.
+    wait_cancelled: bool,
+    last_busy_ms: u32,
+    /// `M155 S<n>`: seconds between temperature reports (0: off).
+    auto_report_s: u8,
+    last_auto_report_ms: u32,
+    /// `M112` (or a safety fault): outputs off until reset.
+    halted: bool,
+    steppers_enabled: bool,
+    /// `M106`/`M107`: part-cooling fan duty, 0–255.
+    fan_duty: u8,
+    /// Levels that mean "triggered" (bit set: high = triggered).
+    endstop_trigger_levels: EndstopLevels,
+    endstop_levels: EndstopLevels,
+    /// Position in motor steps per axis (X, Y, Z), for `Count` in `M114`.
+    position_steps: [i32; 3],
+    hotend: Heater,
+    bed: Heater,
+}
+
+impl Default for Machine {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Machine {
+    pub const fn new() -> Self {
+        Self {
+            protocol: HostProtocol::new(),
+            queue: heapless::Deque::new(),
+            modal: ModalState::new(),
+            settings: Settings::prusa_i3(),
+            running: Running::Idle,
+            wait_cancelled: false,
+            last_busy_ms: 0,
+            auto_report_s: 0,
+            last_auto_report_ms: 0,
+            halted: false,
+            steppers_enabled: false,
+            fan_duty: 0,
+            // RAMPS with mechanical switches and pull-ups: pressed = high
+            // (Marlin's *_ENDSTOP_INVERTING false).
+            endstop_trigger_levels: 0b11_1111,
+            endstop_levels: 0,
+            position_steps: [0; 3],
+            hotend: Heater::new(),
+            bed: Heater::new(),
+        }
+    }
+
+    /// The start banner, printed once at boot. `start` is what Printrun and
+    /// OctoPrint look for to learn that the firmware (re)started.
+    pub fn write_banner<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        ufmt::uwrite!(out, "start\necho:{} {} ready\n", crate::FIRMWARE_NAME, crate::FIRMWARE_VERSION)
+    }
+
+    // --- what the board reads back -----------------------------------------
+
+    pub fn modal(&self) -> &ModalState {
+        &self.modal
+    }
+
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// Whether the stepper drivers should be enabled.
+    pub fn steppers_enabled(&self) -> bool {
+        self.steppers_enabled && !self.halted
+    }
+
+    /// Part-cooling fan duty, 0–255 (0 while halted).
+    pub fn fan_duty(&self) -> u8 {
+        if self.halted {
+            0
+        } else {
+            self.fan_duty
+        }
+    }
+
+    /// Whether the firmware is halted (`M112` or a safety fault).
+    pub fn is_halted(&self) -> bool {
+        self.halted
+    }
+
+    // --- what the board tells us -------------------------------------------
+
+    /// Latest measured temperatures (from the board's ADC conversion).
+    pub fn set_measured(&mut self, hotend: Celsius, bed: Celsius) {
+        self.hotend.measured = hotend;
+        self.bed.measured = bed;
+    }
+
+    /// Latest raw endstop levels.
+    pub fn set_endstop_levels(&mut self, levels: EndstopLevels) {
+        self.endstop_levels = levels;
+    }
+
+    /// Whether another line fits in the command queue.
+    pub fn can_accept_line(&self) -> bool {
+        !self.queue.is_full()
+    }
+
+    /// `M112` from the receive interrupt (or the queue): stop everything.
+    /// The board has already forced its outputs off.
+    pub fn kill<W: uWrite + ?Sized>(&mut self, out: &mut W) -> Result<(), W::Error> {
+        if self.halted {
+            return Ok(());
+        }
+        self.halted = true;
+        self.hotend.target = Celsius(0);
+        self.bed.target = Celsius(0);
+        self.running = Running::Idle;
+        self.queue.clear();
+        out.write_str("Error:Printer halted. kill() called!\n")
+    }
+
+    /// `M108` from the receive interrupt: end the current wait.
+    pub fn cancel_wait(&mut self) {
+        self.wait_cancelled = self.running != Running::Idle;
+    }
+
+    // --- the two steps -----------------------------------------------------
+
+    /// Step 1: a complete line arrived. Refusals are answered now; accepted
+    /// lines are queued (the caller checked [`Machine::can_accept_line`]).
+    pub fn receive_line<W: uWrite + ?Sized>(&mut self, line: Line<'_>, out: &mut W) -> Result<(), W::Error> {
+        let body = match self.protocol.accept(line) {
+            Ok(body) => body,
+            Err(rejection) => return self.protocol.write_rejection(rejection, out),
+        };
+        let mut text = LineText::new();
+        // The body is a part of a line, so it always fits.
+        let _ = text.extend_from_slice(body);
+        if self.queue.push_back(text).is_err() {
+            // Only reachable if the board ignored can_accept_line(): say so
+            // rather than drop the line silently.
+            return self.protocol.write_rejection(crate::protocol::LineRejection::Damaged, out);
+        }
+        Ok(())
+    }
+
+    /// Step 2: run queued commands. `now_ms` is a free-running millisecond
+    /// clock (wrapping).
+    pub fn poll<W: uWrite + ?Sized>(&mut self, now_ms: u32, out: &mut W) -> Result<(), W::Error> {
+        self.auto_report(now_ms, out)?;
+        loop {
+            if self.running != Running::Idle {
+                if !self.running_done(now_ms) {
+                    if now_ms.wrapping_sub(self.last_busy_ms) >= BUSY_INTERVAL_MS {
+                        self.last_busy_ms = now_ms;
+                        out.write_str("echo:busy: processing\n")?;
+                    }
+                    return Ok(());
+                }
+                self.running = Running::Idle;
+                self.wait_cancelled = false;
+                out.write_str("ok\n")?;
+            }
+            let Some(text) = self.queue.pop_front() else { return Ok(()) };
+            self.last_busy_ms = now_ms;
+            match self.execute(&text, now_ms, out)? {
+                Outcome::Done => out.write_str("ok\n")?,
+                Outcome::Acknowledged => {}
+                Outcome::Failed(error) => {
+                    error.write(out)?;
+                    out.write_str("ok\n")?;
+                }
+                Outcome::Started(running) => self.running = running,
+            }
+        }
+    }
+
+    fn running_done(&self, now_ms: u32) -> bool {
+        if self.wait_cancelled {
+            return true;
+        }
+        match self.running {
+            Running::Idle => true,
+            Running::Dwell { until_ms } => (now_ms.wrapping_sub(until_ms) as i32) >= 0,
+        }
+    }
+
+    fn auto_report<W: uWrite + ?Sized>(&mut self, now_ms: u32, out: &mut W) -> Result<(), W::Error> {
+        if self.auto_report_s == 0 {
+            return Ok(());
+        }
+        if now_ms.wrapping_sub(self.last_auto_report_ms) >= u32::from(self.auto_report_s) * 1000 {
+            self.last_auto_report_ms = now_ms;
+            out.write_str(" ")?;
+            self.write_temperatures(out)?;
+        }
+        Ok(())
+    }
+
+    fn execute<W: uWrite + ?Sized>(&mut self, text: &[u8], now_ms: u32, out: &mut W) -> Result<Outcome, W::Error> {
+        let command = match gcode::parse(text) {
+            Ok(command) => command,
+            Err(ParseError::Empty) => return Ok(Outcome::Done),
+            Err(error) => return Ok(Outcome::Failed(error.into())),
+        };
+        if self.halted {
+            return Ok(Outcome::Failed(CommandError::Halted));
+        }
+        let result = match command.code {
+            Code::G(0 | 1) | Code::Modal => self.linear_move(&command, out),
+            Code::G(2 | 3) => self.arc_move(&command, out),
+            Code::G(4) => return Ok(self.dwell(&command, now_ms)),
+            Code::G(20) => Ok(self.modal.units = Units::Inches),
+            Code::G(21) => Ok(self.modal.units = Units::Millimetres),
+            Code::G(90) => Ok(self.set_distance(Distance::Absolute)),
+            Code::G(91) => Ok(self.set_distance(Distance::Relative)),
+            Code::G(92) => self.modal.set_logical_position(&command),
+            Code::M(82) => Ok(self.modal.extruder_distance = Distance::Absolute),
+            Code::M(83) => Ok(self.modal.extruder_distance = Distance::Relative),
+            Code::M(17) => Ok(self.steppers_enabled = true),
+            Code::M(18 | 84) => Ok(self.steppers_enabled = false),
+            Code::M(105) => {
+                // Marlin puts the report on the `ok` line itself.
+                out.write_str("ok ")?;
+                self.write_temperatures(out)?;
+                return Ok(Outcome::Acknowledged);
+            }
+            Code::M(106) => self.set_fan(&command),
+            Code::M(107) => Ok(self.fan_duty = 0),
+            // M108 and M410 act from the receive interrupt; M110 in the
+            // protocol layer. Here they only get their `ok`.
+            Code::M(108 | 110 | 410) => Ok(()),
+            Code::M(112) => {
+                self.kill(out)?;
+                Ok(())
+            }
+            Code::M(114) => self.report_position(out).map(Ok)?,
+            Code::M(115) => write_capabilities(out).map(Ok)?,
+            Code::M(117) => Ok(()),
+            Code::M(118) => self.echo(text, out).map(Ok)?,
+            Code::M(119) => self.report_endstops(out).map(Ok)?,
+            Code::M(155) => self.set_auto_report(&command, now_ms),
+            Code::M(400) => Ok(()),
+            Code::M(92) => settings_axes(&command, &mut self.settings.steps_per_mm_milli),
+            Code::M(201) => settings_axes(&command, &mut self.settings.max_accel_um_per_s2),
+            Code::M(203) => settings_axes(&command, &mut self.settings.max_feed_um_per_s),
+            Code::M(204) => self.set_accelerations(&command),
+            Code::M(205) => self.set_advanced(&command),
+            Code::M(220) => percent(&command, &mut self.settings.feed_percent),
+            Code::M(221) => percent(&command, &mut self.settings.flow_percent),
+            Code::M(502) => {
+                self.settings = Settings::default();
+                out.write_str("echo:Hardcoded Default Settings Loaded\n")?;
+                Ok(())
+            }
+            Code::M(503) => self.settings.report(out).map(Ok)?,
+            Code::T(tool) if tool < EXTRUDERS => Ok(()),
+            Code::T(tool) => {
+                ufmt::uwrite!(out, "echo:T{} Invalid extruder\n", tool)?;
+                Ok(())
+            }
+            // Parsed and acknowledged; their subsystems land with later work.
+            Code::G(10 | 11 | 28) | Code::M(104 | 109 | 140 | 190 | 301 | 302 | 303 | 500 | 501) => {
+                self.not_yet_available(text, out)?;
+                Ok(())
+            }
+            _ => {
+                ufmt::uwrite!(out, "echo:Unknown command: \"{}\"\n", Printable(trim(text)))?;
+                Ok(())
+            }
+        };
+        Ok(match result {
+            Ok(()) => Outcome::Done,
+            Err(error) => Outcome::Failed(error),
+        })
+    }
+
+    fn not_yet_available<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
+        ufmt::uwrite!(out, "echo:\"{}\" is not available yet in this build\n", Printable(trim(text)))
+    }
+
+    fn set_distance(&mut self, distance: Distance) {
+        // G90/G91 switch E too (Marlin); M82/M83 then override E alone.
+        self.modal.distance = distance;
+        self.modal.extruder_distance = distance;
+    }
+
+    /// `G0`/`G1` (or bare axis words): validate fully, then hand over.
+    fn linear_move<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
+        let mode = match command.code {
+            Code::G(0) => MotionMode::Rapid,
+            Code::G(1) => MotionMode::Linear,
+            _ => self.modal.motion_mode,
+        };
+        if matches!(mode, MotionMode::ClockwiseArc | MotionMode::CounterClockwiseArc) {
+            return self.arc_move(command, out);
+        }
+        let feed = self.modal.read_feed(command)?;
+        let _target = self.modal.target(command)?;
+        self.modal.motion_mode = mode;
+        if let Some(feed) = feed {
+            self.modal.feed_um_per_s = feed;
+        }
+        let _ = self.not_yet_available_motion(out);
+        Ok(())
+    }
+
+    /// `G2`/`G3`: an arc needs a centre (`I`/`J`) or a radius (`R`).
+    fn arc_move<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
+        let feed = self.modal.read_feed(command)?;
+        let _target = self.modal.target(command)?;
+        let has_centre = command.value(b'I')?.is_some() || command.value(b'J')?.is_some();
+        let has_radius = command.value(b'R')?.is_some();
+        if !has_centre && !has_radius {
+            return Err(CommandError::Missing(b'R'));
+        }
+        if let Some(feed) = feed {
+            self.modal.feed_um_per_s = feed;
+        }
+        let _ = self.not_yet_available_motion(out);
+        Ok(())
+    }
+
+    fn not_yet_available_motion<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        out.write_str("echo:Motion is not available yet in this build: nothing moved\n")
+    }
+
+    /// `G4 P<ms>` or `G4 S<s>`.
+    fn dwell(&mut self, command: &Command, now_ms: u32) -> Outcome {
+        let ms = match (command.value(b'P'), command.value(b'S')) {
+            (Ok(Some(p)), _) => p.to_int(),
+            (_, Ok(Some(s))) => s.to_scaled(3),
+            (Ok(None), Ok(None)) => Some(0),
+            (Err(e), _) | (_, Err(e)) => return Outcome::Failed(e.into()),
+        };
+        match ms {
+            Some(ms) if ms >= 0 => Outcome::Started(Running::Dwell { until_ms: now_ms.wrapping_add(ms as u32) }),
+            _ => Outcome::Failed(CommandError::OutOfRange(if command.has(b'P') { b'P' } else { b'S' })),
+        }
+    }
+
+    fn set_fan(&mut self, command: &Command) -> Result<(), CommandError> {
+        let duty = match command.value(b'S')? {
+            None => 255,
+            Some(value) => match value.to_int() {
+                Some(duty @ 0..=255) => duty as u8,
+                _ => return Err(CommandError::OutOfRange(b'S')),
+            },
+        };
+        self.fan_duty = duty;
+        Ok(())
+    }
+
+    fn set_auto_report(&mut self, command: &Command, now_ms: u32) -> Result<(), CommandError> {
+        let seconds = match command.value(b'S')?.map(|v| v.to_int()) {
+            None => 1,
+            Some(Some(s @ 0..=60)) => s as u8,
+            Some(_) => return Err(CommandError::OutOfRange(b'S')),
+        };
+        self.auto_report_s = seconds;
+        self.last_auto_report_ms = now_ms;
+        Ok(())
+    }
+
+    fn set_accelerations(&mut self, command: &Command) -> Result<(), CommandError> {
+        let read = |letter| command.value(letter)?.map(|v| positive_milli(letter, v)).transpose();
+        let (s, p, r, t) = (read(b'S')?, read(b'P')?, read(b'R')?, read(b'T')?);
+        let settings = &mut self.settings;
+        // `S` sets print and travel together (older hosts send it); P and T
+        // given on the same line win.
+        if let Some(s) = s {
+            settings.print_accel_um_per_s2 = s;
+            settings.travel_accel_um_per_s2 = s;
+        }
+        if let Some(p) = p {
+            settings.print_accel_um_per_s2 = p;
+        }
+        if let Some(r) = r {
+            settings.retract_accel_um_per_s2 = r;
+        }
+        if let Some(t) = t {
+            settings.travel_accel_um_per_s2 = t;
+        }
+        Ok(())
+    }
+
+    fn set_advanced(&mut self, command: &Command) -> Result<(), CommandError> {
+        let mut settings = self.settings.clone();
+        if let Some(value) = command.value(b'J')? {
+            match value.to_scaled(3) {
+                Some(um @ 1..=300) => settings.junction_deviation_um = um,
+                _ => return Err(CommandError::OutOfRange(b'J')),
+            }
+        }
+        for (letter, slot) in
+            [(b'S', &mut settings.min_feed_um_per_s), (b'T', &mut settings.min_travel_feed_um_per_s)]
+        {
+            if let Some(value) = command.value(letter)? {
+                *slot = non_negative_milli(letter, value)?;
+            }
+        }
+        if let Some(value) = command.value(b'B')? {
+            match value.to_int() {
+                Some(us @ 0..=1_000_000) => settings.min_segment_time_us = us,
+                _ => return Err(CommandError::OutOfRange(b'B')),
+            }
+        }
+        self.settings = settings;
+        Ok(())
+    }
+
+    /// ` T:… /… B:… /… @:… B@:…` (used by M105 and auto-reports).
+    pub fn write_temperatures<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        ufmt::uwrite!(
+            out,
+            "T:{} /{} B:{} /{} @:{} B@:{}\n",
+            self.hotend.measured,
+            self.hotend.target,
+            self.bed.measured,
+            self.bed.target,
+            self.hotend.power,
+            self.bed.power
+        )
+    }
+
+    /// `M114`: `X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0`.
+    fn report_position<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        for (letter, um) in AXIS_LETTERS.iter().zip(self.modal.logical_position()) {
+            ufmt::uwrite!(out, "{}:{} ", char::from(*letter), micrometres_as_mm(um))?;
+        }
+        let [x, y, z] = self.position_steps;
+        ufmt::uwrite!(out, "Count X:{} Y:{} Z:{}\n", x, y, z)
+    }
+
+    /// `M118 [E1] <text>`: print the text (with `echo:` when `E1`).
+    fn echo<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
+        let mut message = gcode::text_argument(text);
+        let mut prefix = false;
+        if let Some(rest) = message.strip_prefix(b"E1 ").or_else(|| message.strip_prefix(b"e1 ")) {
+            prefix = true;
+            message = rest;
+        }
+        if prefix {
+            out.write_str("echo:")?;
+        }
+        ufmt::uwrite!(out, "{}\n", Printable(message))
+    }
+
+    /// `M119`: Marlin's endstop report.
+    fn report_endstops<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        out.write_str("Reporting endstop status\n")?;
+        for (bit, name) in ENDSTOP_NAMES.iter().enumerate() {
+            let level = self.endstop_levels >> bit & 1;
+            let triggered = level == self.endstop_trigger_levels >> bit & 1;
+            ufmt::uwrite!(out, "{}: {}\n", *name, if triggered { "TRIGGERED" } else { "open" })?;
+        }
+        Ok(())
+    }
+}
+
+/// What executing a command led to.
+enum Outcome {
+    /// Finished: send `ok`.
+    Done,
+    /// Finished, and the reply already carried the `ok` (`M105`).
+    Acknowledged,
+    /// Refused: send the error, then `ok`.
+    Failed(CommandError),
+    /// Still running: `ok` when it finishes.
+    Started(Running),
+}
+
+/// Micrometres shown as millimetres with two decimals, rounded.
+fn micrometres_as_mm(um: i32) -> Fixed {
+    let rounded = if um >= 0 { (um + 5) / 10 } else { (um - 5) / 10 };
+    Fixed::hundredths(rounded)
+}
+
+fn trim(text: &[u8]) -> &[u8] {
+    let start = text.iter().position(|&b| b != b' ').unwrap_or(text.len());
+    let end = text.iter().rposition(|&b| b != b' ').map_or(start, |i| i + 1);
+    &text[start..end.max(start)]
+}
+
+/// A strictly positive value in milli-units.
+fn positive_milli(letter: u8, value: gcode::Decimal) -> Result<i32, CommandError> {
+    match value.to_scaled(3) {
+        Some(milli) if milli > 0 => Ok(milli),
+        _ => Err(CommandError::OutOfRange(letter)),
+    }
+}
+
+fn non_negative_milli(letter: u8, value: gcode::Decimal) -> Result<i32, CommandError> {
+    match value.to_scaled(3) {
+        Some(milli) if milli >= 0 => Ok(milli),
+        _ => Err(CommandError::OutOfRange(letter)),
+    }
+}
+
+/// `M92`/`M201`/`M203`: per-axis positive values; all or nothing.
+fn settings_axes(command: &Command, values: &mut [i32; AXES]) -> Result<(), CommandError> {
+    let mut updated = *values;
+    for (axis, &letter) in AXIS_LETTERS.iter().enumerate() {
+        if let Some(value) = command.value(letter)? {
+            updated[axis] = positive_milli(letter, value)?;
+        }
+    }
+    *values = updated;
+    Ok(())
+}
+
+/// `M220 S<percent>` / `M221 S<percent>` (10–999, as Marlin clamps).
+fn percent(command: &Command, slot: &mut i32) -> Result<(), CommandError> {
+    if let Some(value) = command.value(b'S')? {
+        match value.to_int() {
+            Some(p @ 10..=999) => *slot = p,
+            _ => return Err(CommandError::OutOfRange(b'S')),
+        }
+    }
+    Ok(())
+}
+
+/// `M115`: the firmware line and the `Cap:` lines hosts read to decide what
+/// to send (OctoPrint enables auto-reporting and the emergency parser from
+/// these).
+pub fn write_capabilities<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Error> {
+    ufmt::uwrite!(
+        out,
+        "FIRMWARE_NAME:{} {} (Rust) SOURCE_CODE_URL:local PROTOCOL_VERSION:1.0 MACHINE_TYPE:RepRap EXTRUDER_COUNT:{}\n",
+        crate::FIRMWARE_NAME,
+        crate::FIRMWARE_VERSION,
+        EXTRUDERS
+    )?;
+    for (name, on) in CAPABILITIES {
+        ufmt::uwrite!(out, "Cap:{}:{}\n", *name, u8::from(*on))?;
+    }
+    Ok(())
+}
+
+/// The capabilities reported by `M115`, honestly: on only when implemented.
+const CAPABILITIES: &[(&str, bool)] = &[
+    ("SERIAL_XON_XOFF", false),
+    ("BINARY_FILE_TRANSFER", false),
+    ("EEPROM", false),
+    ("VOLUMETRIC", false),
+    ("AUTOREPORT_TEMP", true),
+    ("AUTOREPORT_POS", false),
+    ("PROGRESS", false),
+    ("PRINT_JOB", false),
+    ("AUTOLEVEL", false),
+    ("Z_PROBE", false),
+    ("LEVELING_DATA", false),
+    ("SOFTWARE_POWER", false),
+    ("TOGGLE_LIGHTS", false),
+    ("EMERGENCY_PARSER", true),
+    ("HOST_ACTION_COMMANDS", false),
+    ("PROMPT_SUPPORT", false),
+    ("SDCARD", false),
+    ("AUTOREPORT_SD_STATUS", false),
+    ("THERMAL_PROTECTION", false),
+    ("MOTION_MODES", false),
+    ("ARCS", false),
+    ("BABYSTEPPING", false),
+    ("CHAMBER_TEMPERATURE", false),
+];
+
+#[cfg(test)]
+mod tests;

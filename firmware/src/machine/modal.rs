@@ -1,0 +1,269 @@
+//! Modal state, as RS274/NGC and the RepRap firmwares define it: what a
+//! line means depends on earlier lines.
+//!
+//! - `G90`/`G91`: absolute or relative X, Y, Z (and E, as in Marlin);
+//!   `M82`/`M83` switch E alone;
+//! - `G20`/`G21`: inches or millimetres for every length and feed rate;
+//! - `F`: the feed rate persists until changed (mm/min or in/min);
+//! - `G92`: declares the current position to be a given value, by shifting
+//!   the logical coordinates (the machine does not move);
+//! - `G0`/`G1`/`G2`/`G3`: the motion mode, repeated by a line of bare axis
+//!   words (`X5 Y6`).
+//!
+//! Lengths are kept in whole micrometres (`i32`: ±2147 m, so even a long
+//! print's absolute E fits), exact for millimetre and inch input alike
+//! (1 in = 25 400 µm). Feed rates are in µm/s.
+
+use super::error::CommandError;
+use crate::gcode::{Command, Decimal};
+
+/// Axes a move names, in this order.
+pub const AXIS_LETTERS: [u8; 4] = [b'X', b'Y', b'Z', b'E'];
+/// Number of axes the executor tracks.
+pub const AXES: usize = AXIS_LETTERS.len();
+
+/// Largest coordinate accepted, in µm (±2000 m leaves headroom in `i32`).
+pub const MAX_COORDINATE_UM: i32 = 2_000_000_000;
+/// Highest feed rate accepted, in µm/s (100 m/s: far beyond any machine,
+/// but a typo like `F6000000` is refused rather than clamped silently).
+pub const MAX_FEED_UM_PER_S: i32 = 100_000_000;
+
+/// A position or a distance per axis (X, Y, Z, E), in µm.
+pub type Position = [i32; AXES];
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Distance {
+    Absolute,
+    Relative,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Units {
+    Millimetres,
+    Inches,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MotionMode {
+    Rapid,
+    Linear,
+    ClockwiseArc,
+    CounterClockwiseArc,
+}
+
+/// The modal state of the interpreter.
+#[derive(Clone, Debug)]
+pub struct ModalState {
+    pub motion_mode: MotionMode,
+    /// `G90`/`G91` for X, Y, Z.
+    pub distance: Distance,
+    /// `M82`/`M83` for E.
+    pub extruder_distance: Distance,
+    pub units: Units,
+    /// Current feed rate in µm/s (Marlin's default: 1500 mm/min).
+    pub feed_um_per_s: i32,
+    /// Where the machine is (or will be, once queued motion completes), in
+    /// machine coordinates.
+    pub position: Position,
+    /// `G92` shift: logical = machine + offset.
+    pub offset: Position,
+}
+
+impl Default for ModalState {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ModalState {
+    pub const fn new() -> Self {
+        Self {
+            motion_mode: MotionMode::Linear,
+            distance: Distance::Absolute,
+            extruder_distance: Distance::Absolute,
+            units: Units::Millimetres,
+            feed_um_per_s: 25_000,
+            position: [0; AXES],
+            offset: [0; AXES],
+        }
+    }
+
+    /// The logical position (what `M114` reports and `G90` targets mean).
+    pub fn logical_position(&self) -> Position {
+        let mut logical = [0; AXES];
+        for (axis, value) in logical.iter_mut().enumerate() {
+            *value = self.position[axis].saturating_add(self.offset[axis]);
+        }
+        logical
+    }
+
+    /// A length word in µm, in the current units.
+    pub fn length_um(&self, letter: u8, value: Decimal) -> Result<i32, CommandError> {
+        let um = match self.units {
+            Units::Millimetres => value.to_scaled(3),
+            Units::Inches => inches_to_um(value),
+        }
+        .ok_or(CommandError::OutOfRange(letter))?;
+        if um.unsigned_abs() > MAX_COORDINATE_UM as u32 {
+            return Err(CommandError::OutOfRange(letter));
+        }
+        Ok(um)
+    }
+
+    /// Read `F` if present: it must be positive (`F0` and negative feeds are
+    /// refused, and the stored feed rate is left as it was).
+    pub fn read_feed(&self, command: &Command) -> Result<Option<i32>, CommandError> {
+        let Some(value) = command.value(b'F')? else { return Ok(None) };
+        if value.is_negative() || value.is_zero() {
+            return Err(CommandError::InvalidFeedRate);
+        }
+        let per_minute = self.length_um(b'F', value)?;
+        let per_second = per_minute / 60;
+        if per_second == 0 || per_second > MAX_FEED_UM_PER_S {
+            return Err(CommandError::InvalidFeedRate);
+        }
+        Ok(Some(per_second))
+    }
+
+    /// The machine-coordinate target of a move word set (`X`, `Y`, `Z`,
+    /// `E`), honouring G90/G91, M82/M83, G20/G21 and G92. Axes not named
+    /// stay where they are. Nothing is changed: the caller commits the
+    /// target once the move is accepted.
+    pub fn target(&self, command: &Command) -> Result<Position, CommandError> {
+        let mut target = self.position;
+        for (axis, &letter) in AXIS_LETTERS.iter().enumerate() {
+            let Some(value) = command.value(letter)? else { continue };
+            let um = self.length_um(letter, value)?;
+            let distance = if letter == b'E' { self.extruder_distance } else { self.distance };
+            let machine = match distance {
+                Distance::Absolute => i64::from(um) - i64::from(self.offset[axis]),
+                Distance::Relative => i64::from(self.position[axis]) + i64::from(um),
+            };
+            if machine.unsigned_abs() > MAX_COORDINATE_UM as u64 {
+                return Err(CommandError::OutOfRange(letter));
+            }
+            target[axis] = machine as i32;
+        }
+        Ok(target)
+    }
+
+    /// `G92`: declare the named axes' logical position (all axes to zero
+    /// when none is named, as in Marlin).
+    pub fn set_logical_position(&mut self, command: &Command) -> Result<(), CommandError> {
+        let mut offset = self.offset;
+        let named = AXIS_LETTERS.iter().any(|&l| command.has(l));
+        for (axis, &letter) in AXIS_LETTERS.iter().enumerate() {
+            let value = match command.value(letter)? {
+                Some(value) => self.length_um(letter, value)?,
+                None if !named => 0,
+                None => continue,
+            };
+            offset[axis] = value.saturating_sub(self.position[axis]);
+        }
+        self.offset = offset;
+        Ok(())
+    }
+}
+
+/// Inches to µm without float: `value · 25 400`, from units of 10⁻⁵ in
+/// (0.254 µm each), split so that no product leaves `i32` (64-bit division
+/// costs almost 3 KiB of flash on the AVR). `to_scaled(5)` already bounds
+/// the input to ±21 474 in.
+fn inches_to_um(value: Decimal) -> Option<i32> {
+    let hundred_thousandths = value.to_scaled(5)?;
+    let whole = hundred_thousandths / 1000 * 254;
+    let rest = hundred_thousandths % 1000 * 254;
+    let rounded = if rest >= 0 { (rest + 500) / 1000 } else { (rest - 500) / 1000 };
+    Some(whole + rounded)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gcode::parse;
+
+    fn target(state: &ModalState, line: &str) -> Result<Position, CommandError> {
+        state.target(&parse(line.as_bytes()).unwrap())
+    }
+
+    #[test]
+    fn absolute_targets_are_the_values_in_micrometres() {
+        let state = ModalState::new();
+        assert_eq!(target(&state, "G1 X10.5 Y-3 E0.04521"), Ok([10_500, -3_000, 0, 45]));
+    }
+
+    #[test]
+    fn relative_targets_add_to_the_position() {
+        let mut state = ModalState::new();
+        state.position = [1_000, 2_000, 3_000, 4_000];
+        state.distance = Distance::Relative;
+        assert_eq!(target(&state, "G1 X1 Z-1"), Ok([2_000, 2_000, 2_000, 4_000]));
+    }
+
+    #[test]
+    fn e_follows_m82_m83_independently_of_g90() {
+        let mut state = ModalState::new();
+        state.position = [0, 0, 0, 5_000];
+        state.extruder_distance = Distance::Relative;
+        assert_eq!(target(&state, "G1 X1 E1"), Ok([1_000, 0, 0, 6_000]));
+    }
+
+    #[test]
+    fn inches_are_exact() {
+        let mut state = ModalState::new();
+        state.units = Units::Inches;
+        assert_eq!(target(&state, "G1 X1 Y-0.5 Z0.001"), Ok([25_400, -12_700, 25, 0]));
+        assert_eq!(target(&state, "G1 X-1.00001"), Ok([-25_400, 0, 0, 0]));
+        assert_eq!(target(&state, "G1 X21000"), Ok([533_400_000, 0, 0, 0]));
+        assert_eq!(target(&state, "G1 X80000"), Err(CommandError::OutOfRange(b'X')));
+        assert_eq!(state.read_feed(&parse(b"G1 F60").unwrap()), Ok(Some(25_400)));
+    }
+
+    #[test]
+    fn g92_shifts_logical_coordinates_without_moving() {
+        let mut state = ModalState::new();
+        state.position = [5_000, 0, 0, 7_000];
+        state.set_logical_position(&parse(b"G92 X0 E0").unwrap()).unwrap();
+        assert_eq!(state.position, [5_000, 0, 0, 7_000]);
+        assert_eq!(state.logical_position(), [0, 0, 0, 0]);
+        // Absolute X10 now means machine 15 mm.
+        assert_eq!(target(&state, "G1 X10"), Ok([15_000, 0, 0, 7_000]));
+    }
+
+    #[test]
+    fn g92_without_axes_zeroes_every_axis() {
+        let mut state = ModalState::new();
+        state.position = [1, 2, 3, 4];
+        state.set_logical_position(&parse(b"G92").unwrap()).unwrap();
+        assert_eq!(state.logical_position(), [0; AXES]);
+    }
+
+    #[test]
+    fn feed_rates_must_be_positive() {
+        let state = ModalState::new();
+        assert_eq!(state.read_feed(&parse(b"G1 F0").unwrap()), Err(CommandError::InvalidFeedRate));
+        assert_eq!(state.read_feed(&parse(b"G1 F-100").unwrap()), Err(CommandError::InvalidFeedRate));
+        assert_eq!(state.read_feed(&parse(b"G1 F0.001").unwrap()), Err(CommandError::InvalidFeedRate));
+        assert_eq!(state.read_feed(&parse(b"G1 F1800").unwrap()), Ok(Some(30_000)));
+        assert_eq!(state.read_feed(&parse(b"G1 X1").unwrap()), Ok(None));
+    }
+
+    #[test]
+    fn coordinates_beyond_range_are_refused() {
+        let state = ModalState::new();
+        assert_eq!(target(&state, "G1 X2000001"), Err(CommandError::OutOfRange(b'X')));
+        let mut relative = ModalState::new();
+        relative.distance = Distance::Relative;
+        relative.position = [MAX_COORDINATE_UM, 0, 0, 0];
+        assert_eq!(target(&relative, "G1 X1"), Err(CommandError::OutOfRange(b'X')));
+    }
+
+    #[test]
+    fn a_flag_axis_is_an_error() {
+        let state = ModalState::new();
+        assert_eq!(
+            target(&state, "G1 X"),
+            Err(CommandError::Parse(crate::gcode::ParseError::WordWithoutValue(b'X')))
+        );
+    }
+}

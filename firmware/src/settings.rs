@@ -1,0 +1,107 @@
+//! The machine's tunable settings: what `M92`, `M201`, `M203`, `M204`,
+//! `M205`, `M220` and `M221` change and `M503` prints (and, once storage
+//! lands, what `M500`/`M501` save and load).
+//!
+//! Values are fixed point with three decimals ("milli" units) so that they
+//! print back exactly as typed and need no float: steps/mm × 1000, mm/s ×
+//! 1000 (= µm/s), mm/s² × 1000 (= µm/s²). Units are Marlin's.
+
+use crate::machine::modal::{AXES, AXIS_LETTERS};
+use crate::reply::Fixed;
+use ufmt::uWrite;
+
+/// Every tunable value.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Settings {
+    /// `M92`: steps per mm × 1000, per axis X Y Z E.
+    pub steps_per_mm_milli: [i32; AXES],
+    /// `M203`: maximum feed rate per axis, µm/s.
+    pub max_feed_um_per_s: [i32; AXES],
+    /// `M201`: maximum acceleration per axis, µm/s².
+    pub max_accel_um_per_s2: [i32; AXES],
+    /// `M204 P`: acceleration of printing moves, µm/s².
+    pub print_accel_um_per_s2: i32,
+    /// `M204 R`: acceleration of retracts (E-only moves), µm/s².
+    pub retract_accel_um_per_s2: i32,
+    /// `M204 T`: acceleration of travel (non-extruding) moves, µm/s².
+    pub travel_accel_um_per_s2: i32,
+    /// `M205 J`: junction deviation, µm (Marlin's default 0.013 mm).
+    pub junction_deviation_um: i32,
+    /// `M205 S`: minimum feed rate of printing moves, µm/s.
+    pub min_feed_um_per_s: i32,
+    /// `M205 T`: minimum feed rate of travel moves, µm/s.
+    pub min_travel_feed_um_per_s: i32,
+    /// `M205 B`: minimum segment time, µs.
+    pub min_segment_time_us: i32,
+    /// `M220 S`: feed-rate override, percent.
+    pub feed_percent: i32,
+    /// `M221 S`: flow (extrusion) override, percent.
+    pub flow_percent: i32,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self::prusa_i3()
+    }
+}
+
+impl Settings {
+    /// SPEC §1: the Cartesian Prusa i3 on RAMPS (A4988 at 1/16, GT2 16-tooth
+    /// pulleys: 100 steps/mm on X and Y; M8 Z rods: 400 steps/mm; E 93).
+    pub const fn prusa_i3() -> Self {
+        Self {
+            steps_per_mm_milli: [100_000, 100_000, 400_000, 93_000],
+            max_feed_um_per_s: [300_000, 300_000, 5_000, 25_000],
+            max_accel_um_per_s2: [3_000_000, 3_000_000, 100_000, 10_000_000],
+            print_accel_um_per_s2: 1_500_000,
+            retract_accel_um_per_s2: 1_500_000,
+            travel_accel_um_per_s2: 1_500_000,
+            junction_deviation_um: 13,
+            min_feed_um_per_s: 0,
+            min_travel_feed_um_per_s: 0,
+            min_segment_time_us: 20_000,
+            feed_percent: 100,
+            flow_percent: 100,
+        }
+    }
+
+    /// `M503`: the settings as the commands that would set them, in
+    /// Marlin's layout.
+    pub fn report<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        out.write_str("echo:; Steps per unit:\necho:  M92")?;
+        write_axes(out, &self.steps_per_mm_milli)?;
+        out.write_str("\necho:; Max feedrates (units/s):\necho:  M203")?;
+        write_axes(out, &self.max_feed_um_per_s)?;
+        out.write_str("\necho:; Max Acceleration (units/s2):\necho:  M201")?;
+        write_axes(out, &self.max_accel_um_per_s2)?;
+        ufmt::uwrite!(
+            out,
+            "\necho:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\necho:  M204 P{} R{} T{}\n",
+            milli(self.print_accel_um_per_s2),
+            milli(self.retract_accel_um_per_s2),
+            milli(self.travel_accel_um_per_s2)
+        )?;
+        ufmt::uwrite!(
+            out,
+            "echo:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\necho:  M205 B{} S{} T{} J{}\n",
+            self.min_segment_time_us,
+            milli(self.min_feed_um_per_s),
+            milli(self.min_travel_feed_um_per_s),
+            Fixed { mantissa: self.junction_deviation_um, digits: 3 }
+        )?;
+        ufmt::uwrite!(out, "echo:; Feedrate and flow:\necho:  M220 S{}\necho:  M221 S{}\n", self.feed_percent, self.flow_percent)
+    }
+}
+
+/// A milli-unit value with two decimals, rounded (Marlin prints two).
+fn milli(value: i32) -> Fixed {
+    let rounded = if value >= 0 { (value + 5) / 10 } else { (value - 5) / 10 };
+    Fixed::hundredths(rounded)
+}
+
+fn write_axes<W: uWrite + ?Sized>(out: &mut W, values: &[i32; AXES]) -> Result<(), W::Error> {
+    for (letter, value) in AXIS_LETTERS.iter().zip(values) {
+        ufmt::uwrite!(out, " {}{}", char::from(*letter), milli(*value))?;
+    }
+    Ok(())
+}
