@@ -21,6 +21,34 @@ pub enum Emergency {
     QuickStop,
 }
 
+impl Emergency {
+    /// This emergency as a bit of [`Pending`].
+    pub const fn bit(self) -> u8 {
+        match self {
+            Self::Kill => 1,
+            Self::CancelWait => 2,
+            Self::QuickStop => 4,
+        }
+    }
+}
+
+/// Emergencies seen by the interrupt and not yet handled by the main loop,
+/// one bit each (a `u8` so an interrupt can set it in one store).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Pending(pub u8);
+
+impl Pending {
+    pub const NONE: Self = Self(0);
+
+    pub fn with(self, emergency: Emergency) -> Self {
+        Self(self.0 | emergency.bit())
+    }
+
+    pub fn contains(self, emergency: Emergency) -> bool {
+        self.0 & emergency.bit() != 0
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum State {
     /// At the start of a line, before any word.

@@ -9,6 +9,7 @@
 //! - [`rx`]: the serial receive ring between the RX interrupt and the main loop;
 //! - [`emergency`]: `M112`/`M108`/`M410` recognised inside the RX interrupt;
 //! - [`line`]: assembling received bytes into bounded lines;
+//! - [`host_link`]: the main loop's serial duties, shared by all boards;
 //! - [`gcode`]: the allocation-free G-code lexer/parser and its number format;
 //! - [`protocol`]: Marlin's host protocol (line numbers, checksums, resends);
 //! - [`reply`]: the exact reply strings hosts parse, and decimal formatting;
@@ -25,6 +26,7 @@ extern crate std;
 
 pub mod emergency;
 pub mod gcode;
+pub mod host_link;
 pub mod line;
 pub mod machine;
 pub mod progmem;

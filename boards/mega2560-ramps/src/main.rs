@@ -18,7 +18,7 @@ mod serial;
 mod watchdog;
 
 use avr_device::atmega2560::Peripherals;
-use firmware::line::LineAssembler;
+use firmware::host_link::HostLink;
 use firmware::machine::Machine;
 use firmware::rx::{self, RxQueue};
 use firmware::thermal::thermistor::{celsius_from_adc, NTC100K_B3950_4K7};
@@ -39,7 +39,7 @@ fn main() -> ! {
     // SAFETY: the queue is split exactly once, here, before interrupts are
     // enabled; afterwards only its two ends are used.
     let queue = unsafe { &mut *core::ptr::addr_of_mut!(RX_QUEUE) };
-    let (producer, mut consumer) = rx::split(queue);
+    let (producer, consumer) = rx::split(queue);
     serial::init(&dp, producer);
     clock::init(&dp);
     adc::init(&dp);
@@ -47,12 +47,12 @@ fn main() -> ! {
     unsafe { avr_device::interrupt::enable() };
 
     let mut tx = serial::Tx;
-    let mut machine = Machine::new();
-    let mut assembler = LineAssembler::new();
+    let mut rx = serial::Rx { consumer };
+    let mut link = HostLink::new();
     for endstop in pins::ENDSTOPS {
         pins::make_input_pulled_up(&dp, endstop);
     }
-    let _ = machine.write_banner(&mut tx);
+    let _ = link.machine.write_banner(&mut tx);
     let mut next_thermal_ms = 0u32;
 
     // The loop never sleeps: QEMU's AVR machine does not wake from `sleep`
@@ -60,33 +60,15 @@ fn main() -> ! {
     // a printer board has no battery to save.
     loop {
         watchdog::feed();
-        let emergencies = serial::take_emergencies();
-        if emergencies & serial::KILL != 0 {
-            let _ = machine.kill(&mut tx);
-        }
-        if emergencies & serial::CANCEL_WAIT != 0 {
-            machine.cancel_wait();
-        }
-        if serial::take_dropped() > 0 {
-            assembler.mark_damaged();
-        }
-        // Take bytes only while the command queue has room for a line; the
-        // rest waits in the receive ring (hosts wait for `ok` anyway).
-        while machine.can_accept_line() {
-            let Some(byte) = consumer.pop() else { break };
-            if let Some(line) = assembler.push(byte) {
-                let _ = machine.receive_line(line, &mut tx);
-            }
-        }
         let now = clock::millis();
-        let _ = machine.poll(now, &mut tx);
+        let _ = link.service(&mut rx, now, &mut tx);
         if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
             next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
             let read = |channel| celsius_from_adc(&NTC100K_B3950_4K7, adc::read(&dp, channel)).unwrap_or(Celsius(0));
-            machine.set_measured(read(pins::HOTEND_THERMISTOR_CHANNEL), read(pins::BED_THERMISTOR_CHANNEL));
-            machine.set_endstop_levels(pins::endstop_levels(&dp));
+            link.machine.set_measured(read(pins::HOTEND_THERMISTOR_CHANNEL), read(pins::BED_THERMISTOR_CHANNEL));
+            link.machine.set_endstop_levels(pins::endstop_levels(&dp));
         }
-        apply_outputs(&dp, &machine);
+        apply_outputs(&dp, &link.machine);
     }
 }
 

@@ -9,8 +9,9 @@ use avr_device::atmega2560::{Peripherals, USART0};
 use avr_device::interrupt::Mutex;
 use core::cell::RefCell;
 use core::cell::Cell;
-use firmware::emergency::Emergency;
-use firmware::rx::RxProducer;
+use firmware::emergency::{Emergency, Pending};
+use firmware::host_link::SerialLink;
+use firmware::rx::{RxConsumer, RxProducer};
 
 /// Baud rate: Marlin's default 115200, or 250000 with `--features baud-250000`.
 #[cfg(not(feature = "baud-250000"))]
@@ -26,18 +27,27 @@ const UBRR: u16 = ((CPU_HZ + 4 * BAUD) / (8 * BAUD) - 1) as u16;
 /// The interrupt's end of the receive ring, installed once by [`init`].
 pub static RX_PRODUCER: Mutex<RefCell<Option<RxProducer<'static>>>> = Mutex::new(RefCell::new(None));
 
-/// Emergencies seen by the receive interrupt, for the main loop to report
-/// (bit 0: M112 kill, bit 1: M108 cancel wait, bit 2: M410 quick stop).
-static EMERGENCIES: Mutex<Cell<u8>> = Mutex::new(Cell::new(0));
+/// Emergencies seen by the receive interrupt, for the main loop to act on.
+static EMERGENCIES: Mutex<Cell<Pending>> = Mutex::new(Cell::new(Pending::NONE));
 
-/// Take (and clear) the emergencies seen since the last call.
-pub fn take_emergencies() -> u8 {
-    avr_device::interrupt::free(|cs| EMERGENCIES.borrow(cs).replace(0))
+/// The main loop's view of USART0's receive side.
+pub struct Rx {
+    pub consumer: RxConsumer<'static>,
 }
 
-pub const KILL: u8 = 1;
-pub const CANCEL_WAIT: u8 = 2;
-pub const QUICK_STOP: u8 = 4;
+impl SerialLink for Rx {
+    fn pop(&mut self) -> Option<u8> {
+        self.consumer.pop()
+    }
+
+    fn take_dropped(&mut self) -> u8 {
+        avr_device::interrupt::free(|cs| RX_PRODUCER.borrow(cs).borrow_mut().as_mut().map_or(0, |p| p.take_dropped()))
+    }
+
+    fn take_emergencies(&mut self) -> Pending {
+        avr_device::interrupt::free(|cs| EMERGENCIES.borrow(cs).replace(Pending::NONE))
+    }
+}
 
 /// Set up 8N1 at [`BAUD`] with the receive interrupt on.
 pub fn init(dp: &Peripherals, producer: RxProducer<'static>) {
@@ -50,11 +60,6 @@ pub fn init(dp: &Peripherals, producer: RxProducer<'static>) {
     // SAFETY: a valid frame format.
     usart.ucsr0c.write(|w| unsafe { w.bits(0b0000_0110) });
     usart.ucsr0b.write(|w| w.rxen0().set_bit().txen0().set_bit().rxcie0().set_bit());
-}
-
-/// Bytes lost in reception since the last call (ring full or UART overrun).
-pub fn take_dropped() -> u8 {
-    avr_device::interrupt::free(|cs| RX_PRODUCER.borrow(cs).borrow_mut().as_mut().map_or(0, |p| p.take_dropped()))
 }
 
 #[avr_device::interrupt(atmega2560)]
@@ -75,13 +80,8 @@ fn USART0_RX() {
             // registers, and interrupts are off inside this handler.
             crate::pins::all_outputs_safe(unsafe { &avr_device::atmega2560::Peripherals::steal() });
         }
-        let bit = match emergency {
-            Emergency::Kill => KILL,
-            Emergency::CancelWait => CANCEL_WAIT,
-            Emergency::QuickStop => QUICK_STOP,
-        };
-        let flags = EMERGENCIES.borrow(cs);
-        flags.set(flags.get() | bit);
+        let pending = EMERGENCIES.borrow(cs);
+        pending.set(pending.get().with(emergency));
     });
 }
 

@@ -1,0 +1,62 @@
+//! The main loop's serial duties, shared by every board and the simulator:
+//! act on emergencies from the receive interrupt, turn received bytes into
+//! lines (only while the command queue has room), and run the executor.
+//!
+//! A board implements [`SerialLink`] over its receive ring and calls
+//! [`HostLink::service`] once per pass of its main loop.
+
+use crate::emergency::{Emergency, Pending};
+use crate::line::LineAssembler;
+use crate::machine::Machine;
+use ufmt::uWrite;
+
+/// The receive side of a board's serial port, as the main loop sees it.
+pub trait SerialLink {
+    /// The next received byte, if any.
+    fn pop(&mut self) -> Option<u8>;
+    /// Bytes lost since the last call (ring full, UART overrun).
+    fn take_dropped(&mut self) -> u8;
+    /// Emergencies recognised by the receive interrupt since the last call.
+    fn take_emergencies(&mut self) -> Pending;
+}
+
+/// The executor and the line being received.
+pub struct HostLink {
+    pub machine: Machine,
+    assembler: LineAssembler,
+}
+
+impl Default for HostLink {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl HostLink {
+    pub const fn new() -> Self {
+        Self { machine: Machine::new(), assembler: LineAssembler::new() }
+    }
+
+    /// One pass: emergencies first, then input, then execution.
+    pub fn service<W: uWrite + ?Sized>(&mut self, link: &mut impl SerialLink, now_ms: u32, out: &mut W) -> Result<(), W::Error> {
+        let emergencies = link.take_emergencies();
+        if emergencies.contains(Emergency::Kill) {
+            self.machine.kill(out)?;
+        }
+        if emergencies.contains(Emergency::CancelWait) {
+            self.machine.cancel_wait();
+        }
+        if link.take_dropped() > 0 {
+            self.assembler.mark_damaged();
+        }
+        // Take bytes only while the queue has room for a line; the rest
+        // waits in the receive ring (hosts wait for `ok` anyway).
+        while self.machine.can_accept_line() {
+            let Some(byte) = link.pop() else { break };
+            if let Some(line) = self.assembler.push(byte) {
+                self.machine.receive_line(line, out)?;
+            }
+        }
+        self.machine.poll(now_ms, out)
+    }
+}

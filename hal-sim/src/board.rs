@@ -1,0 +1,139 @@
+//! A simulated board running the firmware core on virtual time.
+//!
+//! The serial port goes through the same receive ring (`firmware::rx`,
+//! emergency scanner included) and the same main-loop duties
+//! (`firmware::host_link`) as on the Mega 2560; only the clock is virtual:
+//! [`SimBoard::advance`] moves it on by whole milliseconds, so a long job
+//! simulates in moments.
+
+use firmware::emergency::Pending;
+use firmware::host_link::{HostLink, SerialLink};
+use firmware::rx::{self, RxConsumer, RxProducer, RxQueue};
+
+/// The firmware core on a simulated board.
+pub struct SimBoard {
+    pub link: HostLink,
+    producer: RxProducer<'static>,
+    rx: SimRx,
+    now_ms: u32,
+    output: String,
+}
+
+struct SimRx {
+    consumer: RxConsumer<'static>,
+    dropped: u8,
+    emergencies: Pending,
+}
+
+impl SerialLink for SimRx {
+    fn pop(&mut self) -> Option<u8> {
+        self.consumer.pop()
+    }
+    fn take_dropped(&mut self) -> u8 {
+        core::mem::take(&mut self.dropped)
+    }
+    fn take_emergencies(&mut self) -> Pending {
+        core::mem::take(&mut self.emergencies)
+    }
+}
+
+impl Default for SimBoard {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl SimBoard {
+    /// A board that has just booted (its banner is in the output).
+    pub fn new() -> Self {
+        // One small ring per board for the life of the process (tests).
+        let queue: &'static mut RxQueue = Box::leak(Box::new(RxQueue::new()));
+        let (producer, consumer) = rx::split(queue);
+        let mut board = Self {
+            link: HostLink::new(),
+            producer,
+            rx: SimRx { consumer, dropped: 0, emergencies: Pending::NONE },
+            now_ms: 0,
+            output: String::new(),
+        };
+        let _ = board.link.machine.write_banner(&mut Output(&mut board.output));
+        board
+    }
+
+    /// Bytes arriving on the serial line, as the receive interrupt sees them.
+    pub fn receive(&mut self, bytes: &[u8]) {
+        for &byte in bytes {
+            if let Some(emergency) = self.producer.push(byte, false) {
+                self.rx.emergencies = self.rx.emergencies.with(emergency);
+            }
+        }
+        self.rx.dropped = self.rx.dropped.saturating_add(self.producer.take_dropped());
+    }
+
+    /// Run the main loop for `ms` milliseconds of virtual time (one pass per
+    /// millisecond).
+    pub fn advance(&mut self, ms: u32) {
+        for _ in 0..ms.max(1) {
+            let _ = self.link.service(&mut self.rx, self.now_ms, &mut Output(&mut self.output));
+            self.now_ms = self.now_ms.wrapping_add(1);
+        }
+    }
+
+    /// Virtual time since boot, ms.
+    pub fn now_ms(&self) -> u32 {
+        self.now_ms
+    }
+
+    /// Take everything the firmware has written since the last call.
+    pub fn take_output(&mut self) -> String {
+        core::mem::take(&mut self.output)
+    }
+}
+
+struct Output<'a>(&'a mut String);
+
+impl ufmt::uWrite for Output<'_> {
+    type Error = core::convert::Infallible;
+    fn write_str(&mut self, s: &str) -> Result<(), Self::Error> {
+        self.0.push_str(s);
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_simulated_board_boots_and_answers() {
+        let mut board = SimBoard::new();
+        assert_eq!(board.take_output(), "start\necho:Ferrostep 0.1.0 ready\n");
+        board.receive(b"M114\n");
+        board.advance(1);
+        assert_eq!(board.take_output(), "X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0\nok\n");
+    }
+
+    #[test]
+    fn a_burst_beyond_the_ring_is_reported_not_lost_silently() {
+        let mut board = SimBoard::new();
+        board.take_output();
+        // 200 bytes at once: more than the 127-byte ring holds.
+        let burst = "M118 a\n".repeat(28);
+        board.receive(burst.as_bytes());
+        board.advance(10);
+        let output = board.take_output();
+        assert!(output.contains("Error:Serial receive overrun, line lost\n"), "{output}");
+        // Every line got exactly one ok: lost ones through their error.
+        let answered = output.matches("ok\n").count();
+        assert!(answered >= 18 && answered <= 28, "{answered} in {output}");
+    }
+
+    #[test]
+    fn m112_acts_even_when_the_queue_is_full() {
+        let mut board = SimBoard::new();
+        board.receive(b"G4 S100\nM114\nM114\nM114\nM114\nM112\n");
+        board.advance(5);
+        assert!(board.take_output().contains("Error:Printer halted. kill() called!\n"));
+        assert!(board.link.machine.is_halted());
+    }
+}
