@@ -82,3 +82,57 @@ impl Drop for QemuBoard {
         let _ = self.child.wait();
     }
 }
+
+/// The emulated board as a raw byte port (for the printcore relay).
+pub struct QemuPort {
+    child: Child,
+    input: ChildStdin,
+    chunks: Receiver<Vec<u8>>,
+}
+
+impl QemuPort {
+    pub fn boot(elf: &Path) -> Self {
+        let mut child = Command::new("qemu-system-avr")
+            .args(["-M", "mega2560", "-display", "none", "-serial", "stdio", "-monitor", "none", "-bios"])
+            .arg(elf)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("cannot start qemu-system-avr (run bash tests/scripts/test.sh, which installs qemu-system-misc)");
+        let input = child.stdin.take().expect("piped stdin");
+        let mut output = child.stdout.take().expect("piped stdout");
+        let (sender, chunks) = mpsc::channel();
+        std::thread::spawn(move || {
+            let mut buffer = [0u8; 512];
+            while let Ok(n) = std::io::Read::read(&mut output, &mut buffer) {
+                if n == 0 || sender.send(buffer[..n].to_vec()).is_err() {
+                    break;
+                }
+            }
+        });
+        Self { child, input, chunks }
+    }
+}
+
+impl crate::printcore::BoardPort for QemuPort {
+    fn send(&mut self, bytes: &[u8]) {
+        let _ = self.input.write_all(bytes);
+        let _ = self.input.flush();
+    }
+
+    fn receive(&mut self) -> Vec<u8> {
+        let mut bytes = Vec::new();
+        while let Ok(chunk) = self.chunks.try_recv() {
+            bytes.extend_from_slice(&chunk);
+        }
+        bytes
+    }
+}
+
+impl Drop for QemuPort {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
