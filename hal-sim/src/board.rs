@@ -10,10 +10,19 @@ use firmware::emergency::Pending;
 use firmware::host_link::{HostLink, SerialLink};
 use firmware::rx::{self, RxConsumer, RxProducer, RxQueue};
 
+/// Marlin's default line rate.
+pub const DEFAULT_BAUD: u32 = 115_200;
+
 /// The firmware core on a simulated board.
 pub struct SimBoard {
     pub link: HostLink,
     producer: RxProducer<'static>,
+    /// Bytes sent by the host and still on the wire.
+    wire: std::collections::VecDeque<u8>,
+    /// Line rate in bytes per second (8N1: baud / 10).
+    bytes_per_s: u32,
+    /// Fraction of a byte carried over between milliseconds, in 1/1000.
+    wire_credit: u32,
     rx: SimRx,
     now_ms: u32,
     output: String,
@@ -52,6 +61,9 @@ impl SimBoard {
         let mut board = Self {
             link: HostLink::new(),
             producer,
+            wire: std::collections::VecDeque::new(),
+            bytes_per_s: DEFAULT_BAUD / 10,
+            wire_credit: 0,
             rx: SimRx { consumer, dropped: 0, emergencies: Pending::NONE },
             now_ms: 0,
             output: String::new(),
@@ -60,8 +72,15 @@ impl SimBoard {
         board
     }
 
-    /// Bytes arriving on the serial line, as the receive interrupt sees them.
+    /// Bytes sent by the host: they arrive at the line rate (115200 baud,
+    /// 8N1) while [`SimBoard::advance`] runs, as on a real serial line.
     pub fn receive(&mut self, bytes: &[u8]) {
+        self.wire.extend(bytes);
+    }
+
+    /// Bytes arriving all at once, faster than any UART: for tests of what
+    /// happens when the receive ring overflows.
+    pub fn inject(&mut self, bytes: &[u8]) {
         for &byte in bytes {
             if let Some(emergency) = self.producer.push(byte, false) {
                 self.rx.emergencies = self.rx.emergencies.with(emergency);
@@ -74,6 +93,11 @@ impl SimBoard {
     /// millisecond).
     pub fn advance(&mut self, ms: u32) {
         for _ in 0..ms.max(1) {
+            self.wire_credit += self.bytes_per_s;
+            let arriving = (self.wire_credit / 1000) as usize;
+            self.wire_credit %= 1000;
+            let bytes: Vec<u8> = self.wire.drain(..arriving.min(self.wire.len())).collect();
+            self.inject(&bytes);
             let _ = self.link.service(&mut self.rx, self.now_ms, &mut Output(&mut self.output));
             self.now_ms = self.now_ms.wrapping_add(1);
         }
@@ -119,7 +143,7 @@ mod tests {
         board.take_output();
         // 200 bytes at once: more than the 127-byte ring holds.
         let burst = "M118 a\n".repeat(28);
-        board.receive(burst.as_bytes());
+        board.inject(burst.as_bytes());
         board.advance(10);
         let output = board.take_output();
         assert!(output.contains("Error:Serial receive overrun, line lost\n"), "{output}");

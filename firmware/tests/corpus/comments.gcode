@@ -1,0 +1,3 @@
+G1 (unterminated X1
+;only comment
+(only)

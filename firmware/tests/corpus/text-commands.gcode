@@ -1,0 +1,3 @@
+M117 Hello ; world
+M118 E1 é
+M118
