@@ -8,6 +8,7 @@
 use crate::emergency::{Emergency, Pending};
 use crate::line::LineAssembler;
 use crate::machine::Machine;
+use crate::storage::NonVolatile;
 use ufmt::uWrite;
 
 /// The receive side of a board's serial port, as the main loop sees it.
@@ -38,7 +39,13 @@ impl HostLink {
     }
 
     /// One pass: emergencies first, then input, then execution.
-    pub fn service<W: uWrite + ?Sized>(&mut self, link: &mut impl SerialLink, now_ms: u32, out: &mut W) -> Result<(), W::Error> {
+    pub fn service<W: uWrite + ?Sized>(
+        &mut self,
+        link: &mut impl SerialLink,
+        storage: &mut dyn NonVolatile,
+        now_ms: u32,
+        out: &mut W,
+    ) -> Result<(), W::Error> {
         let emergencies = link.take_emergencies();
         if emergencies.contains(Emergency::Kill) {
             self.machine.kill(out)?;
@@ -57,6 +64,6 @@ impl HostLink {
                 self.machine.receive_line(line, out)?;
             }
         }
-        self.machine.poll(now_ms, out)
+        self.machine.poll(now_ms, storage, out)
     }
 }

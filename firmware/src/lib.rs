@@ -15,6 +15,7 @@
 //! - [`reply`]: the exact reply strings hosts parse, and decimal formatting;
 //! - [`machine`]: the command queue, the executor and the modal state;
 //! - [`settings`]: tunable values (`M92`, `M201`–`M205`, ...), `M503`;
+//! - [`storage`]: `M500`/`M501` images in non-volatile memory, two slots + CRC;
 //! - [`thermal`]: thermistors and heaters;
 //! - [`progmem`]: constant tables kept in flash on the AVR.
 #![no_std]
@@ -34,6 +35,7 @@ pub mod protocol;
 pub mod reply;
 pub mod rx;
 pub mod settings;
+pub mod storage;
 pub mod thermal;
 
 /// Name and version reported in the boot banner and by `M115`.

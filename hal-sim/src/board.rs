@@ -9,6 +9,10 @@
 use firmware::emergency::Pending;
 use firmware::host_link::{HostLink, SerialLink};
 use firmware::rx::{self, RxConsumer, RxProducer, RxQueue};
+use firmware::storage::MemoryStorage;
+
+/// The simulated EEPROM: 4 KiB like the ATmega2560's.
+pub type SimEeprom = MemoryStorage<4096>;
 
 /// Marlin's default line rate.
 pub const DEFAULT_BAUD: u32 = 115_200;
@@ -16,6 +20,7 @@ pub const DEFAULT_BAUD: u32 = 115_200;
 /// The firmware core on a simulated board.
 pub struct SimBoard {
     pub link: HostLink,
+    pub eeprom: SimEeprom,
     producer: RxProducer<'static>,
     /// Bytes sent by the host and still on the wire.
     wire: std::collections::VecDeque<u8>,
@@ -53,13 +58,20 @@ impl Default for SimBoard {
 }
 
 impl SimBoard {
-    /// A board that has just booted (its banner is in the output).
+    /// A board that has just booted with a blank EEPROM (its banner is in
+    /// the output).
     pub fn new() -> Self {
+        Self::with_eeprom(SimEeprom::new())
+    }
+
+    /// A board booting with `eeprom`'s contents (e.g. after a power loss).
+    pub fn with_eeprom(eeprom: SimEeprom) -> Self {
         // One small ring per board for the life of the process (tests).
         let queue: &'static mut RxQueue = Box::leak(Box::new(RxQueue::new()));
         let (producer, consumer) = rx::split(queue);
         let mut board = Self {
             link: HostLink::new(),
+            eeprom,
             producer,
             wire: std::collections::VecDeque::new(),
             bytes_per_s: DEFAULT_BAUD / 10,
@@ -69,6 +81,7 @@ impl SimBoard {
             output: String::new(),
         };
         let _ = board.link.machine.write_banner(&mut Output(&mut board.output));
+        let _ = board.link.machine.load_settings(&mut board.eeprom, &mut Output(&mut board.output));
         board
     }
 
@@ -98,7 +111,7 @@ impl SimBoard {
             self.wire_credit %= 1000;
             let bytes: Vec<u8> = self.wire.drain(..arriving.min(self.wire.len())).collect();
             self.inject(&bytes);
-            let _ = self.link.service(&mut self.rx, self.now_ms, &mut Output(&mut self.output));
+            let _ = self.link.service(&mut self.rx, &mut self.eeprom, self.now_ms, &mut Output(&mut self.output));
             self.now_ms = self.now_ms.wrapping_add(1);
         }
     }
@@ -131,7 +144,10 @@ mod tests {
     #[test]
     fn the_simulated_board_boots_and_answers() {
         let mut board = SimBoard::new();
-        assert_eq!(board.take_output(), "start\necho:Ferrostep 0.1.0 ready\n");
+        assert_eq!(
+            board.take_output(),
+            "start\necho:Ferrostep 0.1.0 ready\necho:No stored settings\necho:Hardcoded Default Settings Loaded\n"
+        );
         board.receive(b"M114\n");
         board.advance(1);
         assert_eq!(board.take_output(), "X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0\nok\n");
@@ -150,6 +166,16 @@ mod tests {
         // Every line got exactly one ok: lost ones through their error.
         let answered = output.matches("ok\n").count();
         assert!(answered >= 18 && answered <= 28, "{answered} in {output}");
+    }
+
+    #[test]
+    fn settings_saved_with_m500_survive_a_reboot() {
+        let mut board = SimBoard::new();
+        board.receive(b"M92 E415\nM500\n");
+        board.advance(10);
+        let mut rebooted = SimBoard::with_eeprom(SimEeprom { bytes: board.eeprom.bytes, ..SimEeprom::new() });
+        assert!(rebooted.take_output().contains("echo:V1 stored settings retrieved"));
+        assert_eq!(rebooted.link.machine.settings().steps_per_mm_milli[3], 415_000);
     }
 
     #[test]

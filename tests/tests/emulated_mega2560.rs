@@ -6,9 +6,11 @@ use std::time::Duration;
 
 fn booted_board() -> QemuBoard {
     let mut board = QemuBoard::boot(&mega2560_elf());
-    let banner = board.read_until(Duration::from_secs(20), |l| l.starts_with("echo:"));
-    assert_eq!(banner.first().map(String::as_str), Some("start"), "banner: {banner:?}");
-    assert!(banner.last().unwrap().starts_with("echo:Ferrostep "), "banner: {banner:?}");
+    let banner = board.read_until(Duration::from_secs(20), |l| l.ends_with("Settings Loaded") || l.contains("retrieved"));
+    assert_eq!(banner[0], "start", "banner: {banner:?}");
+    assert!(banner[1].starts_with("echo:Ferrostep "), "banner: {banner:?}");
+    // QEMU has no EEPROM: it reads back blank, so the defaults apply.
+    assert_eq!(banner[2..], ["echo:No stored settings", "echo:Hardcoded Default Settings Loaded"], "banner: {banner:?}");
     board
 }
 

@@ -13,6 +13,7 @@
 
 mod adc;
 mod clock;
+mod eeprom;
 mod pins;
 mod serial;
 mod watchdog;
@@ -49,10 +50,13 @@ fn main() -> ! {
     let mut tx = serial::Tx;
     let mut rx = serial::Rx { consumer };
     let mut link = HostLink::new();
+    // SAFETY: the EEPROM registers are used by this driver only.
+    let mut eeprom = eeprom::Eeprom::new(unsafe { Peripherals::steal() }.EEPROM);
     for endstop in pins::ENDSTOPS {
         pins::make_input_pulled_up(&dp, endstop);
     }
     let _ = link.machine.write_banner(&mut tx);
+    let _ = link.machine.load_settings(&mut eeprom, &mut tx);
     let mut next_thermal_ms = 0u32;
 
     // The loop never sleeps: QEMU's AVR machine does not wake from `sleep`
@@ -61,7 +65,7 @@ fn main() -> ! {
     loop {
         watchdog::feed();
         let now = clock::millis();
-        let _ = link.service(&mut rx, now, &mut tx);
+        let _ = link.service(&mut rx, &mut eeprom, now, &mut tx);
         if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
             next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
             let read = |channel| celsius_from_adc(&NTC100K_B3950_4K7, adc::read(&dp, channel)).unwrap_or(Celsius(0));

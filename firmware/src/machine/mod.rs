@@ -24,6 +24,7 @@ use crate::line::{Line, MAX_LINE};
 use crate::protocol::HostProtocol;
 use crate::reply::{Fixed, Printable};
 use crate::settings::Settings;
+use crate::storage::{self, LoadError, NonVolatile};
 use crate::thermal::{Celsius, Heater};
 use error::CommandError;
 use modal::{Distance, ModalState, MotionMode, Units, AXES, AXIS_LETTERS};
@@ -204,9 +205,58 @@ impl Machine {
         Ok(())
     }
 
+    /// Load the stored settings (at boot, and for `M501`), reporting the
+    /// outcome; on any problem the defaults stay in force.
+    pub fn load_settings<W: uWrite + ?Sized>(&mut self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
+        match storage::load(storage) {
+            Ok((settings, stored)) => {
+                self.settings = settings;
+                ufmt::uwrite!(
+                    out,
+                    "echo:V{} stored settings retrieved ({} bytes; crc {})\n",
+                    storage::LAYOUT_VERSION,
+                    stored.bytes,
+                    stored.crc
+                )
+            }
+            Err(error) => {
+                match error {
+                    LoadError::NoImage => out.write_str("echo:No stored settings\n")?,
+                    LoadError::Corrupt { stored, computed } => ufmt::uwrite!(
+                        out,
+                        "echo:EEPROM CRC mismatch - (stored) {} != {} (calculated)!\n",
+                        stored,
+                        computed
+                    )?,
+                    LoadError::OldVersion(version) => ufmt::uwrite!(
+                        out,
+                        "echo:EEPROM version mismatch (EEPROM=V{} Firmware=V{})\n",
+                        version,
+                        storage::LAYOUT_VERSION
+                    )?,
+                    LoadError::TooSmall => out.write_str("echo:EEPROM too small for the settings\n")?,
+                }
+                self.settings = Settings::default();
+                out.write_str("echo:Hardcoded Default Settings Loaded\n")
+            }
+        }
+    }
+
+    fn save_settings<W: uWrite + ?Sized>(&self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
+        match storage::save(storage, &self.settings) {
+            Ok(stored) => ufmt::uwrite!(out, "echo:Settings Stored ({} bytes; crc {})\n", stored.bytes, stored.crc),
+            Err(_) => out.write_str("Error:EEPROM too small for the settings\n"),
+        }
+    }
+
     /// Step 2: run queued commands. `now_ms` is a free-running millisecond
-    /// clock (wrapping).
-    pub fn poll<W: uWrite + ?Sized>(&mut self, now_ms: u32, out: &mut W) -> Result<(), W::Error> {
+    /// clock (wrapping); `storage` holds the settings for `M500`/`M501`.
+    pub fn poll<W: uWrite + ?Sized>(
+        &mut self,
+        now_ms: u32,
+        storage: &mut dyn NonVolatile,
+        out: &mut W,
+    ) -> Result<(), W::Error> {
         self.auto_report(now_ms, out)?;
         loop {
             if self.running != Running::Idle {
@@ -223,7 +273,7 @@ impl Machine {
             }
             let Some(text) = self.queue.pop_front() else { return Ok(()) };
             self.last_busy_ms = now_ms;
-            match self.execute(&text, now_ms, out)? {
+            match self.execute(&text, now_ms, storage, out)? {
                 Outcome::Done => out.write_str("ok\n")?,
                 Outcome::Acknowledged => {}
                 Outcome::Failed(error) => {
@@ -257,7 +307,13 @@ impl Machine {
         Ok(())
     }
 
-    fn execute<W: uWrite + ?Sized>(&mut self, text: &[u8], now_ms: u32, out: &mut W) -> Result<Outcome, W::Error> {
+    fn execute<W: uWrite + ?Sized>(
+        &mut self,
+        text: &[u8],
+        now_ms: u32,
+        storage: &mut dyn NonVolatile,
+        out: &mut W,
+    ) -> Result<Outcome, W::Error> {
         let command = match gcode::parse(text) {
             Ok(command) => command,
             Err(ParseError::Empty) => return Ok(Outcome::Done),
@@ -308,6 +364,8 @@ impl Machine {
             Code::M(205) => self.set_advanced(&command),
             Code::M(220) => percent(&command, &mut self.settings.feed_percent),
             Code::M(221) => percent(&command, &mut self.settings.flow_percent),
+            Code::M(500) => self.save_settings(storage, out).map(Ok)?,
+            Code::M(501) => self.load_settings(storage, out).map(Ok)?,
             Code::M(502) => {
                 self.settings = Settings::default();
                 out.write_str("echo:Hardcoded Default Settings Loaded\n")?;
@@ -320,7 +378,7 @@ impl Machine {
                 Ok(())
             }
             // Parsed and acknowledged; their subsystems land with later work.
-            Code::G(10 | 11 | 28) | Code::M(104 | 109 | 140 | 190 | 301 | 302 | 303 | 500 | 501) => {
+            Code::G(10 | 11 | 28) | Code::M(104 | 109 | 140 | 190 | 301 | 302 | 303) => {
                 self.not_yet_available(text, out)?;
                 Ok(())
             }
@@ -601,7 +659,7 @@ pub fn write_capabilities<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Erro
 const CAPABILITIES: &[(&str, bool)] = &[
     ("SERIAL_XON_XOFF", false),
     ("BINARY_FILE_TRANSFER", false),
-    ("EEPROM", false),
+    ("EEPROM", true),
     ("VOLUMETRIC", false),
     ("AUTOREPORT_TEMP", true),
     ("AUTOREPORT_POS", false),

@@ -3,6 +3,7 @@
 use super::*;
 use crate::line::LineAssembler;
 use crate::reply::test_support::Text;
+use crate::storage::MemoryStorage;
 use std::format;
 use std::string::String;
 
@@ -15,7 +16,7 @@ fn converse(machine: &mut Machine, now_ms: u32, input: &str) -> String {
         if let Some(line) = assembler.push(byte) {
             machine.receive_line(line, &mut out).unwrap();
         }
-        machine.poll(now_ms, &mut out).unwrap();
+        machine.poll(now_ms, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     }
     out.0
 }
@@ -106,10 +107,10 @@ fn g4_blocks_the_queue_and_reports_busy_every_two_seconds() {
     assert_eq!(converse(&mut machine, 0, "G4 S5\nM114\n"), "");
     let mut out = Text::default();
     for now in [1_000, 2_000, 3_999, 4_000, 4_999] {
-        machine.poll(now, &mut out).unwrap();
+        machine.poll(now, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     }
     assert_eq!(out.0, "echo:busy: processing\necho:busy: processing\n");
-    machine.poll(5_000, &mut out).unwrap();
+    machine.poll(5_000, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     assert!(out.0.ends_with("busy: processing\nok\nX:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0\nok\n"), "{}", out.0);
 }
 
@@ -119,7 +120,7 @@ fn m108_ends_a_wait() {
     converse(&mut machine, 0, "G4 P60000\n");
     machine.cancel_wait();
     let mut out = Text::default();
-    machine.poll(1, &mut out).unwrap();
+    machine.poll(1, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     assert_eq!(out.0, "ok\n");
 }
 
@@ -134,10 +135,10 @@ fn the_queue_holds_four_lines_while_a_command_blocks() {
                 machine.receive_line(l, &mut out).unwrap();
             }
         }
-        machine.poll(0, &mut out).unwrap();
+        machine.poll(0, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     }
     assert!(!machine.can_accept_line());
-    machine.poll(100, &mut out).unwrap();
+    machine.poll(100, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     assert_eq!(out.0.matches("ok\n").count(), 5);
 }
 
@@ -193,9 +194,9 @@ fn m155_reports_temperatures_on_its_own() {
     let mut machine = Machine::new();
     converse(&mut machine, 0, "M155 S2\n");
     let mut out = Text::default();
-    machine.poll(1_999, &mut out).unwrap();
+    machine.poll(1_999, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     assert_eq!(out.0, "");
-    machine.poll(2_000, &mut out).unwrap();
+    machine.poll(2_000, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     assert_eq!(out.0, " T:0.00 /0.00 B:0.00 /0.00 @:0 B@:0\n");
 }
 
@@ -220,4 +221,40 @@ fn fan_commands_set_the_duty() {
 #[test]
 fn arcs_need_a_centre_or_a_radius() {
     assert_eq!(reply("G2 X10 Y10\n"), "Error:Missing R word\nok\n");
+}
+
+#[test]
+fn m500_saves_and_m501_restores_over_later_changes() {
+    let mut machine = Machine::new();
+    let mut eeprom = MemoryStorage::<4096>::new();
+    let mut out = Text::default();
+    let mut send = |machine: &mut Machine, line: &str, out: &mut Text| {
+        let mut assembler = LineAssembler::new();
+        for &b in line.as_bytes() {
+            if let Some(l) = assembler.push(b) {
+                machine.receive_line(l, out).unwrap();
+            }
+        }
+        machine.poll(0, &mut eeprom, out).unwrap();
+    };
+    send(&mut machine, "M92 X80\nM500\n", &mut out);
+    assert!(out.0.starts_with("ok\necho:Settings Stored (93 bytes; crc "), "{}", out.0);
+    send(&mut machine, "M92 X90\nM501\n", &mut out);
+    assert!(out.0.contains("echo:V1 stored settings retrieved (93 bytes; crc "), "{}", out.0);
+    assert_eq!(machine.settings().steps_per_mm_milli[0], 80_000);
+}
+
+#[test]
+fn a_corrupt_image_at_boot_is_reported_and_the_defaults_stay() {
+    let mut eeprom = MemoryStorage::<4096>::new();
+    let mut custom = Settings::default();
+    custom.steps_per_mm_milli[0] = 80_000;
+    crate::storage::save(&mut eeprom, &custom).unwrap();
+    eeprom.bytes[20] ^= 0x10;
+    let mut machine = Machine::new();
+    let mut out = Text::default();
+    machine.load_settings(&mut eeprom, &mut out).unwrap();
+    assert!(out.0.starts_with("echo:EEPROM CRC mismatch - (stored) "), "{}", out.0);
+    assert!(out.0.ends_with("echo:Hardcoded Default Settings Loaded\n"), "{}", out.0);
+    assert_eq!(machine.settings(), &Settings::default());
 }

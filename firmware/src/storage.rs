@@ -1,0 +1,373 @@
+//! Persistent settings: `M500` saves, `M501` loads, at boot they load.
+//!
+//! The image is kept twice, in two slots, and a save always writes the slot
+//! that does not hold the newest image: payload first, then the header
+//! whose CRC covers both. A power loss during a save leaves a slot whose
+//! CRC does not match, and the other slot still holds the previous
+//! settings: after any interruption the next boot loads either the old or
+//! the new settings, never a mix.
+//!
+//! Slot layout (little endian):
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 2 | magic `0xF5E7` |
+//! | 2 | 1 | layout version ([`LAYOUT_VERSION`]) |
+//! | 3 | 2 | sequence number (the newer slot has the higher, wrapping) |
+//! | 5 | 2 | payload length |
+//! | 7 | 2 | CRC-16/CCITT of bytes 0–6 and the payload |
+//! | 9 | n | payload ([`Settings`] fields in declaration order, `i32` each) |
+//!
+//! An image with another magic, version or length, or a wrong CRC, is
+//! refused whole and reported; the defaults stay in force.
+//!
+//! EEPROM wears out (≈100 000 writes per cell): only bytes that differ are
+//! written.
+
+use crate::settings::Settings;
+
+/// Bump whenever the payload layout changes: older images are then refused.
+pub const LAYOUT_VERSION: u8 = 1;
+const MAGIC: u16 = 0xF5E7;
+const HEADER_LEN: usize = 9;
+/// Payload: 21 `i32` fields of [`Settings`].
+pub const PAYLOAD_LEN: usize = 21 * 4;
+/// Bytes one slot occupies.
+pub const SLOT_LEN: usize = HEADER_LEN + PAYLOAD_LEN;
+/// Storage the two slots need.
+pub const STORAGE_NEEDED: usize = 2 * SLOT_LEN;
+
+/// Byte-addressed non-volatile memory (the Mega 2560's EEPROM, or RAM in
+/// hal-sim).
+pub trait NonVolatile {
+    /// Size in bytes.
+    fn capacity(&self) -> usize;
+    fn read(&mut self, address: usize) -> u8;
+    /// Write one byte (may take milliseconds on EEPROM).
+    fn write(&mut self, address: usize, value: u8);
+}
+
+/// Why stored settings were not loaded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LoadError {
+    /// No slot holds an image of this firmware (blank, or another layout).
+    NoImage,
+    /// An image is there but its CRC does not match: corrupt.
+    Corrupt { stored: u16, computed: u16 },
+    /// The image was written by a firmware with another layout version.
+    OldVersion(u8),
+    /// The storage is smaller than two slots.
+    TooSmall,
+}
+
+/// What a successful save or load reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Stored {
+    pub bytes: usize,
+    pub crc: u16,
+}
+
+/// Save `settings` into the slot not holding the newest image.
+pub fn save(storage: &mut (impl NonVolatile + ?Sized), settings: &Settings) -> Result<Stored, LoadError> {
+    if storage.capacity() < STORAGE_NEEDED {
+        return Err(LoadError::TooSmall);
+    }
+    let (newest_slot, sequence) = match newest(storage) {
+        Some((slot, sequence)) => (Some(slot), sequence.wrapping_add(1)),
+        None => (None, 0),
+    };
+    let slot = match newest_slot {
+        Some(0) => 1,
+        _ => 0,
+    };
+    let mut image = [0u8; SLOT_LEN];
+    encode(settings, sequence, &mut image);
+    let base = slot * SLOT_LEN;
+    // Payload first, header last: the CRC in the header makes it valid.
+    for index in (HEADER_LEN..SLOT_LEN).chain(0..HEADER_LEN) {
+        if storage.read(base + index) != image[index] {
+            storage.write(base + index, image[index]);
+        }
+    }
+    Ok(Stored { bytes: SLOT_LEN, crc: u16::from_le_bytes([image[7], image[8]]) })
+}
+
+/// Load the newest valid image.
+pub fn load(storage: &mut (impl NonVolatile + ?Sized)) -> Result<(Settings, Stored), LoadError> {
+    if storage.capacity() < STORAGE_NEEDED {
+        return Err(LoadError::TooSmall);
+    }
+    match newest(storage) {
+        Some((slot, _)) => {
+            let image = read_slot(storage, slot);
+            Ok((decode(&image), Stored { bytes: SLOT_LEN, crc: u16::from_le_bytes([image[7], image[8]]) }))
+        }
+        // Say why nothing loaded: the first slot's problem is as good as any.
+        None => Err(check(&read_slot(storage, 0)).err().unwrap_or(LoadError::NoImage)),
+    }
+}
+
+/// The valid slot with the newest sequence number, if any.
+fn newest(storage: &mut (impl NonVolatile + ?Sized)) -> Option<(usize, u16)> {
+    let mut best: Option<(usize, u16)> = None;
+    for slot in 0..2 {
+        let image = read_slot(storage, slot);
+        if let Ok(sequence) = check(&image) {
+            best = match best {
+                // Sequence numbers wrap: newer means "ahead by less than half".
+                Some((_, other)) if sequence.wrapping_sub(other) > u16::MAX / 2 => best,
+                _ => Some((slot, sequence)),
+            };
+        }
+    }
+    best
+}
+
+fn read_slot(storage: &mut (impl NonVolatile + ?Sized), slot: usize) -> [u8; SLOT_LEN] {
+    let mut image = [0u8; SLOT_LEN];
+    for (index, byte) in image.iter_mut().enumerate() {
+        *byte = storage.read(slot * SLOT_LEN + index);
+    }
+    image
+}
+
+/// The sequence number of a valid image.
+fn check(image: &[u8; SLOT_LEN]) -> Result<u16, LoadError> {
+    if u16::from_le_bytes([image[0], image[1]]) != MAGIC {
+        return Err(LoadError::NoImage);
+    }
+    if image[2] != LAYOUT_VERSION {
+        return Err(LoadError::OldVersion(image[2]));
+    }
+    if usize::from(u16::from_le_bytes([image[5], image[6]])) != PAYLOAD_LEN {
+        return Err(LoadError::NoImage);
+    }
+    let stored = u16::from_le_bytes([image[7], image[8]]);
+    let computed = image_crc(image);
+    if stored != computed {
+        return Err(LoadError::Corrupt { stored, computed });
+    }
+    Ok(u16::from_le_bytes([image[3], image[4]]))
+}
+
+fn image_crc(image: &[u8; SLOT_LEN]) -> u16 {
+    let crc = crc16(0xFFFF, &image[..7]);
+    crc16(crc, &image[HEADER_LEN..])
+}
+
+/// CRC-16/CCITT-FALSE, bitwise: 30 bytes of code instead of a 512-byte
+/// table, and the image is only checked at boot and on `M500`/`M501`.
+fn crc16(mut crc: u16, bytes: &[u8]) -> u16 {
+    for &byte in bytes {
+        crc ^= u16::from(byte) << 8;
+        for _ in 0..8 {
+            crc = if crc & 0x8000 != 0 { (crc << 1) ^ 0x1021 } else { crc << 1 };
+        }
+    }
+    crc
+}
+
+/// The settings' fields in declaration order, for the payload.
+fn fields(settings: &Settings) -> [i32; 21] {
+    let s = settings;
+    let [a, b, c, d] = s.steps_per_mm_milli;
+    let [e, f, g, h] = s.max_feed_um_per_s;
+    let [i, j, k, l] = s.max_accel_um_per_s2;
+    [
+        a, b, c, d, e, f, g, h, i, j, k, l,
+        s.print_accel_um_per_s2, s.retract_accel_um_per_s2, s.travel_accel_um_per_s2,
+        s.junction_deviation_um, s.min_feed_um_per_s, s.min_travel_feed_um_per_s,
+        s.min_segment_time_us, s.feed_percent, s.flow_percent,
+    ]
+}
+
+fn encode(settings: &Settings, sequence: u16, image: &mut [u8; SLOT_LEN]) {
+    image[0..2].copy_from_slice(&MAGIC.to_le_bytes());
+    image[2] = LAYOUT_VERSION;
+    image[3..5].copy_from_slice(&sequence.to_le_bytes());
+    image[5..7].copy_from_slice(&(PAYLOAD_LEN as u16).to_le_bytes());
+    for (index, value) in fields(settings).iter().enumerate() {
+        let at = HEADER_LEN + 4 * index;
+        image[at..at + 4].copy_from_slice(&value.to_le_bytes());
+    }
+    let crc = image_crc(image);
+    image[7..9].copy_from_slice(&crc.to_le_bytes());
+}
+
+fn decode(image: &[u8; SLOT_LEN]) -> Settings {
+    let mut values = [0i32; 21];
+    for (index, value) in values.iter_mut().enumerate() {
+        let at = HEADER_LEN + 4 * index;
+        *value = i32::from_le_bytes([image[at], image[at + 1], image[at + 2], image[at + 3]]);
+    }
+    let v = values;
+    Settings {
+        steps_per_mm_milli: [v[0], v[1], v[2], v[3]],
+        max_feed_um_per_s: [v[4], v[5], v[6], v[7]],
+        max_accel_um_per_s2: [v[8], v[9], v[10], v[11]],
+        print_accel_um_per_s2: v[12],
+        retract_accel_um_per_s2: v[13],
+        travel_accel_um_per_s2: v[14],
+        junction_deviation_um: v[15],
+        min_feed_um_per_s: v[16],
+        min_travel_feed_um_per_s: v[17],
+        min_segment_time_us: v[18],
+        feed_percent: v[19],
+        flow_percent: v[20],
+    }
+}
+
+/// Storage in RAM, with the faults a test wants (hal-sim and unit tests).
+pub struct MemoryStorage<const N: usize> {
+    pub bytes: [u8; N],
+    /// Writes still allowed before the "power" fails (None: unlimited).
+    pub writes_before_power_loss: Option<usize>,
+    pub writes: usize,
+}
+
+impl<const N: usize> Default for MemoryStorage<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> MemoryStorage<N> {
+    /// Blank, like an erased EEPROM (all 0xFF).
+    pub const fn new() -> Self {
+        Self { bytes: [0xFF; N], writes_before_power_loss: None, writes: 0 }
+    }
+}
+
+impl<const N: usize> NonVolatile for MemoryStorage<N> {
+    fn capacity(&self) -> usize {
+        N
+    }
+    fn read(&mut self, address: usize) -> u8 {
+        self.bytes.get(address).copied().unwrap_or(0xFF)
+    }
+    fn write(&mut self, address: usize, value: u8) {
+        if let Some(left) = self.writes_before_power_loss {
+            if left == 0 {
+                return;
+            }
+            self.writes_before_power_loss = Some(left - 1);
+        }
+        if let Some(byte) = self.bytes.get_mut(address) {
+            *byte = value;
+            self.writes += 1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    type Eeprom = MemoryStorage<4096>;
+
+    fn custom() -> Settings {
+        let mut settings = Settings::default();
+        settings.steps_per_mm_milli[3] = 415_500;
+        settings.junction_deviation_um = 20;
+        settings
+    }
+
+    #[test]
+    fn a_blank_eeprom_has_no_image() {
+        assert_eq!(load(&mut Eeprom::new()), Err(LoadError::NoImage));
+    }
+
+    #[test]
+    fn saved_settings_load_back_unchanged() {
+        let mut eeprom = Eeprom::new();
+        let stored = save(&mut eeprom, &custom()).unwrap();
+        let (settings, loaded) = load(&mut eeprom).unwrap();
+        assert_eq!(settings, custom());
+        assert_eq!(stored, loaded);
+        assert_eq!(stored.bytes, 93);
+    }
+
+    #[test]
+    fn saves_alternate_slots_and_the_newest_wins() {
+        let mut eeprom = Eeprom::new();
+        save(&mut eeprom, &Settings::default()).unwrap();
+        save(&mut eeprom, &custom()).unwrap();
+        assert_eq!(load(&mut eeprom).unwrap().0, custom());
+        // Slot 0 still holds the first image, slot 1 the second.
+        assert_eq!(&eeprom.bytes[0..2], &MAGIC.to_le_bytes());
+        assert_eq!(&eeprom.bytes[SLOT_LEN..SLOT_LEN + 2], &MAGIC.to_le_bytes());
+    }
+
+    #[test]
+    fn every_single_bit_flip_is_detected() {
+        let mut reference = Eeprom::new();
+        save(&mut reference, &custom()).unwrap();
+        for byte in 0..SLOT_LEN {
+            for bit in 0..8 {
+                let mut eeprom = Eeprom { bytes: reference.bytes, writes_before_power_loss: None, writes: 0 };
+                eeprom.bytes[byte] ^= 1 << bit;
+                match load(&mut eeprom) {
+                    Err(_) => {}
+                    Ok((settings, _)) => panic!("flip of byte {byte} bit {bit} loaded {settings:?}"),
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_truncated_image_is_refused() {
+        let mut eeprom = Eeprom::new();
+        save(&mut eeprom, &custom()).unwrap();
+        for byte in &mut eeprom.bytes[SLOT_LEN / 2..SLOT_LEN] {
+            *byte = 0xFF;
+        }
+        assert!(matches!(load(&mut eeprom), Err(LoadError::Corrupt { .. })));
+    }
+
+    #[test]
+    fn another_layout_version_is_refused() {
+        let mut eeprom = Eeprom::new();
+        save(&mut eeprom, &custom()).unwrap();
+        eeprom.bytes[2] = LAYOUT_VERSION + 1;
+        assert_eq!(load(&mut eeprom), Err(LoadError::OldVersion(LAYOUT_VERSION + 1)));
+    }
+
+    #[test]
+    fn a_power_loss_at_any_byte_of_a_save_leaves_old_or_new_never_a_mix() {
+        let old = Settings::default();
+        let new = custom();
+        for cut in 0..=SLOT_LEN {
+            let mut eeprom = Eeprom::new();
+            save(&mut eeprom, &old).unwrap();
+            eeprom.writes_before_power_loss = Some(cut);
+            save(&mut eeprom, &new).unwrap();
+            eeprom.writes_before_power_loss = None;
+            let (loaded, _) = load(&mut eeprom).unwrap();
+            assert!(loaded == old || loaded == new, "cut after {cut} writes: {loaded:?}");
+        }
+    }
+
+    #[test]
+    fn unchanged_bytes_are_not_rewritten() {
+        let mut eeprom = Eeprom::new();
+        save(&mut eeprom, &custom()).unwrap();
+        save(&mut eeprom, &custom()).unwrap();
+        let writes = eeprom.writes;
+        // A third save goes to slot 0 again, which holds the same payload:
+        // only the sequence number and CRC change.
+        save(&mut eeprom, &custom()).unwrap();
+        assert!(eeprom.writes - writes <= 4, "{} writes", eeprom.writes - writes);
+    }
+
+    #[test]
+    fn sequence_numbers_wrap() {
+        let mut eeprom = Eeprom::new();
+        save(&mut eeprom, &Settings::default()).unwrap();
+        // Force slot 0's sequence to the top, then save twice across the wrap.
+        let mut image = read_slot(&mut eeprom, 0);
+        encode(&Settings::default(), u16::MAX, &mut image);
+        eeprom.bytes[..SLOT_LEN].copy_from_slice(&image);
+        save(&mut eeprom, &custom()).unwrap();
+        assert_eq!(load(&mut eeprom).unwrap().0, custom());
+    }
+}
