@@ -15,6 +15,7 @@ use std::io::{Read, Write};
 use std::os::fd::OwnedFd;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -78,9 +79,10 @@ pub fn stream(board: impl BoardPort, gcode: &Path, corruption: Corruption, timeo
     let board = Arc::new(Mutex::new(board));
     let recorded = Arc::new(Mutex::new(Vec::<u8>::new()));
     let corrupted = Arc::new(Mutex::new(0usize));
+    let stop = Arc::new(AtomicBool::new(false));
 
     // Host → board, line by line, corrupting chosen lines the first time.
-    {
+    let host_to_board = {
         let board = Arc::clone(&board);
         let corrupted = Arc::clone(&corrupted);
         std::thread::spawn(move || {
@@ -106,13 +108,17 @@ pub fn stream(board: impl BoardPort, gcode: &Path, corruption: Corruption, timeo
                     pending.clear();
                 }
             }
-        });
-    }
+        })
+    };
     // Board → host, recording everything.
-    {
+    let board_to_host = {
         let board = Arc::clone(&board);
         let recorded = Arc::clone(&recorded);
+        let stop = Arc::clone(&stop);
         std::thread::spawn(move || loop {
+            if stop.load(Ordering::Relaxed) {
+                break;
+            }
             let bytes = board.lock().unwrap().receive();
             if bytes.is_empty() {
                 std::thread::sleep(Duration::from_millis(1));
@@ -122,8 +128,8 @@ pub fn stream(board: impl BoardPort, gcode: &Path, corruption: Corruption, timeo
             if to_host.write_all(&bytes).is_err() {
                 break;
             }
-        });
-    }
+        })
+    };
 
     let output = Command::new(printcore_python())
         .arg(workspace_root().join("tests/hosts/printcore_stream.py"))
@@ -132,7 +138,13 @@ pub fn stream(board: impl BoardPort, gcode: &Path, corruption: Corruption, timeo
         .arg(timeout.as_secs().to_string())
         .output()
         .expect("run printcore");
+    // Stop the relay: closing the last slave descriptor ends the master's
+    // reads; then the board (and an emulator behind it) is dropped.
+    stop.store(true, Ordering::Relaxed);
     drop(pty.slave);
+    let _ = board_to_host.join();
+    let _ = host_to_board.join();
+    drop(board);
     assert!(
         output.status.success(),
         "printcore failed: {}\nstderr: {}\nboard said: {}",

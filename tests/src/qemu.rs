@@ -10,6 +10,26 @@ use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
+/// `qemu-system-avr` for `elf`, with USART0 on stdin/stdout, dying with
+/// the test process (so an aborted test leaves no emulator behind).
+fn qemu_command(elf: &Path) -> Command {
+    use std::os::unix::process::CommandExt;
+    let mut command = Command::new("qemu-system-avr");
+    command
+        .args(["-M", "mega2560", "-display", "none", "-serial", "stdio", "-monitor", "none", "-bios"])
+        .arg(elf)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null());
+    // SAFETY: prctl is async-signal-safe; nothing else runs in the child.
+    unsafe {
+        command.pre_exec(|| {
+            nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGKILL).map_err(std::io::Error::from)
+        });
+    }
+    command
+}
+
 /// A running emulated board.
 pub struct QemuBoard {
     child: Child,
@@ -20,12 +40,7 @@ pub struct QemuBoard {
 impl QemuBoard {
     /// Boot `elf` on an emulated Mega 2560.
     pub fn boot(elf: &Path) -> Self {
-        let mut child = Command::new("qemu-system-avr")
-            .args(["-M", "mega2560", "-display", "none", "-serial", "stdio", "-monitor", "none", "-bios"])
-            .arg(elf)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
+        let mut child = qemu_command(elf)
             .spawn()
             .expect("cannot start qemu-system-avr (run bash tests/scripts/test.sh, which installs qemu-system-misc)");
         let input = child.stdin.take().expect("piped stdin");
@@ -92,12 +107,7 @@ pub struct QemuPort {
 
 impl QemuPort {
     pub fn boot(elf: &Path) -> Self {
-        let mut child = Command::new("qemu-system-avr")
-            .args(["-M", "mega2560", "-display", "none", "-serial", "stdio", "-monitor", "none", "-bios"])
-            .arg(elf)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
+        let mut child = qemu_command(elf)
             .spawn()
             .expect("cannot start qemu-system-avr (run bash tests/scripts/test.sh, which installs qemu-system-misc)");
         let input = child.stdin.take().expect("piped stdin");
