@@ -30,6 +30,23 @@ fn qemu_command(elf: &Path) -> Command {
     command
 }
 
+/// QEMU's USART has no baud rate: it hands the next byte over as soon as
+/// the firmware has read the last one, far faster than any serial line. A
+/// host never sends faster than its line, so the tests pace their bytes at
+/// 115200 baud (11.52 bytes per ms), in chunks of 8.
+fn send_at_line_rate(input: &mut ChildStdin, bytes: &[u8]) {
+    const CHUNK: usize = 8;
+    let chunk_time = Duration::from_micros(CHUNK as u64 * 10 * 1_000_000 / 115_200);
+    for chunk in bytes.chunks(CHUNK) {
+        let started = Instant::now();
+        let _ = input.write_all(chunk);
+        let _ = input.flush();
+        if let Some(left) = chunk_time.checked_sub(started.elapsed()) {
+            std::thread::sleep(left);
+        }
+    }
+}
+
 /// A running emulated board.
 pub struct QemuBoard {
     child: Child,
@@ -57,10 +74,9 @@ impl QemuBoard {
         Self { child, input, lines }
     }
 
-    /// Send raw bytes to the board's serial port.
+    /// Send raw bytes to the board's serial port, at 115200 baud.
     pub fn send(&mut self, bytes: &[u8]) {
-        self.input.write_all(bytes).expect("write to QEMU");
-        self.input.flush().expect("flush to QEMU");
+        send_at_line_rate(&mut self.input, bytes);
     }
 
     /// Collect reply lines until one satisfies `last` (inclusive); panics
@@ -127,8 +143,7 @@ impl QemuPort {
 
 impl crate::printcore::BoardPort for QemuPort {
     fn send(&mut self, bytes: &[u8]) {
-        let _ = self.input.write_all(bytes);
-        let _ = self.input.flush();
+        send_at_line_rate(&mut self.input, bytes);
     }
 
     fn receive(&mut self) -> Vec<u8> {
