@@ -98,3 +98,91 @@ mod tests {
         assert_eq!(ROWS.load()[2], (3, -3));
     }
 }
+
+/// A string kept in flash on the AVR (see [`flash_str!`]). ASCII only.
+#[derive(Clone, Copy)]
+pub struct FlashStr {
+    bytes: &'static [u8],
+}
+
+impl FlashStr {
+    /// Wrap bytes that live in `.progmem.data` (use [`flash_str!`]).
+    #[doc(hidden)]
+    pub const fn from_static(bytes: &'static [u8]) -> Self {
+        Self { bytes }
+    }
+
+    pub const fn len(&self) -> usize {
+        self.bytes.len()
+    }
+
+    pub const fn is_empty(&self) -> bool {
+        self.bytes.is_empty()
+    }
+
+    /// Write the string to `out`, copying it out of flash in small pieces.
+    pub fn write_to<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        self.for_each_piece(|text| out.write_str(text))
+    }
+
+    /// Call `write` with the text, 16 bytes at a time.
+    fn for_each_piece<E>(&self, mut write: impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
+        let mut chunk = [0u8; 16];
+        for piece in self.bytes.chunks(chunk.len()) {
+            for (slot, byte) in chunk.iter_mut().zip(piece) {
+                *slot = load(byte);
+            }
+            // ASCII by construction (`flash_str!` checks it at compile time).
+            write(core::str::from_utf8(&chunk[..piece.len()]).unwrap_or("?"))?;
+        }
+        Ok(())
+    }
+}
+
+impl ufmt::uDisplay for FlashStr {
+    fn fmt<W: ufmt::uWrite + ?Sized>(&self, f: &mut ufmt::Formatter<'_, W>) -> Result<(), W::Error> {
+        self.for_each_piece(|text| f.write_str(text))
+    }
+}
+
+/// Copy a string literal into a static byte array (const context).
+#[doc(hidden)]
+pub const fn ascii_bytes<const N: usize>(text: &str) -> [u8; N] {
+    let bytes = text.as_bytes();
+    assert!(bytes.len() == N);
+    let mut array = [0u8; N];
+    let mut index = 0;
+    while index < N {
+        assert!(bytes[index] < 0x80, "flash strings are ASCII");
+        array[index] = bytes[index];
+        index += 1;
+    }
+    array
+}
+
+/// A string literal stored in flash on the AVR (in RAM on other targets),
+/// as a [`FlashStr`]: `out.write_flash(flash_str!("echo:busy"))`.
+#[macro_export]
+macro_rules! flash_str {
+    ($text:expr) => {{
+        const TEXT: &str = $text;
+        #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+        static BYTES: [u8; TEXT.len()] = $crate::progmem::ascii_bytes(TEXT);
+        $crate::progmem::FlashStr::from_static(&BYTES)
+    }};
+}
+
+#[cfg(test)]
+mod flash_str_tests {
+    use crate::reply::test_support::Text;
+
+    #[test]
+    fn a_flash_string_writes_its_text_in_any_length() {
+        let mut out = Text::default();
+        crate::flash_str!("").write_to(&mut out).unwrap();
+        crate::flash_str!("Cap:EEPROM:").write_to(&mut out).unwrap();
+        crate::flash_str!("0123456789abcdefXYZ").write_to(&mut out).unwrap();
+        ufmt::uwrite!(out, "[{}]", crate::flash_str!("mid")).unwrap();
+        assert_eq!(out.0, "Cap:EEPROM:0123456789abcdefXYZ[mid]");
+    }
+}

@@ -32,15 +32,15 @@ pub enum LineRejection {
 
 impl LineRejection {
     /// Marlin's text for the rejection (the part after `Error:`).
-    pub fn message(self) -> &'static str {
+    pub fn message(self) -> crate::progmem::FlashStr {
         match self {
-            Self::ChecksumMismatch => "checksum mismatch",
-            Self::LineNumberOutOfOrder => "Line Number is not Last Line Number+1",
-            Self::NoChecksum => "No Checksum with line number",
-            Self::NoLineNumberWithChecksum => "No Line Number with checksum",
-            Self::MalformedHeader => "Malformed line number or checksum",
-            Self::TooLong => "Line too long",
-            Self::Damaged => "Serial receive overrun, line lost",
+            Self::ChecksumMismatch => crate::flash_str!("checksum mismatch"),
+            Self::LineNumberOutOfOrder => crate::flash_str!("Line Number is not Last Line Number+1"),
+            Self::NoChecksum => crate::flash_str!("No Checksum with line number"),
+            Self::NoLineNumberWithChecksum => crate::flash_str!("No Line Number with checksum"),
+            Self::MalformedHeader => crate::flash_str!("Malformed line number or checksum"),
+            Self::TooLong => crate::flash_str!("Line too long"),
+            Self::Damaged => crate::flash_str!("Serial receive overrun, line lost"),
         }
     }
 }
@@ -116,7 +116,7 @@ impl HostProtocol {
     /// the host numbers its lines, and `ok` (Marlin's order).
     pub fn write_rejection<W: uWrite + ?Sized>(&self, rejection: LineRejection, out: &mut W) -> Result<(), W::Error> {
         out.write_str("Error:")?;
-        out.write_str(rejection.message())?;
+        rejection.message().write_to(out)?;
         if self.numbered {
             ufmt::uwrite!(out, ", Last Line: {}\nResend: {}\n", self.last_line, self.last_line.wrapping_add(1))?;
         } else {

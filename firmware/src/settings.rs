@@ -68,28 +68,37 @@ impl Settings {
     /// `M503`: the settings as the commands that would set them, in
     /// Marlin's layout.
     pub fn report<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        out.write_str("echo:; Steps per unit:\necho:  M92")?;
+        crate::flash_str!("echo:; Steps per unit:\necho:  M92").write_to(out)?;
         write_axes(out, &self.steps_per_mm_milli)?;
-        out.write_str("\necho:; Max feedrates (units/s):\necho:  M203")?;
+        crate::flash_str!("\necho:; Max feedrates (units/s):\necho:  M203").write_to(out)?;
         write_axes(out, &self.max_feed_um_per_s)?;
-        out.write_str("\necho:; Max Acceleration (units/s2):\necho:  M201")?;
+        crate::flash_str!("\necho:; Max Acceleration (units/s2):\necho:  M201").write_to(out)?;
         write_axes(out, &self.max_accel_um_per_s2)?;
+        crate::flash_str!(
+            "\necho:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\necho:  M204 P"
+        )
+        .write_to(out)?;
         ufmt::uwrite!(
             out,
-            "\necho:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\necho:  M204 P{} R{} T{}\n",
+            "{} R{} T{}\n",
             milli(self.print_accel_um_per_s2),
             milli(self.retract_accel_um_per_s2),
             milli(self.travel_accel_um_per_s2)
         )?;
+        crate::flash_str!(
+            "echo:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\necho:  M205 B"
+        )
+        .write_to(out)?;
         ufmt::uwrite!(
             out,
-            "echo:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\necho:  M205 B{} S{} T{} J{}\n",
+            "{} S{} T{} J{}\n",
             self.min_segment_time_us,
             milli(self.min_feed_um_per_s),
             milli(self.min_travel_feed_um_per_s),
             Fixed { mantissa: self.junction_deviation_um, digits: 3 }
         )?;
-        ufmt::uwrite!(out, "echo:; Feedrate and flow:\necho:  M220 S{}\necho:  M221 S{}\n", self.feed_percent, self.flow_percent)
+        crate::flash_str!("echo:; Feedrate and flow:\necho:  M220 S").write_to(out)?;
+        ufmt::uwrite!(out, "{}\necho:  M221 S{}\n", self.feed_percent, self.flow_percent)
     }
 }
 

@@ -30,10 +30,10 @@ impl CommandError {
         out.write_str("Error:")?;
         match self {
             Self::Parse(error) => write_parse_error(error, out),
-            Self::InvalidFeedRate => out.write_str("Invalid feed rate (F must be > 0)"),
+            Self::InvalidFeedRate => crate::flash_str!("Invalid feed rate (F must be > 0)").write_to(out),
             Self::OutOfRange(letter) => ufmt::uwrite!(out, "Value out of range for {}", char::from(letter)),
             Self::Missing(letter) => ufmt::uwrite!(out, "Missing {} word", char::from(letter)),
-            Self::Halted => out.write_str("Printer halted. kill() called!"),
+            Self::Halted => crate::flash_str!("Printer halted. kill() called!").write_to(out),
         }?;
         out.write_str("\n")
     }
@@ -44,7 +44,7 @@ fn write_parse_error<W: uWrite + ?Sized>(error: ParseError, out: &mut W) -> Resu
         ParseError::BadNumber(letter) => ufmt::uwrite!(out, "Bad number after {}", char::from(letter)),
         ParseError::NumberOutOfRange(letter) => ufmt::uwrite!(out, "Number out of range after {}", char::from(letter)),
         ParseError::WordWithoutValue(letter) => ufmt::uwrite!(out, "Missing value after {}", char::from(letter)),
-        ParseError::UnterminatedComment => out.write_str("Unterminated comment"),
+        ParseError::UnterminatedComment => crate::flash_str!("Unterminated comment").write_to(out),
         ParseError::UnexpectedByte(byte) => ufmt::uwrite!(out, "Unexpected character (byte {})", byte),
         ParseError::DuplicateWord(letter) => ufmt::uwrite!(out, "Repeated word {}", char::from(letter)),
         ParseError::TooManyWords => out.write_str("Too many words"),

@@ -649,38 +649,35 @@ pub fn write_capabilities<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Erro
         crate::FIRMWARE_VERSION,
         EXTRUDERS
     )?;
-    for (name, on) in CAPABILITIES {
-        ufmt::uwrite!(out, "Cap:{}:{}\n", *name, u8::from(*on))?;
-    }
-    Ok(())
+    crate::flash_str!(CAPABILITIES).write_to(out)
 }
 
-/// The capabilities reported by `M115`, honestly: on only when implemented.
-const CAPABILITIES: &[(&str, bool)] = &[
-    ("SERIAL_XON_XOFF", false),
-    ("BINARY_FILE_TRANSFER", false),
-    ("EEPROM", true),
-    ("VOLUMETRIC", false),
-    ("AUTOREPORT_TEMP", true),
-    ("AUTOREPORT_POS", false),
-    ("PROGRESS", false),
-    ("PRINT_JOB", false),
-    ("AUTOLEVEL", false),
-    ("Z_PROBE", false),
-    ("LEVELING_DATA", false),
-    ("SOFTWARE_POWER", false),
-    ("TOGGLE_LIGHTS", false),
-    ("EMERGENCY_PARSER", true),
-    ("HOST_ACTION_COMMANDS", false),
-    ("PROMPT_SUPPORT", false),
-    ("SDCARD", false),
-    ("AUTOREPORT_SD_STATUS", false),
-    ("THERMAL_PROTECTION", false),
-    ("MOTION_MODES", false),
-    ("ARCS", false),
-    ("BABYSTEPPING", false),
-    ("CHAMBER_TEMPERATURE", false),
-];
+/// The capabilities reported by `M115`, honestly: 1 only when implemented.
+/// One string in flash: on the AVR every `&str` would cost SRAM.
+const CAPABILITIES: &str = "Cap:SERIAL_XON_XOFF:0
+Cap:BINARY_FILE_TRANSFER:0
+Cap:EEPROM:1
+Cap:VOLUMETRIC:0
+Cap:AUTOREPORT_TEMP:1
+Cap:AUTOREPORT_POS:0
+Cap:PROGRESS:0
+Cap:PRINT_JOB:0
+Cap:AUTOLEVEL:0
+Cap:Z_PROBE:0
+Cap:LEVELING_DATA:0
+Cap:SOFTWARE_POWER:0
+Cap:TOGGLE_LIGHTS:0
+Cap:EMERGENCY_PARSER:1
+Cap:HOST_ACTION_COMMANDS:0
+Cap:PROMPT_SUPPORT:0
+Cap:SDCARD:0
+Cap:AUTOREPORT_SD_STATUS:0
+Cap:THERMAL_PROTECTION:0
+Cap:MOTION_MODES:0
+Cap:ARCS:0
+Cap:BABYSTEPPING:0
+Cap:CHAMBER_TEMPERATURE:0
+";
 
 #[cfg(test)]
 mod tests;
