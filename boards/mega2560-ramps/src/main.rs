@@ -15,6 +15,7 @@ mod adc;
 mod clock;
 mod eeprom;
 mod pins;
+mod pwm;
 mod serial;
 mod watchdog;
 
@@ -44,6 +45,7 @@ fn main() -> ! {
     serial::init(&dp, producer);
     clock::init(&dp);
     adc::init(&dp);
+    pwm::init(&dp);
     // SAFETY: everything the interrupts touch is initialised.
     unsafe { avr_device::interrupt::enable() };
 
@@ -83,7 +85,7 @@ fn apply_outputs(dp: &Peripherals, machine: &Machine) {
         return;
     }
     pins::set_steppers_enabled(dp, machine.steppers_enabled());
-    pins::make_output(dp, pins::FAN, machine.fan_duty() > 0);
+    pwm::set(dp, pwm::Output::Fan, machine.fan_duty());
 }
 
 #[panic_handler]

@@ -40,8 +40,12 @@ const fn pin(port: Port, bit: u8) -> Pin {
 pub const STEPPER_ENABLES: [Pin; 5] =
     [pin(Port::D, 7), pin(Port::F, 2), pin(Port::K, 0), pin(Port::A, 2), pin(Port::C, 7)];
 /// Heater and fan MOSFET gates (high = on).
-pub const HEATER_OUTPUTS: [Pin; 3] = [pin(Port::B, 4), pin(Port::H, 5), pin(Port::H, 6)];
-/// The part-cooling fan (D9).
+pub const HEATER_OUTPUTS: [Pin; 3] = [HOTEND, BED, FAN];
+/// The hot-end heater (D10, OC2A).
+pub const HOTEND: Pin = pin(Port::B, 4);
+/// The heated bed (D8, OC4C).
+pub const BED: Pin = pin(Port::H, 5);
+/// The part-cooling fan (D9, OC2B).
 pub const FAN: Pin = pin(Port::H, 6);
 /// Endstops in the core's bit order: X_MIN, X_MAX, Y_MIN, Y_MAX, Z_MIN, Z_MAX.
 pub const ENDSTOPS: [Pin; 6] =
@@ -131,6 +135,9 @@ pub fn endstop_levels(dp: &Peripherals) -> u8 {
 /// The safe state: every heater and fan off, every stepper driver disabled.
 /// Runs first at boot and from the panic handler.
 pub fn all_outputs_safe(dp: &Peripherals) {
+    // A pin driven by a PWM compare unit ignores its PORT bit: cut the
+    // timers loose first.
+    crate::pwm::disconnect_all(dp);
     for heater in HEATER_OUTPUTS {
         make_output(dp, heater, false);
     }

@@ -1,0 +1,69 @@
+//! Hardware PWM for the RAMPS MOSFET outputs.
+//!
+//! | output | pin | timer | frequency |
+//! |---|---|---|---|
+//! | hot end | D10 = PB4 = OC2A | Timer2, fast PWM 8-bit, /64 | 976 Hz |
+//! | fan | D9 = PH6 = OC2B | Timer2 (shared) | 976 Hz |
+//! | bed | D8 = PH5 = OC4C | Timer4, fast PWM 8-bit, /8 | 7.8 kHz |
+//!
+//! The bed runs at 7.8 kHz because SPEC §2's bed drives a triac stage
+//! through a 40 Hz RC filter: the ripple is 1.6 % at 3.9 kHz and worse
+//! below, so its PWM must stay at or above 4 kHz.
+//!
+//! A duty of 0 disconnects the pin from its timer and drives it low: a PWM
+//! compare unit at 0 would still emit a one-cycle spike every period in
+//! fast PWM mode.
+
+use avr_device::atmega2560::Peripherals;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Output {
+    Hotend,
+    Bed,
+    Fan,
+}
+
+/// Start both timers with every output disconnected (low).
+pub fn init(dp: &Peripherals) {
+    // Timer2: WGM21|WGM20 = fast PWM 0xFF; CS22 = clk/64.
+    // SAFETY: valid mode and prescaler bits; compare outputs off.
+    dp.TC2.tccr2a.write(|w| unsafe { w.bits(0b0000_0011) });
+    dp.TC2.tccr2b.write(|w| unsafe { w.bits(0b0000_0100) });
+    // Timer4: WGM42|WGM40 = fast PWM 8-bit; CS41 = clk/8.
+    // SAFETY: valid mode and prescaler bits; compare outputs off.
+    dp.TC4.tccr4a.write(|w| unsafe { w.bits(0b0000_0001) });
+    dp.TC4.tccr4b.write(|w| unsafe { w.bits(0b0000_1010) });
+}
+
+/// Set one output's duty, 0 (off) to 255 (fully on).
+pub fn set(dp: &Peripherals, output: Output, duty: u8) {
+    // COMnx1 (non-inverting) bit of each output in its TCCRnA.
+    let (connect_bit, pin) = match output {
+        Output::Hotend => (7, crate::pins::HOTEND),
+        Output::Fan => (5, crate::pins::FAN),
+        Output::Bed => (3, crate::pins::BED),
+    };
+    let connect = duty != 0;
+    match output {
+        Output::Hotend => dp.TC2.ocr2a.write(|w| w.bits(duty)),
+        Output::Fan => dp.TC2.ocr2b.write(|w| w.bits(duty)),
+        Output::Bed => dp.TC4.ocr4c.write(|w| w.bits(u16::from(duty))),
+    }
+    let update = |bits: u8| if connect { bits | (1 << connect_bit) } else { bits & !(1 << connect_bit) };
+    match output {
+        // SAFETY: only the output's own COM bit changes.
+        Output::Hotend | Output::Fan => dp.TC2.tccr2a.modify(|r, w| unsafe { w.bits(update(r.bits())) }),
+        Output::Bed => dp.TC4.tccr4a.modify(|r, w| unsafe { w.bits(update(r.bits())) }),
+    }
+    // Low in PORT: the level whenever the compare unit is disconnected;
+    // and the pin must be an output for the compare unit to drive it.
+    crate::pins::make_output(dp, pin, false);
+}
+
+/// Disconnect every PWM output from its timer (then the pins follow their
+/// PORT bits, which the caller drives low).
+pub fn disconnect_all(dp: &Peripherals) {
+    // SAFETY: clearing COM bits only; waveform mode bits are kept.
+    dp.TC2.tccr2a.modify(|r, w| unsafe { w.bits(r.bits() & 0b0000_1111) });
+    dp.TC4.tccr4a.modify(|r, w| unsafe { w.bits(r.bits() & 0b0000_0011) });
+}
