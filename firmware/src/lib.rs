@@ -17,6 +17,7 @@
 //! - [`settings`]: tunable values (`M92`, `M201`–`M205`, ...), `M503`;
 //! - [`storage`]: `M500`/`M501` images in non-volatile memory, two slots + CRC;
 //! - [`thermal`]: thermistors and heaters;
+//! - [`closed_loop`]: encoders (NSE-5310, quadrature) and closed position loops;
 //! - [`progmem`]: constant tables kept in flash on the AVR.
 #![no_std]
 #![deny(unsafe_op_in_unsafe_fn)]
@@ -25,6 +26,7 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod closed_loop;
 pub mod emergency;
 pub mod gcode;
 pub mod host_link;
