@@ -1,4 +1,6 @@
 //! A simulated board for the firmware core (std only): the same core code as
 //! on the boards, on virtual time.
 
+pub mod axis_plant;
 pub mod board;
+pub mod encoder_trace;

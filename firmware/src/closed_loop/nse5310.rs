@@ -180,6 +180,23 @@ impl TrackerConfig {
     pub const fn default_for_printer() -> Self {
         Self { index_phase: 0, index_window: 256, max_jump: 1024, max_bad_reads: 5, stuck_travel: UNITS_PER_MM / 4 }
     }
+
+    /// The printer defaults with `max_jump` sized for an axis that moves at
+    /// most `max_speed_mm_s` and is read `read_hz` times a second: 1.5 × the
+    /// travel per read + 64 counts of noise margin. `None` when the axis
+    /// could move 0.9 mm or more between reads: the unwrapping would be
+    /// ambiguous (SPEC §1: read at least once per 1 mm).
+    pub fn for_read_rate(max_speed_mm_s: u16, read_hz: u16) -> Option<Self> {
+        if read_hz == 0 {
+            return None;
+        }
+        let per_read = u32::from(max_speed_mm_s) * UNITS_PER_MM as u32 / u32::from(read_hz);
+        if per_read * 10 >= 9 * UNITS_PER_MM as u32 {
+            return None;
+        }
+        let max_jump = (per_read * 3 / 2 + 64).min(HALF_POLE_PAIR as u32 - 1) as u16;
+        Some(Self { max_jump, ..Self::default_for_printer() })
+    }
 }
 
 /// Counters a host can ask for (`M822`): how healthy the encoder is.
@@ -506,6 +523,15 @@ mod tests {
         for i in 0..1000u16 {
             assert!(t.update(777 + (i % 2), 0, 0).is_ok());
         }
+    }
+
+    #[test]
+    fn max_jump_follows_speed_and_read_rate_and_refuses_ambiguous_rates() {
+        // 200 mm/s at 500 Hz: 0.4 mm = 819 counts per read → 1292
+        assert_eq!(TrackerConfig::for_read_rate(200, 500).map(|c| c.max_jump), Some(1292));
+        // 200 mm/s at 200 Hz is 1 mm per read: refused
+        assert_eq!(TrackerConfig::for_read_rate(200, 200), None);
+        assert_eq!(TrackerConfig::for_read_rate(200, 0), None);
     }
 
     #[test]
