@@ -18,6 +18,9 @@
 //! - [`storage`]: `M500`/`M501` images in non-volatile memory, two slots + CRC;
 //! - [`thermal`]: thermistors and heaters;
 //! - [`closed_loop`]: encoders (NSE-5310, quadrature) and closed position loops;
+//! - [`machines`]: the filament extrusion line and the powder-bed retrofit
+//!   (velocity-mode steppers, diameter loop, travel measurement, layer cycle);
+//! - [`drivers`]: small device drivers (HD44780 character LCD, status screen);
 //! - [`progmem`]: constant tables kept in flash on the AVR.
 #![no_std]
 #![deny(unsafe_op_in_unsafe_fn)]
@@ -27,11 +30,13 @@
 extern crate std;
 
 pub mod closed_loop;
+pub mod drivers;
 pub mod emergency;
 pub mod gcode;
 pub mod host_link;
 pub mod line;
 pub mod machine;
+pub mod machines;
 pub mod progmem;
 pub mod protocol;
 pub mod reply;

@@ -1,0 +1,1 @@
+//! Small device drivers over embedded-hal traits.

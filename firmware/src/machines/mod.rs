@@ -1,0 +1,4 @@
+//! The machines that are not printers (SPEC §4 filament extrusion line,
+//! SPEC §5 powder-bed retrofit). Integration notes follow once complete.
+
+pub mod velocity;
