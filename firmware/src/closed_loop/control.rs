@@ -25,17 +25,18 @@
 //! - DC servo PID (SPEC §5): Kff = 0 (or a velocity feedforward), derivative
 //!   on the measurement, output in duty units.
 //!
-//! Units: positions in [`Units`](super::Units) (1/2048 mm for the NSE-5310,
+//! Units: positions in [`Units`] (1/2048 mm for the NSE-5310,
 //! counts for a quadrature axis), velocities in units/s, the output in
 //! units/s (stepper axes: turn it into a step rate with
 //! [`StepperScale`](super::output::StepperScale)) or duty (servo axes).
 //!
-//! Fixed point: gains are Q16.16 ([`Q16`]); the integral is kept exactly,
-//! as an i64 sum of Ki·T·e products in Q16 (tiny errors still integrate and
-//! nothing is rounded away); products go through
-//! [`mul_q16`], which uses a 32-bit multiply when the operands are small
-//! (|value| < 2048, |gain| < 16: the usual case of an error under 1 mm) and
-//! a 64-bit one otherwise. No division, no float, no checked multiply.
+//! Fixed point: gains are Q16.16 ([`Q16`]); the integral is kept exactly
+//! (whole units/s + 16 fraction bits: tiny errors still integrate, nothing
+//! is rounded away); products go through [`mul_q16`], which uses one 32-bit
+//! multiply when bound comparisons show the product fits (an error under
+//! 1 mm times a gain under 16, a velocity under 16 mm/s times a decay, …)
+//! and four 16 × 16-bit products otherwise. No 64-bit arithmetic, no
+//! division, no float, no checked multiply in the tick.
 
 use super::nse5310::EncoderFault;
 use super::{AxisFault, Units};
@@ -66,25 +67,91 @@ impl Q16 {
 
 /// `value × gain`, rounded, saturated to the i32 range.
 pub fn mul_q16(value: i32, gain: Q16) -> i32 {
-    mul_shift(value, gain.0, 16)
+    mul_shift::<16>(value, gain.0)
 }
 
-/// `value × factor / 2^shift` rounded half up, saturated. 32-bit fast path
-/// when the product provably fits (bound comparisons, never a checked
-/// multiply: see the README on `__mulosi4`).
-pub fn mul_shift(value: i32, factor: i32, shift: u32) -> i32 {
-    let half = if shift == 0 { 0 } else { 1i32 << (shift - 1) };
-    if value.unsigned_abs() < (1 << 11) && factor.unsigned_abs() < (1 << 19) {
-        // |product| < 2^30, + half < 2^31.
-        return (value * factor + half) >> shift;
+/// |a| × |b| as a 64-bit magnitude `(high word, low word)`, from four
+/// 16 × 16 → 32-bit products: on the AVR each is one `__umulhisi3`
+/// (≈ 20 cycles), where an `i64` multiply would be compiler-builtins'
+/// generic `__muldi3` (≈ 1000).
+#[inline]
+fn wide_magnitude(a: u32, b: u32) -> (u32, u32) {
+    let (a_high, a_low) = (u32::from((a >> 16) as u16), u32::from(a as u16));
+    let (b_high, b_low) = (u32::from((b >> 16) as u16), u32::from(b as u16));
+    let low_low = a_low * b_low;
+    let (middle, middle_carry) = (a_low * b_high).overflowing_add(a_high * b_low);
+    let (low, low_carry) = low_low.overflowing_add(middle << 16);
+    // The true product is below 2^64, so the high word cannot overflow.
+    let high = (a_high * b_high)
+        .wrapping_add(middle >> 16)
+        .wrapping_add(u32::from(middle_carry) << 16)
+        .wrapping_add(u32::from(low_carry));
+    (high, low)
+}
+
+/// Whether |a| × |b| < 2^31, by bound comparisons only (no multiply, no
+/// leading-zero count): the three shapes the loop meets (an error times a
+/// gain, a velocity times a decay, a velocity times a step scale).
+#[inline(always)]
+fn fits_i32(a: u32, b: u32) -> bool {
+    (a < 1 << 11 && b < 1 << 20) || (a < 1 << 15 && b < 1 << 16) || (a < 1 << 19 && b < 1 << 12)
+}
+
+/// `value × factor / 2^SHIFT` rounded half away from zero, saturated.
+/// One 32-bit multiply (libgcc's `__mulsi3`, ≈ 40 cycles on the AVR) when
+/// the product provably fits (bound comparisons, never a checked multiply:
+/// see the README on `__mulosi4`); otherwise four 16-bit partial products,
+/// still no 64-bit arithmetic.
+#[inline]
+pub fn mul_shift<const SHIFT: u32>(value: i32, factor: i32) -> i32 {
+    let half = 1i32 << (SHIFT - 1);
+    if fits_i32(value.unsigned_abs(), factor.unsigned_abs()) {
+        // |product| < 2^31 and SHIFT ≥ 1, so ± half cannot overflow.
+        let product = value * factor;
+        return if product >= 0 { (product + half) >> SHIFT } else { -((half - product) >> SHIFT) };
     }
-    let product = (i64::from(value) * i64::from(factor) + i64::from(half)) >> shift;
-    if product > i64::from(i32::MAX) {
+    mul_shift_wide::<SHIFT>(value, factor)
+}
+
+#[inline(never)]
+fn mul_shift_wide<const SHIFT: u32>(value: i32, factor: i32) -> i32 {
+    let half = 1u32 << (SHIFT - 1);
+    let negative = (value < 0) != (factor < 0);
+    let (high, low) = wide_magnitude(value.unsigned_abs(), factor.unsigned_abs());
+    let (low, carry) = low.overflowing_add(half);
+    let high = high.wrapping_add(u32::from(carry));
+    let magnitude = if high >> SHIFT != 0 { u32::MAX } else { (high << (32 - SHIFT)) | (low >> SHIFT) };
+    if negative {
+        if magnitude > 1 << 31 {
+            i32::MIN
+        } else {
+            (magnitude as i32).wrapping_neg()
+        }
+    } else if magnitude > i32::MAX as u32 {
         i32::MAX
-    } else if product < i64::from(i32::MIN) {
-        i32::MIN
     } else {
-        product as i32
+        magnitude as i32
+    }
+}
+
+/// `value × factor` in Q16 as (floor of the product / 2^16, the 16
+/// fraction bits), saturated: the integral's exact increment.
+fn mul_q16_split(value: i32, factor: i32) -> (i32, u16) {
+    if fits_i32(value.unsigned_abs(), factor.unsigned_abs()) {
+        let product = value * factor;
+        // The arithmetic shift is the floor; the low bits are the fraction.
+        return (product >> 16, product as u16);
+    }
+    let negative = (value < 0) != (factor < 0);
+    let (high, low) = wide_magnitude(value.unsigned_abs(), factor.unsigned_abs());
+    let whole = if high >> 15 != 0 { i32::MAX as u32 } else { (high << 16) | (low >> 16) };
+    let fraction = low as u16;
+    if !negative {
+        (whole as i32, fraction)
+    } else if fraction == 0 {
+        (-(whole as i32), 0)
+    } else {
+        (-(whole as i32) - 1, 0u16.wrapping_sub(fraction))
     }
 }
 
@@ -155,8 +222,10 @@ pub struct AxisController {
     output_limit: i32,
     following: FollowingErrorLimit,
     over_limit_ticks: u16,
-    /// Q48.16 units/s: the exact sum of (Ki·T in Q16) × error.
-    integral: i64,
+    /// The integral, units/s: whole part (floor) and 16 fraction bits, the
+    /// exact sum of (Ki·T in Q16) × error.
+    integral: i32,
+    integral_fraction: u16,
     derivative: i32,
     previous_signal: i32,
     primed: bool,
@@ -199,6 +268,7 @@ impl AxisController {
             following,
             over_limit_ticks: 0,
             integral: 0,
+            integral_fraction: 0,
             derivative: 0,
             previous_signal: 0,
             primed: false,
@@ -235,8 +305,8 @@ impl AxisController {
             self.over_limit_ticks = 0;
         }
 
-        let gains = self.gains;
-        let signal = match gains.derivative_on {
+        // Field by field: copying `self.gains` costs a memcpy on the AVR.
+        let signal = match self.gains.derivative_on {
             DerivativeOn::Error => error,
             DerivativeOn::Measurement => measured.saturating_neg(),
         };
@@ -244,35 +314,51 @@ impl AxisController {
             self.previous_signal = signal;
             self.primed = true;
         }
-        if gains.derivative.0 != 0 {
+        if self.gains.derivative.0 != 0 {
             let change = signal.saturating_sub(self.previous_signal);
-            self.derivative = mul_q16(self.derivative, gains.derivative_decay).saturating_add(mul_q16(change, gains.derivative));
+            self.derivative =
+                mul_q16(self.derivative, self.gains.derivative_decay).saturating_add(mul_q16(change, self.gains.derivative));
         }
         self.previous_signal = signal;
 
-        let mut known = mul_q16(error, gains.proportional).saturating_add(self.derivative);
-        if gains.feedforward == Q16::ONE {
-            known = known.saturating_add(reference.velocity);
-        } else if gains.feedforward.0 != 0 {
-            known = known.saturating_add(mul_q16(reference.velocity, gains.feedforward));
+        let mut known = self.derivative;
+        if self.gains.proportional.0 != 0 {
+            known = known.saturating_add(mul_q16(error, self.gains.proportional));
         }
-        if gains.integral_per_tick.0 != 0 {
-            let before = known.saturating_add((self.integral >> 16) as i32);
+        let feedforward = self.gains.feedforward;
+        if feedforward == Q16::ONE {
+            known = known.saturating_add(reference.velocity);
+        } else if feedforward.0 != 0 {
+            known = known.saturating_add(mul_q16(reference.velocity, feedforward));
+        }
+        let integral_gain = self.gains.integral_per_tick.0;
+        if integral_gain != 0 {
+            let before = known.saturating_add(self.integral);
             let pushing_up = before >= self.output_limit && error > 0;
             let pushing_down = before <= -self.output_limit && error < 0;
             if !pushing_up && !pushing_down {
-                let limit = i64::from(self.output_limit) << 16;
-                let increment = if error.unsigned_abs() < (1 << 11) && gains.integral_per_tick.0.unsigned_abs() < (1 << 19) {
-                    i64::from(error * gains.integral_per_tick.0)
-                } else {
-                    i64::from(error) * i64::from(gains.integral_per_tick.0)
-                };
-                self.integral = (self.integral + increment).clamp(-limit, limit);
+                let (whole, fraction) = mul_q16_split(error, integral_gain);
+                let (fraction, carry) = self.integral_fraction.overflowing_add(fraction);
+                self.integral_fraction = fraction;
+                self.integral = self.integral.saturating_add(whole).saturating_add(i32::from(carry));
+                if self.integral >= self.output_limit {
+                    self.integral = self.output_limit;
+                    self.integral_fraction = 0;
+                } else if self.integral < -self.output_limit {
+                    self.integral = -self.output_limit;
+                    self.integral_fraction = 0;
+                }
             }
         }
-        // |integral| ≤ output_limit < 2^23: the shift fits an i32.
-        let output = known.saturating_add((self.integral >> 16) as i32);
-        Ok(output.clamp(-self.output_limit, self.output_limit))
+        let output = known.saturating_add(self.integral);
+        // Not `clamp`: it carries a panic path for min > max.
+        Ok(if output > self.output_limit {
+            self.output_limit
+        } else if output < -self.output_limit {
+            -self.output_limit
+        } else {
+            output
+        })
     }
 
     fn latch(&mut self, fault: AxisFault) -> AxisFault {
@@ -296,6 +382,7 @@ impl AxisController {
         self.fault = None;
         self.over_limit_ticks = 0;
         self.integral = 0;
+        self.integral_fraction = 0;
         self.derivative = 0;
         self.primed = false;
     }
@@ -305,6 +392,7 @@ impl AxisController {
     pub fn set_gains(&mut self, gains: FixedGains) {
         self.gains = gains;
         self.integral = 0;
+        self.integral_fraction = 0;
         self.derivative = 0;
         self.primed = false;
     }
@@ -327,7 +415,7 @@ impl AxisController {
 
     /// The integral term, units/s (for reports and tests).
     pub fn integral(&self) -> i32 {
-        (self.integral >> 16) as i32
+        self.integral
     }
 }
 
@@ -362,6 +450,25 @@ mod tests {
         assert_eq!(mul_q16(1_000_000, Q16::from_f32(5.0).unwrap()), 5_000_000);
         assert_eq!(mul_q16(i32::MAX, Q16::from_f32(100.0).unwrap()), i32::MAX);
         assert_eq!(mul_q16(i32::MIN, Q16::from_f32(100.0).unwrap()), i32::MIN);
+        assert_eq!(mul_shift::<8>(10_240, 3200), 128_000);
+        assert_eq!(mul_shift::<8>(-10_240, 3200), -128_000);
+    }
+
+    #[test]
+    fn the_wide_multiply_agrees_with_64_bit_arithmetic() {
+        let values = [0i32, 1, -1, 2047, -2048, 65_535, 65_536, -65_537, 1 << 20, -(1 << 23) + 3, 123_456_789, i32::MAX, i32::MIN];
+        for &a in &values {
+            for &b in &values {
+                let exact = i64::from(a) * i64::from(b);
+                let rounded = if exact >= 0 { (exact + (1 << 15)) >> 16 } else { -((-exact + (1 << 15)) >> 16) };
+                let expected = rounded.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
+                assert_eq!(mul_shift::<16>(a, b), expected, "{a} × {b}");
+                if exact.abs() < (1i64 << 46) {
+                    let (whole, fraction) = mul_q16_split(a, b);
+                    assert_eq!(i64::from(whole) * 65_536 + i64::from(fraction), exact, "{a} × {b}");
+                }
+            }
+        }
     }
 
     #[test]

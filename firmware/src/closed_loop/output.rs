@@ -37,7 +37,7 @@ impl StepperScale {
 
     /// In the tick: velocity (units/s) → step rate (one multiply).
     pub fn step_rate(self, units_per_s: i32) -> StepRate {
-        StepRate(mul_shift(units_per_s, self.steps_per_unit_q16, 8))
+        StepRate(mul_shift::<8>(units_per_s, self.steps_per_unit_q16))
     }
 }
 

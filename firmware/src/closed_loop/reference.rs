@@ -17,7 +17,7 @@
 //! run dry, the preview shrinks (the look-ahead cursor waits at the end of
 //! the queue): keep at least the preview time queued.
 //!
-//! Cost per tick: per axis one 64-bit add and a compare; the division that
+//! Cost per tick: per axis two 16/32-bit adds and a compare; the division that
 //! turns a piece into per-tick increments happens in [`push`](ReferencePath::push),
 //! in the main loop. On the AVR, `push` and `advance` share the path inside
 //! a critical section.
@@ -28,8 +28,9 @@ use super::Units;
 #[derive(Clone, Copy, Debug)]
 struct Piece<const AXES: usize> {
     end: [Units; AXES],
-    /// Units per tick, Q16.
+    /// Units per tick: whole part (floor) and 16 fraction bits.
     increment: [i32; AXES],
+    increment_fraction: [u16; AXES],
     /// Units per second.
     velocity: [i32; AXES],
     ticks: u16,
@@ -55,8 +56,10 @@ pub struct ReferencePath<const AXES: usize, const N: usize> {
     len: u8,
     /// End of the last queued piece: the start of the next.
     queued_end: [Units; AXES],
-    /// The reference position, Q16 units.
-    position: [i64; AXES],
+    /// The reference position: whole units (floor) and 16 fraction bits
+    /// (two words instead of an i64: the AVR shifts an i64 bit by bit).
+    position: [Units; AXES],
+    position_fraction: [u16; AXES],
     present_tick: u16,
     /// Ticks the present cursor still waits at the start of a path.
     start_delay: u16,
@@ -71,16 +74,13 @@ impl<const AXES: usize, const N: usize> ReferencePath<AXES, N> {
     /// A path at rest at `start`, for a loop ticking at `tick_hz`, with the
     /// feedforward `preview_ticks` ahead.
     pub fn new(start: [Units; AXES], tick_hz: u16, preview_ticks: u16) -> Self {
-        let mut position = [0i64; AXES];
-        for (q16, &units) in position.iter_mut().zip(start.iter()) {
-            *q16 = i64::from(units) << 16;
-        }
         Self {
-            pieces: [Piece { end: [0; AXES], increment: [0; AXES], velocity: [0; AXES], ticks: 0 }; N],
+            pieces: [Piece { end: [0; AXES], increment: [0; AXES], increment_fraction: [0; AXES], velocity: [0; AXES], ticks: 0 }; N],
             head: 0,
             len: 0,
             queued_end: start,
-            position,
+            position: start,
+            position_fraction: [0; AXES],
             present_tick: 0,
             start_delay: 0,
             lead_piece: 0,
@@ -98,14 +98,15 @@ impl<const AXES: usize, const N: usize> ReferencePath<AXES, N> {
         if usize::from(self.len) >= N {
             return Err(PathError::Full);
         }
-        let mut piece = Piece { end, increment: [0; AXES], velocity: [0; AXES], ticks };
+        let mut piece = Piece { end, increment: [0; AXES], increment_fraction: [0; AXES], velocity: [0; AXES], ticks };
         for axis in 0..AXES {
             let distance = i64::from(end[axis]) - i64::from(self.queued_end[axis]);
             let increment = (distance << 16) / i64::from(ticks);
             if increment.abs() > i64::from(i32::MAX) {
                 return Err(PathError::TooFast);
             }
-            piece.increment[axis] = increment as i32;
+            piece.increment[axis] = (increment >> 16) as i32;
+            piece.increment_fraction[axis] = increment as u16;
             piece.velocity[axis] = (distance * i64::from(self.tick_hz) / i64::from(ticks)) as i32;
         }
         if self.len == 0 {
@@ -126,11 +127,11 @@ impl<const AXES: usize, const N: usize> ReferencePath<AXES, N> {
     /// velocity `preview_ticks` ahead), then move on.
     pub fn advance(&mut self) -> [Reference; AXES] {
         let mut references = [Reference::default(); AXES];
-        for (reference, &q16) in references.iter_mut().zip(self.position.iter()) {
-            reference.position = ((q16 + (1 << 15)) >> 16) as Units;
+        for (reference, position) in references.iter_mut().zip(self.position()) {
+            reference.position = position;
         }
         if self.lead_piece < self.len {
-            let piece = &self.pieces[self.slot(self.lead_piece)];
+            let piece = &self.pieces[(usize::from(self.head) + usize::from(self.lead_piece)) % N];
             for (reference, &velocity) in references.iter_mut().zip(piece.velocity.iter()) {
                 reference.velocity = velocity;
             }
@@ -143,14 +144,13 @@ impl<const AXES: usize, const N: usize> ReferencePath<AXES, N> {
         if self.start_delay > 0 {
             self.start_delay -= 1;
         } else if self.len > 0 {
-            let piece = self.pieces[usize::from(self.head)];
+            let head = usize::from(self.head);
             self.present_tick += 1;
-            if self.present_tick >= piece.ticks {
-                for (q16, &end) in self.position.iter_mut().zip(piece.end.iter()) {
-                    *q16 = i64::from(end) << 16;
-                }
+            if self.present_tick >= self.pieces[head].ticks {
+                self.position = self.pieces[head].end;
+                self.position_fraction = [0; AXES];
                 self.present_tick = 0;
-                self.head = ((usize::from(self.head) + 1) % N) as u8;
+                self.head = ((head + 1) % N) as u8;
                 self.len -= 1;
                 if self.lead_piece > 0 {
                     self.lead_piece -= 1;
@@ -158,16 +158,15 @@ impl<const AXES: usize, const N: usize> ReferencePath<AXES, N> {
                     self.lead_tick = 0;
                 }
             } else {
-                for (q16, &increment) in self.position.iter_mut().zip(piece.increment.iter()) {
-                    *q16 += i64::from(increment);
+                let piece = &self.pieces[head];
+                for axis in 0..AXES {
+                    let (fraction, carry) = self.position_fraction[axis].overflowing_add(piece.increment_fraction[axis]);
+                    self.position_fraction[axis] = fraction;
+                    self.position[axis] = self.position[axis].wrapping_add(piece.increment[axis]).wrapping_add(i32::from(carry));
                 }
             }
         }
         references
-    }
-
-    fn slot(&self, offset: u8) -> usize {
-        (usize::from(self.head) + usize::from(offset)) % N
     }
 
     /// No piece left: the reference is at rest.
@@ -181,9 +180,11 @@ impl<const AXES: usize, const N: usize> ReferencePath<AXES, N> {
 
     /// The reference position now (units).
     pub fn position(&self) -> [Units; AXES] {
-        let mut out = [0; AXES];
-        for (units, &q16) in out.iter_mut().zip(self.position.iter()) {
-            *units = ((q16 + (1 << 15)) >> 16) as Units;
+        let mut out = self.position;
+        for (units, &fraction) in out.iter_mut().zip(self.position_fraction.iter()) {
+            if fraction >= 0x8000 {
+                *units = units.wrapping_add(1);
+            }
         }
         out
     }
@@ -295,6 +296,6 @@ mod tests {
     #[test]
     fn the_path_is_small() {
         // two axes, four pieces
-        assert!(core::mem::size_of::<ReferencePath<2, 4>>() <= 160, "{}", core::mem::size_of::<ReferencePath<2, 4>>());
+        assert!(core::mem::size_of::<ReferencePath<2, 4>>() <= 176, "{}", core::mem::size_of::<ReferencePath<2, 4>>());
     }
 }
