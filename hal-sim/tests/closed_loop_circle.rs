@@ -296,7 +296,7 @@ fn a_bridge_fault_stops_the_servo_axis_and_latches() {
     let mut controller = AxisController::new(fixed, 255, FollowingErrorLimit { limit: 4000, hold_ticks: 1000 });
     let mut faults = Vec::new();
     let stopped_at = run_servo(&mut plant, &mut decoder, 1000, |count| {
-        let bridge_fault = faults.len() > 0 || count > 200;
+        let bridge_fault = !faults.is_empty() || count > 200;
         match controller.tick(Reference { position: 2000, velocity: 0 }, Ok(count), DriverStatus { alarm: false, bridge_fault }) {
             Ok(duty) => Some(duty),
             Err(fault) => {

@@ -29,7 +29,7 @@ impl StepperScale {
     /// From steps/mm and loop units/mm (main loop; f32 allowed).
     pub fn new(steps_per_mm: f32, units_per_mm: f32) -> Option<Self> {
         let q16 = steps_per_mm / units_per_mm * 65536.0;
-        if !(q16 >= 1.0 && q16 < 2_147_483_000.0) {
+        if !(1.0..2_147_483_000.0).contains(&q16) {
             return None;
         }
         Some(Self { steps_per_unit_q16: (q16 + 0.5) as i32 })
@@ -190,7 +190,9 @@ mod tests {
         }
     }
 
-    fn bridge(diag_high: bool) -> (HBridge<Pwm, Pin, Pin, Pin>, Log, Rc<RefCell<u16>>) {
+    type Fixture = (HBridge<Pwm, Pin, Pin, Pin>, Log, Rc<RefCell<u16>>);
+
+    fn bridge(diag_high: bool) -> Fixture {
         let log: Log = Rc::default();
         let duty = Rc::new(RefCell::new(99));
         let b = HBridge::new(

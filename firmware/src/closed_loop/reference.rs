@@ -4,8 +4,10 @@
 //!
 //! Why a preview (ours): the identified axis has a 0.1 s dead time, so a
 //! causal loop that learns about a velocity change when it happens is
-//! 0.1 s late by construction (at 5 mm/s that is 0.5 mm, and on the 5 mm/s
-//! circle it alone costs more than 0.0006 mm² of MSE). The pieces are known
+//! 0.1 s late by construction (at 5 mm/s that is 0.5 mm; on the 5 mm/s
+//! circle the start alone costs v²θ³/3 / 12.6 s ≈ 0.0007 mm² of MSE, and
+//! the simulated robust PID goes from 0.0039 mm² without preview to
+//! 0.00023 mm² with it). The pieces are known
 //! in advance (the planner queued them), so the feedforward velocity is
 //! taken `preview_ticks` ahead of the reference position: the command
 //! reaches the axis when the reference gets there. The loop still compares
@@ -99,6 +101,7 @@ impl<const AXES: usize, const N: usize> ReferencePath<AXES, N> {
             return Err(PathError::Full);
         }
         let mut piece = Piece { end, increment: [0; AXES], increment_fraction: [0; AXES], velocity: [0; AXES], ticks };
+        #[allow(clippy::needless_range_loop)] // four arrays in step
         for axis in 0..AXES {
             let distance = i64::from(end[axis]) - i64::from(self.queued_end[axis]);
             let increment = (distance << 16) / i64::from(ticks);
