@@ -179,8 +179,8 @@ fn belt_slip_in_open_loop_is_a_following_error_half_a_second_after_the_slip() {
     let report = replay(&rows);
     let (row, fault) = report.fault.expect("slip must be detected");
     let AxisFault::FollowingError { error } = fault else { panic!("{fault:?}") };
-    // the carriage is ≈ 2.5 mm beyond the commanded 5 mm (2 mm slip + the
-    // 10 % gain error short: 5 × 0.9 + 2 = 6.5 mm, i.e. 1.5 mm)
+    // the carriage ends 1.5 mm beyond the commanded 5 mm: it moved 4.5 mm
+    // (k' 0.9, open loop), then the belt skipped 2 mm
     assert!(error < -UNITS_PER_MM, "{error}");
     let at = rows[row].time_s;
     assert!(at > 1.0 + 0.5 && at < 1.0 + 0.6, "fault at {at}");
