@@ -2,3 +2,4 @@
 //! SPEC §5 powder-bed retrofit). Integration notes follow once complete.
 
 pub mod velocity;
+pub mod powder_bed;
