@@ -37,6 +37,7 @@ pub mod host_link;
 pub mod line;
 pub mod machine;
 pub mod machines;
+pub mod motion;
 pub mod progmem;
 pub mod protocol;
 pub mod reply;

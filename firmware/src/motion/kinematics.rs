@@ -1,0 +1,560 @@
+//! Kinematics: where the motors must be for a Cartesian nozzle position, and
+//! back. One [`Kinematics`] per machine family of the SPEC, chosen by the
+//! machine configuration through [`MachineKinematics`].
+//!
+//! Motor coordinates are in *motor units*: millimetres of travel for a
+//! Cartesian axis, a delta carriage or a lead screw; degrees for an arm
+//! joint. [`Kinematics::motor_steps_per_unit`] turns them into steps, and
+//! rounding to the nearest step happens once, in [`to_steps`].
+//!
+//! Only the three positioning motors (indices 0, 1, 2) go through the
+//! kinematics; the extruder (index 3) is always linear.
+//!
+//! All of this is main-loop float code (SPEC §2 and §3 give the formulas);
+//! the step interrupt never sees a float.
+
+use super::math::{self, atan2, round_to_i32, sin_cos, sqrt};
+
+/// Cartesian axes (X, Y, Z) and the motors that position them.
+pub const LINEAR_AXES: usize = 3;
+
+/// A point or a motor position, one value per positioning motor.
+pub type Vector3 = [f32; LINEAR_AXES];
+
+/// Why a position cannot be reached.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KinematicsError {
+    /// A delta rod or the arm cannot reach the point (L² − d² ≤ 0, or the
+    /// arm's |cos θ2| > 1).
+    OutOfReach,
+    /// Outside the configured printable radius of a delta.
+    OutsidePrintable,
+    /// A delta rod would lean more than the configured tilt limit.
+    TooTilted,
+    /// The forward solution does not exist (carriage heights inconsistent).
+    NoSolution,
+}
+
+/// Inverse and forward kinematics of one machine family.
+pub trait Kinematics {
+    /// Cartesian nozzle position (mm) → motor coordinates (motor units).
+    fn inverse(&self, cartesian: Vector3) -> Result<Vector3, KinematicsError>;
+    /// Motor coordinates (motor units) → Cartesian nozzle position (mm).
+    fn forward(&self, motors: Vector3) -> Result<Vector3, KinematicsError>;
+    /// Longest Cartesian piece (mm) that may be interpolated linearly in
+    /// motor space; `None` when straight lines stay straight (Cartesian).
+    fn segment_mm(&self) -> Option<f32>;
+    /// Steps per motor unit, given the `M92` steps/mm of X, Y, Z.
+    fn motor_steps_per_unit(&self, steps_per_mm: Vector3) -> Vector3;
+}
+
+/// Motor coordinates → whole steps, rounded to the nearest step (half away
+/// from zero).
+pub fn to_steps(motors: Vector3, steps_per_unit: Vector3) -> [i32; LINEAR_AXES] {
+    [
+        round_to_i32(motors[0] * steps_per_unit[0]),
+        round_to_i32(motors[1] * steps_per_unit[1]),
+        round_to_i32(motors[2] * steps_per_unit[2]),
+    ]
+}
+
+/// Whole steps → motor coordinates.
+pub fn from_steps(steps: [i32; LINEAR_AXES], steps_per_unit: Vector3) -> Vector3 {
+    [
+        steps[0] as f32 / steps_per_unit[0],
+        steps[1] as f32 / steps_per_unit[1],
+        steps[2] as f32 / steps_per_unit[2],
+    ]
+}
+
+/// SPEC §1: one motor per Cartesian axis (the Prusa i3). Which way a motor
+/// turns for +Y is the step generator's direction-inversion mask, so that
+/// +Y always means the nozzle's +Y even though the belt moves the bed.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Cartesian;
+
+impl Kinematics for Cartesian {
+    fn inverse(&self, cartesian: Vector3) -> Result<Vector3, KinematicsError> {
+        Ok(cartesian)
+    }
+    fn forward(&self, motors: Vector3) -> Result<Vector3, KinematicsError> {
+        Ok(motors)
+    }
+    fn segment_mm(&self) -> Option<f32> {
+        None
+    }
+    fn motor_steps_per_unit(&self, steps_per_mm: Vector3) -> Vector3 {
+        steps_per_mm
+    }
+}
+
+/// SPEC §2: a linear delta. Motor i is the carriage of tower i; its
+/// coordinate is the carriage height h_i in mm:
+///
+/// h_i = z + OF + √(L² − (R·cosθ_i − x)² − (R·sinθ_i − y)²)
+///
+/// with L the rod length, R the radius of the rod pivots, OF the nozzle's
+/// offset below the effector pivots and θ_i the tower angles.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Delta {
+    rod_length: f32,
+    radius: f32,
+    effector_offset: f32,
+    tower_angles_deg: Vector3,
+    /// Tower pivot positions (R·cosθ_i, R·sinθ_i).
+    towers: [[f32; 2]; 3],
+    /// Points farther than this from the centre are refused (mm).
+    pub printable_radius: f32,
+    /// Largest allowed rod tilt from vertical, as sin²; `None`: no check.
+    pub max_tilt_sin_sqr: Option<f32>,
+    /// `M665 H`: nozzle height when every carriage is at its top endstop.
+    pub homed_height: f32,
+    /// `M666`: how far each tower's endstop sits above the nominal one (mm).
+    pub endstop_trim: Vector3,
+    /// Longest straight piece between inverse-kinematics points (mm).
+    pub segment_length: f32,
+}
+
+impl Delta {
+    /// A delta with the given geometry (mm, degrees); printable radius
+    /// defaults to the reach L − R, no tilt check, no trim.
+    pub fn new(rod_length: f32, radius: f32, effector_offset: f32, tower_angles_deg: Vector3) -> Self {
+        let mut delta = Self {
+            rod_length,
+            radius,
+            effector_offset,
+            tower_angles_deg,
+            towers: [[0.0; 2]; 3],
+            printable_radius: rod_length - radius,
+            max_tilt_sin_sqr: None,
+            homed_height: 300.0,
+            endstop_trim: [0.0; 3],
+            segment_length: 1.0,
+        };
+        delta.place_towers();
+        delta
+    }
+
+    /// SPEC §2's printer: L 361, R 227, OF 64, towers at 0°/120°/240°
+    /// (`repetier_layout` gives 90°/330°/210°), printable radius 130 mm.
+    pub fn spec_printer(repetier_layout: bool) -> Self {
+        let angles = if repetier_layout { [90.0, 330.0, 210.0] } else { [0.0, 120.0, 240.0] };
+        let mut delta = Self::new(361.0, 227.0, 64.0, angles);
+        delta.printable_radius = 130.0;
+        delta
+    }
+
+    /// `M665 L R`: new rod length and radius (the tower angles stay).
+    pub fn set_geometry(&mut self, rod_length: f32, radius: f32) {
+        self.rod_length = rod_length;
+        self.radius = radius;
+        self.place_towers();
+    }
+
+    /// New tower angles (degrees).
+    pub fn set_tower_angles(&mut self, tower_angles_deg: Vector3) {
+        self.tower_angles_deg = tower_angles_deg;
+        self.place_towers();
+    }
+
+    pub fn rod_length(&self) -> f32 {
+        self.rod_length
+    }
+
+    pub fn radius(&self) -> f32 {
+        self.radius
+    }
+
+    fn place_towers(&mut self) {
+        for (tower, angle) in self.towers.iter_mut().zip(self.tower_angles_deg) {
+            let (sin, cos) = sin_cos(math::radians(angle));
+            *tower = [self.radius * cos, self.radius * sin];
+        }
+    }
+
+    /// Carriage height of every tower when all sit at their top endstops:
+    /// the nozzle is then at (0, 0, homed_height), trims aside.
+    pub fn homed_carriage_heights(&self) -> Vector3 {
+        let nominal = self.homed_height + self.effector_offset + sqrt(self.rod_length * self.rod_length - self.radius * self.radius);
+        [
+            nominal + self.endstop_trim[0],
+            nominal + self.endstop_trim[1],
+            nominal + self.endstop_trim[2],
+        ]
+    }
+}
+
+impl Kinematics for Delta {
+    fn inverse(&self, p: Vector3) -> Result<Vector3, KinematicsError> {
+        if p[0] * p[0] + p[1] * p[1] > self.printable_radius * self.printable_radius {
+            return Err(KinematicsError::OutsidePrintable);
+        }
+        let rod_sqr = self.rod_length * self.rod_length;
+        let mut heights = [0.0; 3];
+        for (height, tower) in heights.iter_mut().zip(&self.towers) {
+            let dx = tower[0] - p[0];
+            let dy = tower[1] - p[1];
+            let horizontal_sqr = dx * dx + dy * dy;
+            let vertical_sqr = rod_sqr - horizontal_sqr;
+            if !(vertical_sqr > 0.0) {
+                return Err(KinematicsError::OutOfReach);
+            }
+            if let Some(limit) = self.max_tilt_sin_sqr {
+                // sin(tilt) = d / L
+                if horizontal_sqr > limit * rod_sqr {
+                    return Err(KinematicsError::TooTilted);
+                }
+            }
+            *height = p[2] + self.effector_offset + sqrt(vertical_sqr);
+        }
+        Ok(heights)
+    }
+
+    /// Trilateration: the nozzle (less OF) lies at distance L from each
+    /// carriage pivot (tower x, tower y, h_i); of the two intersections of
+    /// the three spheres, the one below the carriages.
+    fn forward(&self, heights: Vector3) -> Result<Vector3, KinematicsError> {
+        let centre = |i: usize| -> Vector3 { [self.towers[i][0], self.towers[i][1], heights[i] - self.effector_offset] };
+        let (p1, p2, p3) = (centre(0), centre(1), centre(2));
+        let sub = |a: Vector3, b: Vector3| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+        let dot = |a: Vector3, b: Vector3| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let scale = |a: Vector3, k: f32| [a[0] * k, a[1] * k, a[2] * k];
+        let p21 = sub(p2, p1);
+        let d = sqrt(dot(p21, p21));
+        if !(d > 0.0) {
+            return Err(KinematicsError::NoSolution);
+        }
+        let ex = scale(p21, 1.0 / d);
+        let p31 = sub(p3, p1);
+        let i = dot(ex, p31);
+        let ey_raw = sub(p31, scale(ex, i));
+        let ey_len = sqrt(dot(ey_raw, ey_raw));
+        if !(ey_len > 0.0) {
+            return Err(KinematicsError::NoSolution);
+        }
+        let ey = scale(ey_raw, 1.0 / ey_len);
+        let ez = [
+            ex[1] * ey[2] - ex[2] * ey[1],
+            ex[2] * ey[0] - ex[0] * ey[2],
+            ex[0] * ey[1] - ex[1] * ey[0],
+        ];
+        let j = dot(ey, p31);
+        // All three radii are L, so the r₁² − r₂² terms vanish.
+        let x = d / 2.0;
+        let y = (i * i + j * j) / (2.0 * j) - i * x / j;
+        let z_sqr = self.rod_length * self.rod_length - x * x - y * y;
+        if !(z_sqr >= 0.0) {
+            return Err(KinematicsError::NoSolution);
+        }
+        let z = sqrt(z_sqr);
+        let base = [p1[0] + ex[0] * x + ey[0] * y, p1[1] + ex[1] * x + ey[1] * y, p1[2] + ex[2] * x + ey[2] * y];
+        let (a, b) = ([base[0] + ez[0] * z, base[1] + ez[1] * z, base[2] + ez[2] * z], [
+            base[0] - ez[0] * z,
+            base[1] - ez[1] * z,
+            base[2] - ez[2] * z,
+        ]);
+        Ok(if a[2] < b[2] { a } else { b })
+    }
+
+    fn segment_mm(&self) -> Option<f32> {
+        Some(self.segment_length)
+    }
+
+    fn motor_steps_per_unit(&self, steps_per_mm: Vector3) -> Vector3 {
+        steps_per_mm
+    }
+}
+
+/// SPEC §3: the planar RR arm in the Y–Z plane with a lead-screw X.
+/// Motor 0 is X (mm), motor 1 ("Y") the elbow θ2, motor 2 ("Z") the
+/// shoulder θ1, both in degrees. With py = origin_py − y, pz = origin_pz − z:
+///
+/// θ2 = −acos((py² + pz² − L1² − L2²)/(2·L1·L2)),
+/// θ1 = atan2(pz, py) + atan2(L2·sinθ2, L1 + L2·cosθ2).
+///
+/// θ2 is computed as −2·atan2(√((L1+L2)² − r²), √(r² − (L1−L2)²)), the same
+/// angle without acos' loss of precision near full stretch (where 1 − cos
+/// cancels in single precision).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Arm {
+    /// Upper arm (shoulder → elbow), mm.
+    pub l1: f32,
+    /// Forearm (elbow → tool), mm.
+    pub l2: f32,
+    /// py of the work origin (y = 0) in the shoulder's frame, mm.
+    pub origin_py: f32,
+    /// pz of the work origin (z = 0) in the shoulder's frame, mm.
+    pub origin_pz: f32,
+    /// Joint pulses per degree: gearbox × driver pulses per rev / 360.
+    pub joint_steps_per_degree: f32,
+    /// Longest straight piece between inverse-kinematics points (mm).
+    pub segment_length: f32,
+}
+
+impl Arm {
+    /// SPEC §3's arm (L1 120, L2 200, origin at (120, 200) from the
+    /// shoulder, 100:1 gearboxes) with `ppr` driver pulses per motor turn
+    /// (200 on the bench, 400 on the machine), 0.35 mm segments.
+    pub fn spec_arm(ppr: u16) -> Self {
+        Self {
+            l1: 120.0,
+            l2: 200.0,
+            origin_py: 120.0,
+            origin_pz: 200.0,
+            joint_steps_per_degree: 100.0 * ppr as f32 / 360.0,
+            segment_length: 0.35,
+        }
+    }
+
+    /// (θ2, θ1) in degrees for a point (y, z).
+    pub fn joint_angles(&self, y: f32, z: f32) -> Result<(f32, f32), KinematicsError> {
+        let py = self.origin_py - y;
+        let pz = self.origin_pz - z;
+        let reach_sqr = py * py + pz * pz;
+        let outer = self.l1 + self.l2;
+        let inner = self.l1 - self.l2;
+        // (1 − cosθ2) and (1 + cosθ2), each times 2·L1·L2, computed without
+        // cancellation: |cos θ2| > 1 means one of them is negative.
+        let one_minus_cos = outer * outer - reach_sqr;
+        let one_plus_cos = reach_sqr - inner * inner;
+        if !(one_minus_cos >= 0.0) || !(one_plus_cos >= 0.0) {
+            return Err(KinematicsError::OutOfReach);
+        }
+        let elbow = -2.0 * atan2(sqrt(one_minus_cos), sqrt(one_plus_cos));
+        let two_l1_l2 = 2.0 * self.l1 * self.l2;
+        let cos_elbow = (one_plus_cos - one_minus_cos) / (2.0 * two_l1_l2);
+        let sin_elbow = -sqrt(one_minus_cos * one_plus_cos) / two_l1_l2;
+        let shoulder = atan2(pz, py) + atan2(self.l2 * sin_elbow, self.l1 + self.l2 * cos_elbow);
+        Ok((math::degrees(elbow), math::degrees(shoulder)))
+    }
+}
+
+impl Kinematics for Arm {
+    fn inverse(&self, p: Vector3) -> Result<Vector3, KinematicsError> {
+        let (elbow, shoulder) = self.joint_angles(p[1], p[2])?;
+        Ok([p[0], elbow, shoulder])
+    }
+
+    /// py = L1·cosθ1 + L2·cos(θ1 − θ2), pz = L1·sinθ1 + L2·sin(θ1 − θ2).
+    fn forward(&self, motors: Vector3) -> Result<Vector3, KinematicsError> {
+        let elbow = math::radians(motors[1]);
+        let shoulder = math::radians(motors[2]);
+        let (sin1, cos1) = sin_cos(shoulder);
+        let (sin12, cos12) = sin_cos(shoulder - elbow);
+        let py = self.l1 * cos1 + self.l2 * cos12;
+        let pz = self.l1 * sin1 + self.l2 * sin12;
+        Ok([motors[0], self.origin_py - py, self.origin_pz - pz])
+    }
+
+    fn segment_mm(&self) -> Option<f32> {
+        Some(self.segment_length)
+    }
+
+    fn motor_steps_per_unit(&self, steps_per_mm: Vector3) -> Vector3 {
+        [steps_per_mm[0], self.joint_steps_per_degree, self.joint_steps_per_degree]
+    }
+}
+
+/// The kinematics a machine configuration selects.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MachineKinematics {
+    Cartesian(Cartesian),
+    Delta(Delta),
+    Arm(Arm),
+}
+
+impl Kinematics for MachineKinematics {
+    fn inverse(&self, cartesian: Vector3) -> Result<Vector3, KinematicsError> {
+        match self {
+            Self::Cartesian(k) => k.inverse(cartesian),
+            Self::Delta(k) => k.inverse(cartesian),
+            Self::Arm(k) => k.inverse(cartesian),
+        }
+    }
+    fn forward(&self, motors: Vector3) -> Result<Vector3, KinematicsError> {
+        match self {
+            Self::Cartesian(k) => k.forward(motors),
+            Self::Delta(k) => k.forward(motors),
+            Self::Arm(k) => k.forward(motors),
+        }
+    }
+    fn segment_mm(&self) -> Option<f32> {
+        match self {
+            Self::Cartesian(k) => k.segment_mm(),
+            Self::Delta(k) => k.segment_mm(),
+            Self::Arm(k) => k.segment_mm(),
+        }
+    }
+    fn motor_steps_per_unit(&self, steps_per_mm: Vector3) -> Vector3 {
+        match self {
+            Self::Cartesian(k) => k.motor_steps_per_unit(steps_per_mm),
+            Self::Delta(k) => k.motor_steps_per_unit(steps_per_mm),
+            Self::Arm(k) => k.motor_steps_per_unit(steps_per_mm),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn assert_heights(delta: &Delta, x: f32, y: f32, want: Vector3) {
+        let got = delta.inverse([x, y, 0.25]).unwrap();
+        for (g, w) in got.iter().zip(want) {
+            assert!((g - w).abs() <= 0.005, "({x}, {y}): {got:?}, want {want:?}");
+        }
+        // And back: forward kinematics lands on the point.
+        let back = delta.forward(got).unwrap();
+        for (b, w) in back.iter().zip([x, y, 0.25]) {
+            assert!((b - w).abs() <= 0.002, "forward({got:?}) = {back:?}, want ({x}, {y}, 0.25)");
+        }
+    }
+
+    #[test]
+    fn delta_spec_vectors_0_120_240() {
+        let delta = Delta::spec_printer(false);
+        assert_heights(&delta, 0.0, 0.0, [344.95; 3]);
+        assert_heights(&delta, -25.0, 25.0, [321.53, 369.29, 335.15]);
+        assert_heights(&delta, -25.0, -25.0, [321.53, 335.15, 369.29]);
+        assert_heights(&delta, 25.0, -25.0, [362.40, 313.32, 350.08]);
+        assert_heights(&delta, 25.0, 25.0, [362.40, 350.08, 313.32]);
+    }
+
+    #[test]
+    fn delta_spec_vectors_repetier_layout() {
+        let delta = Delta::spec_printer(true);
+        assert_heights(&delta, -25.0, 25.0, [362.40, 313.32, 350.08]);
+        assert_heights(&delta, 25.0, -25.0, [321.53, 369.29, 335.15]);
+    }
+
+    #[test]
+    fn delta_steps_at_80_per_mm() {
+        let delta = Delta::spec_printer(false);
+        let spu = delta.motor_steps_per_unit([80.0; 3]);
+        let low = to_steps(delta.inverse([0.0, 0.0, 0.0]).unwrap(), spu);
+        let high = to_steps(delta.inverse([0.0, 0.0, 50.0]).unwrap(), spu);
+        // Z +50 mm at the centre = 4000 steps per carriage (SPEC §2).
+        for i in 0..3 {
+            assert_eq!(high[i] - low[i], 4000);
+        }
+    }
+
+    #[test]
+    fn delta_reach_and_radius_checks() {
+        let mut delta = Delta::spec_printer(false);
+        assert_eq!(delta.inverse([131.0, 0.0, 0.0]), Err(KinematicsError::OutsidePrintable));
+        delta.printable_radius = 1000.0;
+        // Reach is L − R = 134 mm straight away from a tower (opposite tower 0).
+        assert!(delta.inverse([-133.9, 0.0, 0.0]).is_ok());
+        assert_eq!(delta.inverse([-134.1, 0.0, 0.0]), Err(KinematicsError::OutOfReach));
+        // Exactly on the reach circle L² − d² = 0 is refused too.
+        assert_eq!(delta.inverse([-134.0, 0.0, 0.0]), Err(KinematicsError::OutOfReach));
+        // Tilt: limit the rod to 40° from vertical.
+        let sin40 = sin_cos(math::radians(40.0)).0;
+        delta.max_tilt_sin_sqr = Some(sin40 * sin40);
+        assert!(delta.inverse([0.0, 0.0, 0.0]).is_ok()); // 227/361 → 39°
+        assert_eq!(delta.inverse([-20.0, 0.0, 0.0]), Err(KinematicsError::TooTilted));
+    }
+
+    #[test]
+    fn delta_forward_round_trips_over_the_bed() {
+        let delta = Delta::spec_printer(true);
+        for xi in -12..=12 {
+            for yi in -12..=12 {
+                let (x, y) = (xi as f32 * 10.0, yi as f32 * 10.0);
+                if x * x + y * y > 130.0 * 130.0 {
+                    continue;
+                }
+                let h = delta.inverse([x, y, 7.5]).unwrap();
+                let p = delta.forward(h).unwrap();
+                assert!((p[0] - x).abs() < 0.002 && (p[1] - y).abs() < 0.002 && (p[2] - 7.5).abs() < 0.002, "{x},{y}: {p:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn delta_homed_heights_include_trim() {
+        let mut delta = Delta::spec_printer(false);
+        delta.homed_height = 300.0;
+        delta.endstop_trim = [0.0, -3.0, 0.0];
+        let h = delta.homed_carriage_heights();
+        let p = delta.forward([h[0], h[1] + 3.0, h[2]]).unwrap();
+        assert!(p[0].abs() < 1e-3 && p[1].abs() < 1e-3 && (p[2] - 300.0).abs() < 2e-3, "{p:?}");
+    }
+
+    /// SPEC §3: (y, z) → θ2°, θ1°, elbow pulses, shoulder pulses at 200 ppr.
+    const ARM_VECTORS: [(f32, f32, f32, f32, i32, i32); 6] = [
+        (0.0, 0.0, -90.0, 0.0, -5000, 0),
+        (-107.0, 68.0, -72.3508, -16.3572, -4019, -909),
+        (50.0, 10.0, -106.2105, -1.7495, -5901, -97),
+        (0.0, 50.0, -111.3819, -24.4717, -6188, -1360),
+        (110.0, -40.0, -86.0578, 31.4494, -4781, 1747),
+        (0.0, 0.0, -90.0, 0.0, -5000, 0),
+    ];
+
+    #[test]
+    fn arm_spec_vectors() {
+        let arm = Arm::spec_arm(200);
+        let spu = arm.motor_steps_per_unit([50.0; 3]);
+        for (y, z, elbow, shoulder, elbow_pulses, shoulder_pulses) in ARM_VECTORS {
+            let m = arm.inverse([0.0, y, z]).unwrap();
+            assert!((m[1] - elbow).abs() < 1e-3, "({y}, {z}) θ2 {} want {elbow}", m[1]);
+            assert!((m[2] - shoulder).abs() < 1e-3, "({y}, {z}) θ1 {} want {shoulder}", m[2]);
+            let steps = to_steps(m, spu);
+            assert_eq!((steps[1], steps[2]), (elbow_pulses, shoulder_pulses), "({y}, {z})");
+            let back = arm.forward(m).unwrap();
+            assert!((back[1] - y).abs() < 1e-3 && (back[2] - z).abs() < 1e-3, "forward: {back:?}");
+        }
+        // r = 332.4 > 320: out of reach.
+        assert_eq!(arm.inverse([0.0, -110.0, -40.0]), Err(KinematicsError::OutOfReach));
+    }
+
+    /// The f64 reference: SPEC §3's formulas verbatim (acos), rounded to
+    /// pulses.
+    fn arm_reference_pulses(y: f64, z: f64, ppr: f64) -> Option<(i64, i64)> {
+        let (l1, l2) = (120.0_f64, 200.0_f64);
+        let (py, pz) = (120.0 - y, 200.0 - z);
+        let cos2 = (py * py + pz * pz - l1 * l1 - l2 * l2) / (2.0 * l1 * l2);
+        if cos2.abs() > 1.0 {
+            return None;
+        }
+        let t2 = -cos2.acos();
+        let t1 = pz.atan2(py) + (l2 * t2.sin()).atan2(l1 + l2 * t2.cos());
+        let per_degree = 100.0 * ppr / 360.0;
+        Some(((t2.to_degrees() * per_degree).round() as i64, (t1.to_degrees() * per_degree).round() as i64))
+    }
+
+    #[test]
+    fn arm_within_one_pulse_of_f64_over_the_whole_travel_box() {
+        for ppr in [200_u16, 400] {
+            let arm = Arm::spec_arm(ppr);
+            let spu = arm.motor_steps_per_unit([50.0; 3]);
+            let (mut checked, mut refused, mut worst) = (0, 0, 0_i64);
+            for y in -110..=110 {
+                for z in -40..=40 {
+                    let reference = arm_reference_pulses(y as f64, z as f64, ppr as f64);
+                    match (arm.inverse([0.0, y as f32, z as f32]), reference) {
+                        (Ok(m), Some((elbow, shoulder))) => {
+                            let s = to_steps(m, spu);
+                            worst = worst.max((s[1] as i64 - elbow).abs()).max((s[2] as i64 - shoulder).abs());
+                            checked += 1;
+                        }
+                        (Err(_), None) => refused += 1,
+                        (ours, reference) => panic!("({y}, {z}) ppr {ppr}: {ours:?} vs {reference:?}"),
+                    }
+                }
+            }
+            assert!(worst <= 1, "ppr {ppr}: worst {worst} pulses");
+            assert_eq!(checked + refused, 221 * 81);
+            assert!(refused > 0 && checked > 17_000, "{checked} reachable, {refused} not");
+        }
+    }
+
+    #[test]
+    fn cartesian_is_identity() {
+        let k = MachineKinematics::Cartesian(Cartesian);
+        assert_eq!(k.inverse([1.0, 2.0, 3.0]), Ok([1.0, 2.0, 3.0]));
+        assert_eq!(to_steps([10.0, 0.005, -0.005], [100.0; 3]), [1000, 1, -1]);
+        assert_eq!(k.segment_mm(), None);
+    }
+}

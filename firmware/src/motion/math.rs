@@ -1,0 +1,204 @@
+//! Single-precision maths for the main loop: square root, arc tangent and
+//! sine/cosine, written out because `core` has none of them and a soft-float
+//! AVR cannot afford the slow generic routines.
+//!
+//! Never call these from the step interrupt: they are float code.
+//!
+//! Accuracy (checked against `f64` in the tests): `sqrt` within 2 ulp,
+//! `atan`/`atan2` within 3·10⁻⁷ rad, `sin_cos` within 6·10⁻⁷ over ±7 rad
+//! (the reduction's rounding grows with the angle). The arm's
+//! inverse kinematics needs 1 pulse = 1.57·10⁻⁴ rad at 200 ppr, so this is
+//! three orders of magnitude to spare.
+
+pub const PI: f32 = core::f32::consts::PI;
+const HALF_PI: f32 = core::f32::consts::FRAC_PI_2;
+const SIXTH_PI: f32 = core::f32::consts::FRAC_PI_6;
+/// tan(π/12): above it, the arc tangent is shifted by π/6 first.
+const TAN_TWELFTH_PI: f32 = 0.267_949_2;
+const SQRT_3: f32 = 1.732_050_8;
+
+/// Square root; 0 for zero, negative and NaN input.
+///
+/// One guess from the exponent bits, then four Newton steps on 1/√x, which
+/// need only multiplications (a soft-float division costs several of them).
+pub fn sqrt(value: f32) -> f32 {
+    if !(value > 0.0) {
+        return 0.0;
+    }
+    if value == f32::INFINITY {
+        return value;
+    }
+    // Halving the biased exponent gives 1/√x within a few per cent.
+    let mut inverse = f32::from_bits(0x5f37_59df_u32.wrapping_sub(value.to_bits() >> 1));
+    let half = 0.5 * value;
+    for _ in 0..4 {
+        inverse *= 1.5 - half * inverse * inverse;
+    }
+    let root = value * inverse;
+    // One Newton step on the root itself, 1/(2√x) taken from `inverse`:
+    // removes the rounding bias of the product above.
+    root + 0.5 * inverse * (value - root * root)
+}
+
+/// Arc tangent in (−π/2, π/2).
+pub fn atan(value: f32) -> f32 {
+    if value.is_nan() {
+        return value;
+    }
+    let negative = value < 0.0;
+    let mut x = if negative { -value } else { value };
+    let mut offset = 0.0;
+    if x > 1.0 {
+        // atan(x) = π/2 − atan(1/x)
+        x = 1.0 / x;
+        offset = HALF_PI;
+    }
+    let mut shift = 0.0;
+    if x > TAN_TWELFTH_PI {
+        // atan(x) = π/6 + atan((x√3 − 1)/(x + √3)), which lands in ±tan(π/12).
+        x = (x * SQRT_3 - 1.0) / (x + SQRT_3);
+        shift = SIXTH_PI;
+    }
+    // Taylor series to x¹¹: the next term is below 3·10⁻⁹ for |x| ≤ tan(π/12).
+    let x2 = x * x;
+    let series = x
+        * (1.0
+            - x2 * (1.0 / 3.0
+                - x2 * (1.0 / 5.0 - x2 * (1.0 / 7.0 - x2 * (1.0 / 9.0 - x2 * (1.0 / 11.0))))));
+    let mut angle = shift + series;
+    if offset != 0.0 {
+        angle = offset - angle;
+    }
+    if negative {
+        -angle
+    } else {
+        angle
+    }
+}
+
+/// Angle of the vector (x, y) in (−π, π]; 0 for the zero vector.
+pub fn atan2(y: f32, x: f32) -> f32 {
+    if x > 0.0 {
+        atan(y / x)
+    } else if x < 0.0 {
+        if y >= 0.0 {
+            atan(y / x) + PI
+        } else {
+            atan(y / x) - PI
+        }
+    } else if y > 0.0 {
+        HALF_PI
+    } else if y < 0.0 {
+        -HALF_PI
+    } else {
+        0.0
+    }
+}
+
+/// Sine and cosine of an angle in radians (best within a few turns of 0).
+pub fn sin_cos(angle: f32) -> (f32, f32) {
+    // Reduce to r in [−π/4, π/4] and a quadrant.
+    let turns = angle * (2.0 / PI);
+    let quadrant = round_to_i32(turns);
+    let r = (angle - quadrant as f32 * HALF_PI) - quadrant as f32 * HALF_PI_LOW;
+    let r2 = r * r;
+    // Taylor series; at |r| = π/4 the first omitted terms are below 4·10⁻⁹.
+    let sin_r = r * (1.0 - r2 / 6.0 * (1.0 - r2 / 20.0 * (1.0 - r2 / 42.0 * (1.0 - r2 / 72.0))));
+    let cos_r = 1.0 - r2 / 2.0 * (1.0 - r2 / 12.0 * (1.0 - r2 / 30.0 * (1.0 - r2 / 56.0 * (1.0 - r2 / 90.0))));
+    match quadrant & 3 {
+        0 => (sin_r, cos_r),
+        1 => (cos_r, -sin_r),
+        2 => (-sin_r, -cos_r),
+        _ => (-cos_r, sin_r),
+    }
+}
+
+/// π/2 − (π/2 rounded to f32): keeps the reduction exact to a few ulp.
+const HALF_PI_LOW: f32 = -4.371_139e-8;
+
+/// Round half away from zero, saturating at the `i32` range (NaN → 0).
+pub fn round_to_i32(value: f32) -> i32 {
+    if value.is_nan() {
+        return 0;
+    }
+    let rounded = if value >= 0.0 { value + 0.5 } else { value - 0.5 };
+    // `as` saturates and truncates towards zero.
+    rounded as i32
+}
+
+/// |value| without `std`.
+pub fn abs(value: f32) -> f32 {
+    if value < 0.0 {
+        -value
+    } else {
+        value
+    }
+}
+
+/// Degrees to radians.
+pub fn radians(degrees: f32) -> f32 {
+    degrees * (PI / 180.0)
+}
+
+/// Radians to degrees.
+pub fn degrees(radians: f32) -> f32 {
+    radians * (180.0 / PI)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sqrt_is_within_two_ulp() {
+        let mut x = 1.0e-6_f32;
+        while x < 1.0e12 {
+            let exact = (x as f64).sqrt();
+            let got = sqrt(x) as f64;
+            assert!(((got - exact) / exact).abs() < 2.5e-7, "sqrt({x}) = {got}, want {exact}");
+            x *= 1.013;
+        }
+        assert_eq!(sqrt(0.0), 0.0);
+        assert_eq!(sqrt(-4.0), 0.0);
+        assert_eq!(sqrt(f32::NAN), 0.0);
+        assert_eq!(sqrt(4.0), 2.0);
+        assert_eq!(sqrt(1_000_000.0), 1000.0);
+    }
+
+    #[test]
+    fn atan2_matches_f64_everywhere() {
+        let mut worst = 0.0_f64;
+        for i in -200..=200 {
+            for j in -200..=200 {
+                let (y, x) = (i as f32 * 0.37, j as f32 * 0.53);
+                let exact = (y as f64).atan2(x as f64);
+                let got = atan2(y, x) as f64;
+                worst = worst.max((got - exact).abs());
+            }
+        }
+        assert!(worst < 3.0e-7, "worst atan2 error {worst}");
+        assert!((atan(1.0e30) as f64 - core::f64::consts::FRAC_PI_2).abs() < 1e-7);
+    }
+
+    #[test]
+    fn sin_cos_match_f64() {
+        let mut worst = 0.0_f64;
+        let mut a = -7.0_f32;
+        while a < 7.0 {
+            let (s, c) = sin_cos(a);
+            worst = worst.max((s as f64 - (a as f64).sin()).abs());
+            worst = worst.max((c as f64 - (a as f64).cos()).abs());
+            a += 0.0011;
+        }
+        assert!(worst < 6.0e-7, "worst sin/cos error {worst}");
+    }
+
+    #[test]
+    fn rounding_is_half_away_from_zero() {
+        assert_eq!(round_to_i32(2.5), 3);
+        assert_eq!(round_to_i32(-2.5), -3);
+        assert_eq!(round_to_i32(-4019.489), -4019);
+        assert_eq!(round_to_i32(1e20), i32::MAX);
+        assert_eq!(round_to_i32(f32::NAN), 0);
+    }
+}

@@ -1,0 +1,3 @@
+//! Motion (work in progress).
+pub mod kinematics;
+pub mod math;
