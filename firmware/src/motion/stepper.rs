@@ -1,0 +1,747 @@
+//! The step generator: the only motion code that runs in the step-timer
+//! interrupt.
+//!
+//! # What the interrupt does, and why it is cheap
+//!
+//! Everything that needs a multiplication, a division or a float (planning,
+//! the trapezoid, the timing of every step) happens in the main loop, which
+//! hands two kinds of ready-made work to the interrupt through lock-free
+//! single-producer/single-consumer queues ([`StepQueues`]):
+//!
+//! - a [`StepBlock`] per planner block: the step count of every motor, the
+//!   number of *events* (the largest step count: one event per step of the
+//!   dominant motor), the direction bits and, for homing, the endstops to
+//!   watch;
+//! - [`Segment`]s: runs of events with a linearly changing wait, Klipper's
+//!   `interval`/`add`/`count`. Each block is cut into one or more of them.
+//!
+//! Per event the interrupt does only
+//!
+//! ```text
+//! wait   = frac + interval          (Q24.8 timer ticks; frac keeps the 1/256s)
+//! interval += add ; events_left -= 1
+//! for each moving motor: Bresenham (16-bit compare, add or subtract)
+//! ```
+//!
+//! which is a handful of 8/16/32-bit additions on the AVR, no loop over
+//! idle motors, and no multiplication.
+//!
+//! # Invariants
+//!
+//! 1. All motors of a block start and end together: the multi-motor DDA is
+//!    Bresenham in its truncating form, motor i steps at event
+//!    e = ⌈j·n/sᵢ⌉ (j = 1..sᵢ), so every motor's last step falls on the
+//!    block's last event, and a motor is never ahead of the ideal line and at
+//!    most one step behind it. Counters are 16 bit: blocks have at most
+//!    65 535 events (the planner splits longer moves).
+//! 2. Timing never drifts: waits are summed in 1/256 ticks and only the whole
+//!    ticks leave ([`TimerAction::next_interval_ticks`]), so the step times
+//!    are exactly the running sum of the segments' intervals, which the main
+//!    loop computes with the same integer arithmetic (see `prep`).
+//! 3. A direction change is never presented with a step: when a block turns a
+//!    motor round, the new direction bits come in an action without steps at
+//!    least `dir_setup_ticks` before the first step of the block.
+//! 4. The interrupt never blocks and never fails: with no work queued it
+//!    returns an idle poll interval; a block whose segments have not arrived
+//!    in time (an underrun, which the main loop must prevent) simply waits.
+//!
+//! # How the board uses it
+//!
+//! On every compare interrupt of the step timer (2 MHz on the Mega 2560):
+//!
+//! ```text
+//! if gen.endstop_mask() != 0 { gen.on_endstops(read_endstop_bits()) }
+//! let action = gen.on_timer();
+//! write DIR pins  = action.dir_mask            (bit i: motor i)
+//! raise STEP pins of action.step_mask
+//! OCR += action.next_interval_ticks            (relative to the last compare)
+//! lower STEP pins once the configured pulse width has passed
+//! ```
+//!
+//! Directions are already inverted for the wiring ([`StepperConfig`]).
+
+use heapless::spsc::{Consumer, Producer, Queue};
+
+/// Motors the core drives: X/A/X-screw, Y/B/elbow, Z/C/shoulder, E.
+pub const MOTORS: usize = 4;
+/// Step timer frequency (16 MHz / 8 on the Mega 2560).
+pub const TIMER_HZ: u32 = 2_000_000;
+/// Fractional bits of [`Segment::interval`] and [`Segment::add`].
+pub const INTERVAL_FRACTION_BITS: u32 = 8;
+/// Slots of the segment queue (one stays empty: 15 usable).
+pub const SEGMENT_SLOTS: usize = 16;
+/// Slots of the block queue (15 usable).
+pub const BLOCK_SLOTS: usize = 16;
+/// Interval of the interrupt when there is nothing to do: 1 ms.
+pub const IDLE_POLL_TICKS: u16 = 2000;
+/// Waits longer than 16 bits are cut into pieces of this many ticks.
+const LONG_WAIT_PIECE: u32 = 0x8000;
+
+/// A run of events with a linearly changing wait.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Segment {
+    /// Wait before this segment's first event, in 1/256 timer ticks.
+    pub interval: u32,
+    /// Added to the wait after each event, 1/256 ticks (negative: faster).
+    pub add: i32,
+    /// Events in this segment (≥ 1).
+    pub events: u16,
+    /// The first segment of the next [`StepBlock`].
+    pub starts_block: bool,
+}
+
+/// What the interrupt needs to know about one planner block.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StepBlock {
+    /// Steps of every motor (≤ `events`).
+    pub steps: [u16; MOTORS],
+    /// Events: the largest entry of `steps`.
+    pub events: u16,
+    /// Bit i set: motor i moves in its positive direction.
+    pub direction: u8,
+    /// Endstop bits that stop their motor during this block (homing):
+    /// bit i is motor i's min endstop, bit 4 + i its max endstop.
+    pub watch: u8,
+    /// Stop a watched motor when its endstop *releases* instead.
+    pub watch_release: bool,
+}
+
+/// The interrupt's answer: what to do now and when to come back.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TimerAction {
+    /// Motors to step now (bit i: motor i).
+    pub step_mask: u8,
+    /// Direction pin levels to hold from now on (before stepping).
+    pub dir_mask: u8,
+    /// Ticks from this interrupt's compare time to the next one (≥ 1).
+    pub next_interval_ticks: u16,
+}
+
+/// Why the generator stopped everything.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StepFault {
+    /// An endstop configured as a hard limit was hit while moving towards
+    /// it (the bits of the endstops that were hit).
+    LimitHit(u8),
+    /// The main loop or an emergency stopped motion (`M410`, `M112`).
+    Stopped,
+}
+
+/// Board and driver facts the interrupt needs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StepperConfig {
+    /// Direction bits to invert for the wiring (bit i: motor i).
+    pub dir_invert: u8,
+    /// Least time from a direction change to the next step, ticks.
+    pub dir_setup_ticks: u16,
+    /// Endstops that stop all motion when hit outside homing, if the move
+    /// goes towards them (same bit layout as [`StepBlock::watch`]).
+    pub limit_endstops: u8,
+}
+
+impl Default for StepperConfig {
+    fn default() -> Self {
+        // 5 µs covers the TB6600 and the CL86T; A4988/DRV8825 need 0.2/0.65.
+        Self { dir_invert: 0, dir_setup_ticks: 10, limit_endstops: 0 }
+    }
+}
+
+/// What the main loop learns from the interrupt (read in a critical
+/// section on the board: [`StepGenerator::status`] only copies fields).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StepperStatus {
+    /// Blocks finished or abandoned so far (wrapping).
+    pub blocks_done: u16,
+    /// Steps still queued or running.
+    pub busy: bool,
+    /// Set until [`StepGenerator::clear_fault`].
+    pub fault: Option<StepFault>,
+    /// Motors that a watched endstop stopped in the last homing block.
+    pub stopped: u8,
+    /// Steps each stopped motor made in that block before it stopped.
+    pub stopped_steps: [u16; MOTORS],
+    /// Times a block ran out of segments (the main loop was late).
+    pub underruns: u16,
+}
+
+/// The storage of both queues; the board keeps it in a `static`.
+pub struct StepQueues {
+    segments: Queue<Segment, SEGMENT_SLOTS>,
+    blocks: Queue<StepBlock, BLOCK_SLOTS>,
+}
+
+impl Default for StepQueues {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl StepQueues {
+    pub const fn new() -> Self {
+        Self { segments: Queue::new(), blocks: Queue::new() }
+    }
+
+    /// The main loop's end and the interrupt's end.
+    pub fn split(&mut self, config: StepperConfig) -> (StepFeeder<'_>, StepGenerator<'_>) {
+        let (segment_in, segment_out) = self.segments.split();
+        let (block_in, block_out) = self.blocks.split();
+        (StepFeeder { segments: segment_in, blocks: block_in }, StepGenerator::new(segment_out, block_out, config))
+    }
+}
+
+/// The main loop's end of the queues.
+pub struct StepFeeder<'a> {
+    segments: Producer<'a, Segment, SEGMENT_SLOTS>,
+    blocks: Producer<'a, StepBlock, BLOCK_SLOTS>,
+}
+
+impl StepFeeder<'_> {
+    /// Room for one more segment.
+    pub fn segment_room(&self) -> bool {
+        self.segments.ready()
+    }
+
+    /// Room for a new block and its first segment.
+    pub fn block_room(&self) -> bool {
+        self.segments.ready() && self.blocks.ready()
+    }
+
+    /// Queue a segment (`false` if full).
+    pub fn push_segment(&mut self, segment: Segment) -> bool {
+        self.segments.enqueue(segment).is_ok()
+    }
+
+    /// Queue a block; its first segment must follow with `starts_block`.
+    pub fn push_block(&mut self, block: StepBlock) -> bool {
+        self.blocks.enqueue(block).is_ok()
+    }
+
+    /// Segments waiting for the interrupt.
+    pub fn queued_segments(&self) -> usize {
+        self.segments.len()
+    }
+}
+
+/// The interrupt's end: a pure state machine driven by [`Self::on_timer`].
+pub struct StepGenerator<'a> {
+    segments: Consumer<'a, Segment, SEGMENT_SLOTS>,
+    blocks: Consumer<'a, StepBlock, BLOCK_SLOTS>,
+    config: StepperConfig,
+
+    // The running segment.
+    interval: u32,
+    add: i32,
+    events_left: u16,
+    frac: u8,
+
+    // The running block's Bresenham state.
+    steps: [u16; MOTORS],
+    /// events − steps: a motor steps when its counter reaches this.
+    thresholds: [u16; MOTORS],
+    counters: [u16; MOTORS],
+    /// Motors with steps in this block.
+    moving: u8,
+    events: u16,
+    events_done: u16,
+    direction: u8,
+    watch: u8,
+    watch_release: bool,
+    in_block: bool,
+    discarding: bool,
+
+    // The event computed ahead, fired by the next call.
+    pending_mask: u8,
+    pending_dir: u8,
+    /// Ticks still to wait before the pending event fires.
+    long_wait: u32,
+
+    stopped: u8,
+    stopped_steps: [u16; MOTORS],
+    fault: Option<StepFault>,
+    blocks_done: u16,
+    underruns: u16,
+}
+
+impl<'a> StepGenerator<'a> {
+    fn new(
+        segments: Consumer<'a, Segment, SEGMENT_SLOTS>,
+        blocks: Consumer<'a, StepBlock, BLOCK_SLOTS>,
+        config: StepperConfig,
+    ) -> Self {
+        Self {
+            segments,
+            blocks,
+            config,
+            interval: 0,
+            add: 0,
+            events_left: 0,
+            frac: 0,
+            steps: [0; MOTORS],
+            thresholds: [0; MOTORS],
+            counters: [0; MOTORS],
+            moving: 0,
+            events: 0,
+            events_done: 0,
+            direction: 0,
+            watch: 0,
+            watch_release: false,
+            in_block: false,
+            discarding: false,
+            pending_mask: 0,
+            pending_dir: 0,
+            long_wait: 0,
+            stopped: 0,
+            stopped_steps: [0; MOTORS],
+            fault: None,
+            blocks_done: 0,
+            underruns: 0,
+        }
+    }
+
+    /// The step-timer interrupt: fire the event computed last time, compute
+    /// the next one.
+    #[inline]
+    pub fn on_timer(&mut self) -> TimerAction {
+        if self.long_wait != 0 {
+            return self.wait_longer();
+        }
+        let step_mask = self.pending_mask & !self.stopped;
+        let dir_mask = self.pending_dir ^ self.config.dir_invert;
+        let next_interval_ticks = if self.events_left != 0 { self.next_event() } else { self.next_segment() };
+        TimerAction { step_mask, dir_mask, next_interval_ticks }
+    }
+
+    /// The hot path: one more event of the running segment.
+    #[inline]
+    fn next_event(&mut self) -> u16 {
+        self.events_left -= 1;
+        let sum = self.frac as u32 + self.interval;
+        self.frac = sum as u8;
+        self.interval = self.interval.wrapping_add(self.add as u32);
+        self.pending_mask = self.bresenham();
+        let ticks = sum >> INTERVAL_FRACTION_BITS;
+        if ticks > 0xFFFF {
+            self.long_wait = ticks - LONG_WAIT_PIECE;
+            return LONG_WAIT_PIECE as u16;
+        }
+        ticks as u16
+    }
+
+    #[inline]
+    fn bresenham(&mut self) -> u8 {
+        self.events_done = self.events_done.wrapping_add(1);
+        let mut mask = 0;
+        let mut bit = 1;
+        for motor in 0..MOTORS {
+            if self.moving & bit != 0 {
+                let counter = self.counters[motor];
+                let threshold = self.thresholds[motor];
+                if counter >= threshold {
+                    self.counters[motor] = counter - threshold;
+                    mask |= bit;
+                } else {
+                    self.counters[motor] = counter + self.steps[motor];
+                }
+            }
+            bit <<= 1;
+        }
+        mask
+    }
+
+    /// A wait too long for 16 bits, or the lead of a direction change: an
+    /// action without steps that presents the coming event's directions.
+    fn wait_longer(&mut self) -> TimerAction {
+        let piece = if self.long_wait > 0xFFFF { LONG_WAIT_PIECE } else { self.long_wait };
+        self.long_wait -= piece;
+        TimerAction { step_mask: 0, dir_mask: self.pending_dir ^ self.config.dir_invert, next_interval_ticks: piece as u16 }
+    }
+
+    /// The running segment is used up: take the next one (and its block).
+    fn next_segment(&mut self) -> u16 {
+        self.pending_mask = 0;
+        if self.fault.is_some() {
+            self.drain();
+            return IDLE_POLL_TICKS;
+        }
+        loop {
+            let Some(segment) = self.segments.dequeue() else {
+                if self.in_block && self.events_done != self.events {
+                    if !self.discarding {
+                        self.underruns = self.underruns.wrapping_add(1);
+                    }
+                } else if self.in_block {
+                    self.finish_block();
+                }
+                return IDLE_POLL_TICKS;
+            };
+            if segment.starts_block {
+                if self.in_block {
+                    self.finish_block();
+                }
+                let Some(block) = self.blocks.dequeue() else {
+                    // The feeder pushes the block first; if it is missing
+                    // the queues are corrupt: stop rather than guess.
+                    self.fault = Some(StepFault::Stopped);
+                    return IDLE_POLL_TICKS;
+                };
+                self.start_block(&block);
+            } else if self.discarding || !self.in_block {
+                continue;
+            }
+            self.interval = segment.interval;
+            self.add = segment.add;
+            self.events_left = segment.events;
+            if self.events_left == 0 {
+                continue;
+            }
+            break;
+        }
+        let dir_changes = self.direction != self.pending_dir;
+        let ticks = self.next_event_ticks();
+        self.pending_dir = self.direction;
+        if !dir_changes {
+            return self.split_wait(ticks);
+        }
+        // Present the new directions at least `dir_setup_ticks` before the
+        // step: an empty action first, the step after the rest of the wait.
+        let setup = self.config.dir_setup_ticks.max(1) as u32;
+        let lead = if ticks > setup + 1 { ticks - setup } else { 1 };
+        let lead = lead.min(LONG_WAIT_PIECE);
+        self.long_wait = (ticks - lead.min(ticks)).max(setup);
+        lead as u16
+    }
+
+    /// Like [`Self::next_event`], returning the whole wait.
+    fn next_event_ticks(&mut self) -> u32 {
+        self.events_left -= 1;
+        let sum = self.frac as u32 + self.interval;
+        self.frac = sum as u8;
+        self.interval = self.interval.wrapping_add(self.add as u32);
+        self.pending_mask = self.bresenham();
+        (sum >> INTERVAL_FRACTION_BITS).max(1)
+    }
+
+    fn split_wait(&mut self, ticks: u32) -> u16 {
+        if ticks > 0xFFFF {
+            self.long_wait = ticks - LONG_WAIT_PIECE;
+            LONG_WAIT_PIECE as u16
+        } else {
+            ticks as u16
+        }
+    }
+
+    fn start_block(&mut self, block: &StepBlock) {
+        self.in_block = true;
+        self.discarding = false;
+        self.events = block.events;
+        self.events_done = 0;
+        self.direction = block.direction & 0x0F;
+        self.watch = block.watch;
+        self.watch_release = block.watch_release;
+        self.stopped = 0;
+        self.stopped_steps = [0; MOTORS];
+        self.moving = 0;
+        for motor in 0..MOTORS {
+            let steps = block.steps[motor].min(block.events);
+            self.steps[motor] = steps;
+            self.thresholds[motor] = block.events - steps;
+            self.counters[motor] = 0;
+            if steps != 0 {
+                self.moving |= 1 << motor;
+            }
+        }
+    }
+
+    fn finish_block(&mut self) {
+        self.in_block = false;
+        self.moving = 0;
+        self.blocks_done = self.blocks_done.wrapping_add(1);
+    }
+
+    /// Endstop bits worth reading now (0: the board may skip the reads).
+    #[inline]
+    pub fn endstop_mask(&self) -> u8 {
+        if !self.in_block {
+            return 0;
+        }
+        self.watch | (self.config.limit_endstops & self.endstops_ahead())
+    }
+
+    /// Endstops that the running block moves towards.
+    fn endstops_ahead(&self) -> u8 {
+        let positive = self.moving & self.direction;
+        let negative = self.moving & !self.direction;
+        negative | (positive << 4)
+    }
+
+    /// The board's endstop reading (bit layout of [`StepBlock::watch`],
+    /// 1 = triggered after the configured polarity). Call before
+    /// [`Self::on_timer`] whenever [`Self::endstop_mask`] is non-zero.
+    pub fn on_endstops(&mut self, triggered: u8) {
+        if !self.in_block || self.discarding {
+            return;
+        }
+        if self.watch != 0 {
+            let level = if self.watch_release { !triggered } else { triggered };
+            let hit = level & self.watch;
+            let motors = (hit | (hit >> 4)) & 0x0F & !self.stopped;
+            if motors != 0 {
+                self.stop_motors(motors);
+            }
+        }
+        let limits = triggered & self.config.limit_endstops & self.endstops_ahead() & !self.watch;
+        if limits != 0 {
+            self.halt(StepFault::LimitHit(limits));
+        }
+    }
+
+    /// Stop some motors of a homing block; abandon the block once every
+    /// watched motor has stopped. Cold path (a division per motor).
+    fn stop_motors(&mut self, motors: u8) {
+        // The pending event has not fired: it is not counted.
+        let fired = self.events_done - (self.pending_mask != 0) as u16;
+        for motor in 0..MOTORS {
+            if motors & (1 << motor) != 0 && self.events != 0 {
+                let steps = (fired as u32 * self.steps[motor] as u32) / self.events as u32;
+                self.stopped_steps[motor] = steps as u16;
+            }
+        }
+        self.stopped |= motors;
+        let watched = (self.watch | (self.watch >> 4)) & 0x0F & self.moving;
+        if watched & !self.stopped == 0 {
+            self.abandon_block();
+        }
+    }
+
+    /// Drop the rest of the running block: its queued segments, and the
+    /// ones still coming, up to the next block.
+    fn abandon_block(&mut self) {
+        self.events_left = 0;
+        self.pending_mask = 0;
+        self.long_wait = 0;
+        self.discarding = true;
+        self.events_done = self.events;
+        while let Some(segment) = self.segments.peek() {
+            if segment.starts_block {
+                break;
+            }
+            self.segments.dequeue();
+        }
+    }
+
+    /// Stop all motion at once (hard limit, `M410`, `M112`). Every queued
+    /// step is dropped, and so is everything queued until
+    /// [`Self::clear_fault`]. Positions are lost: the main loop re-homes.
+    pub fn halt(&mut self, fault: StepFault) {
+        self.fault = Some(fault);
+        self.events_left = 0;
+        self.pending_mask = 0;
+        self.long_wait = 0;
+        self.drain();
+    }
+
+    fn drain(&mut self) {
+        while self.segments.dequeue().is_some() {}
+        while self.blocks.dequeue().is_some() {}
+        if self.in_block {
+            self.finish_block();
+        }
+    }
+
+    /// Accept work again after a fault; the main loop calls this once it
+    /// has flushed its planner (everything queued before is dropped).
+    pub fn clear_fault(&mut self) {
+        self.drain();
+        self.fault = None;
+        self.discarding = false;
+    }
+
+    /// A copy of what the main loop needs (cheap: no arithmetic).
+    pub fn status(&self) -> StepperStatus {
+        StepperStatus {
+            blocks_done: self.blocks_done,
+            busy: self.in_block || self.long_wait != 0 || self.pending_mask != 0 || self.segments.ready(),
+            fault: self.fault,
+            stopped: self.stopped,
+            stopped_steps: self.stopped_steps,
+            underruns: self.underruns,
+        }
+    }
+
+    pub fn config(&self) -> StepperConfig {
+        self.config
+    }
+
+    pub fn set_config(&mut self, config: StepperConfig) {
+        self.config = config;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::vec::Vec;
+
+    /// Run the generator for `ticks` of virtual time; (time, mask, dir) of
+    /// every action with steps.
+    fn run(generator: &mut StepGenerator<'_>, ticks: u64) -> Vec<(u64, u8, u8)> {
+        let mut now = 0_u64;
+        let mut out = Vec::new();
+        let mut last_dir = 0;
+        while now < ticks {
+            let action = generator.on_timer();
+            if action.step_mask != 0 {
+                // Invariant 3: directions never change in an action with steps.
+                assert_eq!(action.dir_mask, last_dir, "direction changed with a step at {now}");
+                out.push((now, action.step_mask, action.dir_mask));
+            }
+            last_dir = action.dir_mask;
+            assert!(action.next_interval_ticks >= 1);
+            now += action.next_interval_ticks as u64;
+        }
+        out
+    }
+
+    fn block(steps: [u16; MOTORS], direction: u8) -> StepBlock {
+        StepBlock { steps, events: *steps.iter().max().unwrap(), direction, watch: 0, watch_release: false }
+    }
+
+    #[test]
+    fn constant_rate_block_steps_exactly() {
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        assert!(feeder.push_block(block([1000, 500, 0, 3], 0b0011)));
+        assert!(feeder.push_segment(Segment { interval: 200 << 8, add: 0, events: 1000, starts_block: true }));
+        let events = run(&mut generator, 400_000);
+        let count = |motor: u8| events.iter().filter(|e| e.1 & (1 << motor) != 0).count();
+        assert_eq!((count(0), count(1), count(2), count(3)), (1000, 500, 0, 3));
+        // Every 200 ticks, and all motors' last steps together.
+        let first = events[0].0;
+        assert!(events.windows(2).all(|w| w[1].0 - w[0].0 == 200));
+        let last = events.last().unwrap();
+        assert_eq!(last.1, 0b1011);
+        assert_eq!(last.0 - first, 999 * 200);
+        assert_eq!(generator.status().blocks_done, 1);
+        assert!(!generator.status().busy);
+    }
+
+    #[test]
+    fn direction_change_comes_before_the_step() {
+        let mut queues = StepQueues::new();
+        let config = StepperConfig { dir_invert: 0b0010, dir_setup_ticks: 10, limit_endstops: 0 };
+        let (mut feeder, mut generator) = queues.split(config);
+        feeder.push_block(block([3, 0, 0, 0], 0b0001));
+        feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 3, starts_block: true });
+        feeder.push_block(block([2, 0, 0, 0], 0b0000));
+        feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 2, starts_block: true });
+        let mut now = 0_u64;
+        let mut trace = Vec::new();
+        for _ in 0..12 {
+            let action = generator.on_timer();
+            trace.push((now, action.step_mask, action.dir_mask));
+            now += action.next_interval_ticks as u64;
+        }
+        let steps: Vec<_> = trace.iter().filter(|t| t.1 != 0).collect();
+        assert_eq!(steps.len(), 5);
+        // Motor 1 is inverted: its pin reads 1 for "negative".
+        assert!(steps[..3].iter().all(|s| s.2 == 0b0011));
+        assert!(steps[3..].iter().all(|s| s.2 == 0b0010));
+        // The reversal keeps the 100-tick rhythm and shows the new direction
+        // 10 ticks ahead, in an action without steps.
+        assert_eq!(steps[3].0 - steps[2].0, 100);
+        let change = trace.iter().position(|t| t.2 == 0b0010 && t.0 > steps[2].0).unwrap();
+        assert_eq!(trace[change].1, 0);
+        assert_eq!(steps[3].0 - trace[change].0, 10);
+    }
+
+    #[test]
+    fn long_waits_are_cut_into_pieces() {
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        feeder.push_block(block([3, 0, 0, 0], 1));
+        // 200 000 ticks = 0.1 s between steps: 10 steps/s.
+        feeder.push_segment(Segment { interval: 200_000 << 8, add: 0, events: 3, starts_block: true });
+        let events = run(&mut generator, 1_000_000);
+        assert_eq!(events.len(), 3);
+        assert_eq!(events[1].0 - events[0].0, 200_000);
+        assert_eq!(events[2].0 - events[1].0, 200_000);
+    }
+
+    #[test]
+    fn fractional_intervals_do_not_drift() {
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        feeder.push_block(block([1000, 0, 0, 0], 1));
+        // 33.3 ticks (8525/256): 1000 events take 33 300.78 ticks.
+        feeder.push_segment(Segment { interval: 8525, add: 0, events: 1000, starts_block: true });
+        let events = run(&mut generator, 100_000);
+        let span = events.last().unwrap().0 - events[0].0;
+        assert_eq!(span, (999 * 8525 + (8525 & 0xFF)) as u64 >> 8);
+    }
+
+    #[test]
+    fn homing_block_stops_each_motor_at_its_endstop() {
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        // Three towers up towards their max endstops (bits 4, 5, 6).
+        let mut homing = block([1000, 1000, 1000, 0], 0b0111);
+        homing.watch = 0b0111_0000;
+        feeder.push_block(homing);
+        feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 600, starts_block: true });
+        feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 400, starts_block: false });
+        feeder.push_block(block([5, 0, 0, 0], 0));
+        feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 5, starts_block: true });
+        let mut fired = [0_u32; MOTORS];
+        let mut triggered = 0_u8;
+        for _ in 0..5000 {
+            if generator.endstop_mask() != 0 {
+                generator.on_endstops(triggered);
+            }
+            let action = generator.on_timer();
+            for motor in 0..MOTORS {
+                if action.step_mask & (1 << motor) != 0 {
+                    fired[motor] += 1;
+                }
+            }
+            // Endstops sit at 100, 250 and 700 steps up.
+            for (motor, at) in [(0, 100), (1, 250), (2, 700)] {
+                if fired[motor] >= at {
+                    triggered |= 0x10 << motor;
+                }
+            }
+        }
+        // Each stopped on its switch; the rest of the block was dropped and
+        // the next block ran (five steps back down on motor 0).
+        assert_eq!(fired, [105, 250, 700, 0]);
+        let status = generator.status();
+        assert_eq!(status.blocks_done, 2);
+        assert!(!status.busy);
+    }
+
+    #[test]
+    fn hard_limit_halts_everything_until_cleared() {
+        let mut queues = StepQueues::new();
+        let config = StepperConfig { limit_endstops: 0b0000_0001, ..StepperConfig::default() };
+        let (mut feeder, mut generator) = queues.split(config);
+        feeder.push_block(block([100, 0, 0, 0], 0)); // towards X min
+        feeder.push_segment(Segment { interval: 50 << 8, add: 0, events: 100, starts_block: true });
+        let mut fired = 0;
+        for _ in 0..20 {
+            let action = generator.on_timer();
+            fired += action.step_mask.count_ones();
+        }
+        assert_eq!(generator.endstop_mask(), 0b0000_0001);
+        generator.on_endstops(0b0000_0001);
+        for _ in 0..200 {
+            fired += generator.on_timer().step_mask.count_ones();
+        }
+        assert!(fired < 25, "{fired}");
+        assert_eq!(generator.status().fault, Some(StepFault::LimitHit(1)));
+        // Moving away from the same switch is allowed once cleared.
+        generator.clear_fault();
+        feeder.push_block(block([10, 0, 0, 0], 1));
+        feeder.push_segment(Segment { interval: 50 << 8, add: 0, events: 10, starts_block: true });
+        let events = run(&mut generator, 10_000);
+        assert_eq!(events.len(), 10);
+    }
+}
