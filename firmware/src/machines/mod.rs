@@ -3,3 +3,4 @@
 
 pub mod velocity;
 pub mod powder_bed;
+pub mod diameter;
