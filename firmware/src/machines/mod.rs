@@ -4,3 +4,4 @@
 pub mod velocity;
 pub mod powder_bed;
 pub mod diameter;
+pub mod extrusion_line;
