@@ -31,7 +31,10 @@
 //! The PI law itself is not written here (one PI in the firmware): the
 //! loop is generic over [`PiLaw`], to be implemented for the thermal
 //! module's PI (Kp 2.4, Ki 0.008, conditional integration, the same law
-//! with other gains and limits) when it lands.
+//! with other gains and limits) when it lands; until then
+//! [`ClosedLoopPi`] adapts the closed-loop module's fixed-point loop law.
+
+use crate::closed_loop::control::{AxisController, DerivativeOn, DriverStatus, FixedGains, FollowingErrorLimit, Reference, Q16};
 
 /// What the diameter loop needs from a sampled PI controller. The loop
 /// calls it once per measurement; all values in the loop's units (error in
@@ -285,6 +288,122 @@ impl<P: PiLaw> DiameterLoop<P> {
     }
 }
 
+/// [`PiLaw`] over the firmware's existing fixed-point loop law, the
+/// closed-loop module's [`AxisController`] (PI gains, no derivative), until
+/// the thermal module's PI lands (then implement [`PiLaw`] for that and
+/// drop this adapter).
+///
+/// Mapping: output = centre + u, with centre = (min + max)/2 and
+/// u ∈ ±(max − min)/2, so the controller's symmetric clamp is the 1–15 rpm
+/// clamp; errors in centi-pixels, outputs in milli-RPM. The controller's
+/// conditional integration assumes direct action, so it is fed
+/// measured − setpoint with the gains' signs flipped (the same law).
+/// Bumpless preset: the controller's feedforward input carries a bias
+/// (preset − centre) and its integral restarts at zero. Limitation: the
+/// integral alone spans ±(max − min)/2 around the bias, so after a preset
+/// far from the centre the integral cannot reach the far limit by itself
+/// (the proportional term still can); at the thesis' operating point
+/// (≈ 4 rpm, centre 8 rpm) every speed from 1 to 11 rpm is reachable by
+/// the integral alone.
+#[derive(Clone, Copy, Debug)]
+pub struct ClosedLoopPi {
+    controller: AxisController,
+    centre_mrpm: i32,
+    bias_mrpm: i32,
+    kp: f32,
+    ki: f32,
+    last_output_mrpm: i32,
+}
+
+impl Default for ClosedLoopPi {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ClosedLoopPi {
+    pub const fn new() -> Self {
+        Self {
+            controller: AxisController::new(Self::fixed(0.0, 0.0), 7_000, NO_FOLLOWING_LIMIT),
+            centre_mrpm: 8_000,
+            bias_mrpm: 0,
+            kp: 0.0,
+            ki: 0.0,
+            last_output_mrpm: 8_000,
+        }
+    }
+
+    /// rpm/px → mrpm/cpx is ×10; the sign flips (see the type's docs).
+    const fn fixed(kp: f32, ki: f32) -> FixedGains {
+        FixedGains {
+            feedforward: Q16::ONE,
+            proportional: Q16((-kp * 10.0 * 65536.0) as i32),
+            integral_per_tick: Q16((-ki * 10.0 * 65536.0) as i32),
+            derivative: Q16::ZERO,
+            derivative_decay: Q16::ZERO,
+            derivative_on: DerivativeOn::Error,
+        }
+    }
+
+    fn restart_at(&mut self, output_mrpm: i32) {
+        let limit = self.controller.output_limit();
+        let output = output_mrpm.clamp(self.centre_mrpm - limit, self.centre_mrpm + limit);
+        self.bias_mrpm = output - self.centre_mrpm;
+        self.last_output_mrpm = output;
+        self.controller.reset();
+    }
+}
+
+/// The diameter loop has no following-error supervision.
+const NO_FOLLOWING_LIMIT: FollowingErrorLimit = FollowingErrorLimit { limit: i32::MAX, hold_ticks: u16::MAX };
+
+impl PiLaw for ClosedLoopPi {
+    fn update(&mut self, error: f32) -> f32 {
+        let scaled = error * 100.0;
+        let error_cpx = if !scaled.is_finite() {
+            0
+        } else if scaled > 1.0e6 {
+            1_000_000
+        } else if scaled < -1.0e6 {
+            -1_000_000
+        } else if scaled >= 0.0 {
+            (scaled + 0.5) as i32
+        } else {
+            (scaled - 0.5) as i32
+        };
+        let reference = Reference { position: -error_cpx, velocity: self.bias_mrpm };
+        let u = self.controller.tick(reference, Ok(0), DriverStatus::default()).unwrap_or(self.bias_mrpm);
+        self.last_output_mrpm = self.centre_mrpm + u;
+        self.last_output_mrpm as f32 / 1000.0
+    }
+
+    fn preset(&mut self, output: f32) {
+        let mrpm = if output.is_finite() { (output * 1000.0 + 0.5) as i32 } else { self.centre_mrpm };
+        self.restart_at(mrpm);
+    }
+
+    fn set_gains(&mut self, kp: f32, ki_per_sample: f32) {
+        self.kp = kp;
+        self.ki = ki_per_sample;
+        self.controller.set_gains(Self::fixed(kp, ki_per_sample));
+        // the controller forgot its integral: carry the output in the bias
+        self.restart_at(self.last_output_mrpm);
+    }
+
+    fn gains(&self) -> (f32, f32) {
+        (self.kp, self.ki)
+    }
+
+    fn set_limits(&mut self, min: f32, max: f32) {
+        let min = (min * 1000.0) as i32;
+        let max = (max * 1000.0) as i32;
+        self.centre_mrpm = (min + max) / 2;
+        let limit = (max - min) / 2;
+        self.controller = AxisController::new(Self::fixed(self.kp, self.ki), limit, NO_FOLLOWING_LIMIT);
+        self.restart_at(self.last_output_mrpm);
+    }
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
@@ -436,5 +555,51 @@ pub(crate) mod tests {
         l.set_setpoint_cpx(13_290).unwrap();
         assert_eq!(l.settings().setpoint_cpx, 13_290);
         assert_eq!(l.set_setpoint_cpx(100), Err(DiameterError::Implausible));
+    }
+
+    #[test]
+    fn the_adapter_is_the_thesis_pi_with_clamp_and_anti_windup() {
+        let mut pi = ClosedLoopPi::new();
+        pi.set_limits(1.0, 15.0);
+        pi.set_gains(THESIS_KP, THESIS_KI);
+        pi.preset(4.0);
+        // zero error: the preset comes out
+        assert!((pi.update(0.0) - 4.0).abs() < 1e-3);
+        // −1 px (too thick): P gives +0.07, the integral +0.004 per sample
+        assert!((pi.update(-1.0) - 4.074).abs() < 1e-3, "{}", pi.update(0.0));
+        let mut pi = ClosedLoopPi::new();
+        pi.set_limits(1.0, 15.0);
+        pi.set_gains(THESIS_KP, THESIS_KI);
+        pi.preset(4.0);
+        pi.update(-1.0);
+        let after = pi.update(0.0);
+        // 0.04 mrpm/cpx is 2621/65536 in Q16: 3.999 mrpm, floored to 3
+        assert!((after - 4.004).abs() <= 1.01e-3, "{after}");
+        // saturate for a long time, then come back at once (no windup)
+        for _ in 0..10_000 {
+            assert!(pi.update(-200.0) <= 15.0);
+        }
+        assert!((pi.update(-200.0) - 15.0).abs() < 1e-3);
+        let back = pi.update(10.0);
+        assert!(back < 15.0, "leaves the limit as soon as the error turns: {back}");
+        for _ in 0..10_000 {
+            assert!(pi.update(200.0) >= 1.0);
+        }
+        assert!((pi.update(200.0) - 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn the_adapter_changes_gains_without_a_bump() {
+        let mut pi = ClosedLoopPi::new();
+        pi.set_limits(1.0, 15.0);
+        pi.set_gains(THESIS_KP, THESIS_KI);
+        pi.preset(4.0);
+        for _ in 0..50 {
+            pi.update(-2.0);
+        }
+        let before = pi.update(0.0);
+        pi.set_gains(-0.05, -0.002);
+        assert!((pi.update(0.0) - before).abs() < 1e-3);
+        assert_eq!(pi.gains(), (-0.05, -0.002));
     }
 }
