@@ -4,3 +4,4 @@
 pub mod axis_plant;
 pub mod board;
 pub mod encoder_trace;
+pub mod extrusion_plant;
