@@ -5,3 +5,4 @@ pub mod axis_plant;
 pub mod board;
 pub mod encoder_trace;
 pub mod extrusion_plant;
+pub mod powder_bed_plant;
