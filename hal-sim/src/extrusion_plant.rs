@@ -291,7 +291,7 @@ pub fn run_line(options: &LineOptions) -> LineRun {
     // Heat; try the screw every 10 s.
     let mut t = 0.0;
     loop {
-        if t as u32 % 10 == 0 {
+        if (t as u32).is_multiple_of(10) {
             match line.set_screw(&config, 10_000, &barrel) {
                 Ok(()) => break,
                 Err(ScrewError::Cold(cold)) => run.refusals.push((t, f64::from(cold.measured.0) / 100.0)),

@@ -148,6 +148,11 @@ pub struct Carriage {
     pub time_s: f64,
 }
 
+/// A carriage stroke that failed: the servo loop faulted, or the end
+/// sensor did not trip within the stroke length.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StrokeFailed;
+
 /// The loop period of the carriage servo (1 kHz).
 pub const CARRIAGE_TICK_S: f64 = 0.001;
 
@@ -183,9 +188,9 @@ impl Carriage {
     }
 
     /// Move toward `to` until its sensor reads active, then stop 20
-    /// counts into the sensor's zone and hold. `Err(())` on a loop fault or
+    /// counts into the sensor's zone and hold. `Err(StrokeFailed)` on a loop fault or
     /// when the sensor has not tripped within `max_stroke_counts`.
-    pub fn stroke(&mut self, to: CarriageEnd) -> Result<(), ()> {
+    pub fn stroke(&mut self, to: CarriageEnd) -> Result<(), StrokeFailed> {
         let start = self.decoder.count();
         let (goal, step) = match to {
             CarriageEnd::Plus => (start + self.max_stroke_counts, self.speed_counts_per_s),
@@ -207,11 +212,11 @@ impl Carriage {
             reference = if step > 0 { (reference + per_tick).min(goal) } else { (reference + per_tick).max(goal) };
             self.tick(reference.round() as i32)?;
         }
-        Err(())
+        Err(StrokeFailed)
     }
 
-    fn tick(&mut self, position: i32) -> Result<(), ()> {
-        let duty = self.controller.tick(Reference { position, velocity: 0 }, Ok(self.decoder.count()), DriverStatus::default()).map_err(|_| ())?;
+    fn tick(&mut self, position: i32) -> Result<(), StrokeFailed> {
+        let duty = self.controller.tick(Reference { position, velocity: 0 }, Ok(self.decoder.count()), DriverStatus::default()).map_err(|_| StrokeFailed)?;
         self.plant.set_duty(duty);
         let decoder = &mut self.decoder;
         self.plant.advance(CARRIAGE_TICK_S, |a, b| decoder.on_edge(a, b));
@@ -284,7 +289,7 @@ impl PowderBed {
             }
             LayerCommand::MoveCarriage { to, .. } => match self.carriage.stroke(to) {
                 Ok(()) => LayerEvent::CarriageArrived(to),
-                Err(()) => LayerEvent::Failed,
+                Err(StrokeFailed) => LayerEvent::Failed,
             },
             LayerCommand::StepPlatform { platform, direction, steps } => {
                 let plant = self.platform(platform);

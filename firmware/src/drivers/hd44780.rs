@@ -227,7 +227,7 @@ mod tests {
         fn run(self, body: impl FnOnce(&mut Hd44780<PinMock, PinMock, PinMock, PinMock, PinMock, PinMock>, &mut CheckedDelay)) {
             let mut rs = PinMock::new(&self.rs);
             let mut e = PinMock::new(&self.e);
-            let mut d: Vec<PinMock> = self.d.iter().map(|t| PinMock::new(t)).collect();
+            let mut d: Vec<PinMock> = self.d.iter().map(PinMock::new).collect();
             let mut delay = CheckedDelay::new(&self.delay);
             let mut lcd = Hd44780::new(rs.clone(), e.clone(), d[0].clone(), d[1].clone(), d[2].clone(), d[3].clone());
             body(&mut lcd, &mut delay);
