@@ -1,0 +1,121 @@
+//! Firmware for a BigTreeTech SKR Pro 1.2 (STM32F407ZGT6).
+//!
+//! This crate's binary is the board's vector table and main loop; the
+//! board support is in the library next to it (`src/lib.rs`), and every
+//! decision is made by the `firmware` core, exactly as on the Mega 2560.
+//!
+//! Boot order matters for safety: heaters off and drivers disabled before
+//! anything else, then the watchdog, then the clocks and peripherals.
+#![no_std]
+#![no_main]
+#![deny(unsafe_op_in_unsafe_fn)]
+
+use core::cell::UnsafeCell;
+use cortex_m_rt::{entry, exception};
+use firmware::host_link::HostLink;
+use firmware::machine::Machine;
+use firmware::motion::stepper::StepperConfig;
+use firmware::rx::{self, RxQueue};
+use firmware::thermal::thermistor::{celsius_from_adc, NTC100K_B3950_4K7};
+use firmware::thermal::Celsius;
+use skr_pro::pac::{self, interrupt, Interrupt};
+use skr_pro::{adc, clock, pins, priority, pwm, serial, stepper, storage, watchdog};
+
+/// How often the thermistors and endstops are read, in milliseconds.
+const THERMAL_PERIOD_MS: u32 = 100;
+
+struct RxCell(UnsafeCell<RxQueue>);
+// SAFETY: split exactly once in `main`, before interrupts are enabled.
+unsafe impl Sync for RxCell {}
+static RX_QUEUE: RxCell = RxCell(UnsafeCell::new(RxQueue::new()));
+
+#[entry]
+fn main() -> ! {
+    pins::init();
+    // SAFETY: the only call; `take()` would cost a flag and a panic path.
+    let dp = unsafe { pac::Peripherals::steal() };
+    // SAFETY: as above, for the core peripherals.
+    let mut cp = unsafe { cortex_m::Peripherals::steal() };
+    watchdog::start(&dp.IWDG);
+    let clocks = clock::init(&dp.RCC, &dp.FLASH);
+
+    // SAFETY: split exactly once, here, before interrupts are enabled;
+    // afterwards only its two ends are used.
+    let (producer, consumer) = rx::split(unsafe { &mut *RX_QUEUE.0.get() });
+    serial::init(&dp.RCC, &dp.USART1, &clocks, producer);
+    adc::init(&dp.RCC, &dp.ADC_COMMON, &dp.ADC3);
+    pwm::init(&dp.RCC, &dp.TIM3);
+    // The planner will feed the step queues; until then the interrupt
+    // idles at its poll interval.
+    let _step_feeder = stepper::init(&dp.RCC, &dp.TIM5, &clocks, StepperConfig::default());
+    // SAFETY: priorities are set before the lines are unmasked; everything
+    // the handlers touch is initialised.
+    unsafe {
+        cp.SCB.set_priority(cortex_m::peripheral::scb::SystemHandler::SysTick, priority::TICK);
+        cp.NVIC.set_priority(Interrupt::TIM5, priority::STEP_TIMER);
+        cp.NVIC.set_priority(Interrupt::USART1, priority::SERIAL);
+        cortex_m::peripheral::NVIC::unmask(Interrupt::TIM5);
+        cortex_m::peripheral::NVIC::unmask(Interrupt::USART1);
+    }
+    clock::start_tick(&mut cp.SYST, &clocks);
+
+    let mut tx = serial::Tx;
+    let mut rx = serial::Rx { consumer };
+    let mut link = HostLink::new();
+    let mut settings = storage::RamStorage::new();
+    let _ = link.machine.write_banner(&mut tx);
+    let _ = link.machine.load_settings(&mut settings, &mut tx);
+    let mut next_thermal_ms = 0u32;
+
+    loop {
+        watchdog::feed();
+        let now = clock::millis();
+        let _ = link.service(&mut rx, &mut settings, now, &mut tx);
+        if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
+            next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
+            let read = |channel| celsius_from_adc(&NTC100K_B3950_4K7, adc::read_10bit(&dp.ADC3, channel)).unwrap_or(Celsius(0));
+            link.machine.set_measured(read(pins::HOTEND_THERMISTOR_CHANNEL), read(pins::BED_THERMISTOR_CHANNEL));
+            link.machine.set_endstop_levels(pins::endstop_levels());
+        }
+        apply_outputs(&link.machine);
+    }
+}
+
+/// Drive the outputs the core decides: all off once halted.
+fn apply_outputs(machine: &Machine) {
+    if machine.is_halted() {
+        pins::all_outputs_safe();
+        return;
+    }
+    pins::set_steppers_enabled(machine.steppers_enabled());
+    pwm::set_fan(machine.fan_duty());
+}
+
+#[interrupt]
+fn USART1() {
+    serial::on_interrupt();
+}
+
+#[interrupt]
+fn TIM5() {
+    stepper::on_interrupt();
+}
+
+#[exception]
+fn SysTick() {
+    clock::on_tick();
+}
+
+#[panic_handler]
+fn panic(_info: &core::panic::PanicInfo) -> ! {
+    cortex_m::interrupt::disable();
+    pins::all_outputs_safe();
+    let mut tx = serial::Tx;
+    let _ = ufmt::uwrite!(tx, "Error:Firmware panic: heaters off, motors disabled. Reset the board.\n");
+    loop {
+        // The IWDG cannot be stopped: keep it fed so the board stays in
+        // this safe state (as the Mega 2560 does) instead of rebooting.
+        watchdog::feed();
+        pins::all_outputs_safe();
+    }
+}
