@@ -4,5 +4,6 @@
 pub mod axis_plant;
 pub mod board;
 pub mod encoder_trace;
+pub mod steps;
 pub mod extrusion_plant;
 pub mod powder_bed_plant;

@@ -1,4 +1,842 @@
-//! Motion (work in progress).
+//! Motion: from a parsed `G0`/`G1`/`G2`/`G3`/`G28` to exact, timed steps.
+//!
+//! ```text
+//!  executor ──line_to / arc_to / home──▶ Motion (main loop)
+//!                                          │ cut into pieces (arc chords,
+//!                                          │ kinematic segments), inverse
+//!                                          │ kinematics, steps
+//!                                          ▼
+//!                                       Planner (16-block ring, look-ahead)
+//!                                          │
+//!                                          ▼
+//!                                       Prep (trapezoid → timed segments)
+//!                                          │ StepQueues: SPSC, lock-free
+//!                                          ▼
+//!                       step-timer ISR: StepGenerator::on_timer()
+//! ```
+//!
+//! Module by module: [`kinematics`] (Cartesian, delta, RR arm), [`arc`]
+//! (chord cutter), [`planner`] (look-ahead, junction deviation), [`prep`]
+//! (segments), [`stepper`] (the interrupt), [`homing`] (`G28` sequences),
+//! [`math`] (float helpers for the main loop).
+//!
+//! # Integration
+//!
+//! **Set-up (board, once).** Keep a `static mut QUEUES: StepQueues` and a
+//! [`MotionConfig`] (the board's machine: [`MotionConfig::prusa_i3`],
+//! [`MotionConfig::spec_delta`], [`MotionConfig::spec_arm`], then
+//! [`MotionConfig::apply_settings`] with the loaded `Settings`). Split:
+//! `let (feeder, generator) = QUEUES.split(config.stepper());` Give the
+//! feeder to `Motion::new(config, feeder)` (main loop) and put the
+//! generator where the step interrupt reaches it (an
+//! `avr_device::interrupt::Mutex<RefCell<Option<StepGenerator<'static>>>>`).
+//! Start Timer1 in CTC/compare mode at 2 MHz ([`stepper::TIMER_HZ`]).
+//!
+//! **Step-timer interrupt (TIMER1_COMPA), every compare:**
+//! ```text
+//! if generator.endstop_mask() != 0 {            // homing or hard limits
+//!     generator.on_endstops(endstop_bits());    // bit i: motor i min, bit 4+i: max;
+//! }                                             // 1 = triggered (polarity applied)
+//! let a = generator.on_timer();
+//! write DIR pins from a.dir_mask (bit 0 X, 1 Y, 2 Z, 3 E)   — first
+//! raise STEP pins of a.step_mask
+//! OCR1A = OCR1A + a.next_interval_ticks         // from the last compare, not from now
+//! lower the STEP pins after ≥ the driver's pulse width
+//! ```
+//! The generator never presents a direction change together with a step;
+//! it gives the new directions `dir_setup_ticks` ahead (config).
+//! [`pairs_to_endstop_bits`] converts the executor's X_MIN, X_MAX, Y_MIN…
+//! layout.
+//!
+//! **Main loop, every pass:**
+//! ```text
+//! let status = interrupt::free(|cs| generator.status());   // a copy, no maths
+//! match motion.poll(&status, now_ms) {
+//!     StepperRequest::None => {}
+//!     StepperRequest::ClearFault => interrupt::free(|cs| generator.clear_fault()),
+//!     StepperRequest::Halt => interrupt::free(|cs| generator.halt(StepFault::Stopped)),
+//! }
+//! if let Some(error) = motion.take_error() { reply "Error:…" (and after a
+//!     fault: the position is lost, re-home) }
+//! ```
+//! `poll` cuts pending lines/arcs into the planner and keeps the segment
+//! queue full (≤ 15 segments of ≤ 5 ms), so the main loop must come round at
+//! least every ≈ 50 ms while moving. Anything that blocks longer (EEPROM
+//! writes of many bytes) should call `poll` in between.
+//!
+//! **Executor.**
+//! - `G0`/`G1`: when [`Motion::ready`] is false, keep the command queued
+//!   and try again next pass (Marlin blocks the same way). Else
+//!   `motion.line_to(target_um, feed_um_per_s)` with the *machine*
+//!   coordinates of the target (X, Y, Z, E in µm, `G92` offsets removed) and
+//!   the modal feed in µm/s. `M220`/`M221` are applied inside from the
+//!   settings given to [`Motion::apply_settings`], as are `M92`, `M201`,
+//!   `M203`, `M204`, `M205 J`. Errors (`Unreachable`, `OutsideSoftLimits`,
+//!   `NotHomed`) mean nothing moved: answer `Error:` and keep the position.
+//! - `G2`/`G3`: `motion.arc_to(target_um, ArcCentre::Offset([i, j]) or
+//!   ArcCentre::Radius(r), clockwise, feed_um_per_s)`, all µm.
+//! - `G28 [X][Y][Z]`: `motion.home(mask)` (bit i: motor i; 0 = all), then
+//!   wait (busy keep-alive) until `!motion.is_homing()`; `take_error()` tells
+//!   `HomingFailed`. Then set the modal position from
+//!   [`Motion::position_um`].
+//! - `M400`, `G4` and anything that needs motion finished: wait until
+//!   [`Motion::is_idle`].
+//! - `M114`: [`Motion::position_um`] (where queued motion ends) and
+//!   [`Motion::motor_steps`] for `Count`.
+//! - `M665`/`M666`: change `config.kinematics` (`Delta::set_geometry`,
+//!   `endstop_trim`) while idle, then re-home.
+
+pub mod arc;
+pub mod homing;
 pub mod kinematics;
 pub mod math;
+pub mod planner;
+pub mod prep;
 pub mod stepper;
+
+#[cfg(test)]
+mod tests;
+
+use arc::{ArcCutter, ArcError};
+use homing::{AxisHoming, Homing, HomingConfig, HomingStep};
+use kinematics::{to_steps, Arm, Cartesian, Delta, Kinematics, KinematicsError, MachineKinematics, LINEAR_AXES};
+use math::{round_to_i32, sqrt};
+use planner::{MotorLimits, Planner, PlannerMove, MAX_BLOCK_STEPS};
+use prep::Prep;
+pub use stepper::{StepFault, StepFeeder, StepGenerator, StepQueues, StepperConfig, StepperStatus, TimerAction, MOTORS};
+
+use crate::settings::Settings;
+
+/// Index of the extruder motor.
+pub const E: usize = 3;
+
+/// Soft limits: the box targets must stay in (mm).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SoftLimits {
+    pub min: [f32; LINEAR_AXES],
+    pub max: [f32; LINEAR_AXES],
+}
+
+/// Where the machine is once homed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum HomePosition {
+    /// This Cartesian point; each homed motor is set to its share of the
+    /// inverse kinematics (Cartesian axes, arm joints, the arm's X).
+    Cartesian([f32; LINEAR_AXES]),
+    /// Delta: each carriage at its top endstop (`homed_height` + trim).
+    DeltaTop,
+}
+
+/// A machine's motion configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotionConfig {
+    pub kinematics: MachineKinematics,
+    /// `M92`: steps per mm of X, Y, Z (carriages for a delta; X only for
+    /// the arm, whose joints use `Arm::joint_steps_per_degree`) and E.
+    pub steps_per_mm: [f32; MOTORS],
+    /// `M203`: highest speed of each motor in motor units/s (mm/s; °/s for
+    /// arm joints). On a delta this limits each carriage.
+    pub max_feed: [f32; MOTORS],
+    /// `M201`: highest acceleration of each motor, units/s².
+    pub max_accel: [f32; MOTORS],
+    /// `M204 P`, `R`, `T`: printing, retract (E only) and travel, mm/s².
+    pub print_accel: f32,
+    pub retract_accel: f32,
+    pub travel_accel: f32,
+    /// `M205 J`, mm.
+    pub junction_deviation: f32,
+    /// `M220` / 100 and `M221` / 100.
+    pub feed_factor: f32,
+    pub flow_factor: f32,
+    /// Chord tolerance of arcs, mm.
+    pub arc_tolerance: f32,
+    /// The drivers' (or the interrupt's) highest step rate, steps/s.
+    pub max_step_rate: f32,
+    pub soft_limits: Option<SoftLimits>,
+    pub homing: HomingConfig,
+    pub home: HomePosition,
+    /// Refuse moves until every positioning motor is homed (the arm).
+    pub must_home: bool,
+    /// Direction inversion for the wiring, direction set-up, hard limits.
+    pub stepper: StepperConfig,
+}
+
+impl MotionConfig {
+    /// SPEC §1: the Prusa i3 (100 steps/mm X/Y, 400 Z, 93 E), homing to the
+    /// min endstops, X then Y then Z. The Y motor's direction is inverted:
+    /// the belt moves the bed, so the nozzle's +Y is the bed's −Y.
+    pub fn prusa_i3() -> Self {
+        let settings = Settings::prusa_i3();
+        let mut config = Self {
+            kinematics: MachineKinematics::Cartesian(Cartesian),
+            steps_per_mm: [100.0, 100.0, 400.0, 93.0],
+            max_feed: [300.0, 300.0, 5.0, 25.0],
+            max_accel: [3000.0, 3000.0, 100.0, 10_000.0],
+            print_accel: 1500.0,
+            retract_accel: 1500.0,
+            travel_accel: 1500.0,
+            junction_deviation: 0.013,
+            feed_factor: 1.0,
+            flow_factor: 1.0,
+            arc_tolerance: 0.002,
+            max_step_rate: 40_000.0,
+            soft_limits: Some(SoftLimits { min: [0.0, 0.0, 0.0], max: [200.0, 200.0, 180.0] }),
+            homing: HomingConfig {
+                sequence: [0b001, 0b010, 0b100],
+                axes: [
+                    AxisHoming::bump(false, 100.0, 50.0, 200.0, 5.0),
+                    AxisHoming::bump(false, 100.0, 50.0, 200.0, 5.0),
+                    AxisHoming::bump(false, 400.0, 4.0, 180.0, 2.0),
+                ],
+                acceleration: 100_000.0,
+            },
+            home: HomePosition::Cartesian([0.0, 0.0, 0.0]),
+            must_home: false,
+            stepper: StepperConfig { dir_invert: 0b0010, limit_endstops: 0, ..StepperConfig::default() },
+        };
+        config.apply_settings(&settings);
+        config
+    }
+
+    /// SPEC §2: the delta (80 steps/mm carriages, E 102), homing all
+    /// towers up at once; each carriage at most 150 mm/s.
+    pub fn spec_delta(repetier_layout: bool) -> Self {
+        let mut delta = Delta::spec_printer(repetier_layout);
+        delta.homed_height = 300.0;
+        let tower = AxisHoming::bump(true, 80.0, 50.0, 400.0, 5.0);
+        Self {
+            kinematics: MachineKinematics::Delta(delta),
+            steps_per_mm: [80.0, 80.0, 80.0, 102.0],
+            max_feed: [150.0, 150.0, 150.0, 25.0],
+            max_accel: [3000.0, 3000.0, 3000.0, 10_000.0],
+            soft_limits: None,
+            homing: HomingConfig { sequence: [0b111, 0, 0], axes: [tower; 3], acceleration: 100_000.0 },
+            home: HomePosition::DeltaTop,
+            stepper: StepperConfig::default(),
+            max_step_rate: 40_000.0,
+            ..Self::prusa_i3()
+        }
+    }
+
+    /// SPEC §3: the RR arm with `ppr` driver pulses per turn (200 bench,
+    /// 400 machine), X on a 4 mm lead screw, travel X ±100 Y ±110 Z ±40,
+    /// homing Z (negative) then Y then X (positive) at 200 steps/s with a
+    /// 500 ms pause and a release back-off at 20 steps/s; home (x, y, z) =
+    /// (−100, −107, 68), which the soft limits accept although Z 68 is
+    /// outside ±40. NC limit switches are hard limits.
+    pub fn spec_arm(ppr: u16) -> Self {
+        let arm = Arm::spec_arm(ppr);
+        let joint = |towards_max| AxisHoming {
+            towards_max,
+            fast_rate: 200.0,
+            slow_rate: 20.0,
+            backoff_steps: (10.0 * arm.joint_steps_per_degree) as u32,
+            max_travel_steps: (200.0 * arm.joint_steps_per_degree) as u32,
+            release: true,
+            pause_ms: 500,
+        };
+        let screw_per_mm = ppr as f32 / 4.0;
+        let screw = AxisHoming {
+            backoff_steps: (10.0 * screw_per_mm) as u32,
+            max_travel_steps: (250.0 * screw_per_mm) as u32,
+            ..joint(true)
+        };
+        Self {
+            kinematics: MachineKinematics::Arm(arm),
+            steps_per_mm: [screw_per_mm, 1.0, 1.0, 100.0],
+            // Joints in °/s and °/s² (20 kHz TB6600 at 55.6 pulses/°: 360 °/s).
+            max_feed: [50.0, 60.0, 60.0, 25.0],
+            max_accel: [500.0, 300.0, 300.0, 1000.0],
+            print_accel: 500.0,
+            retract_accel: 500.0,
+            travel_accel: 500.0,
+            max_step_rate: if ppr > 200 { 100_000.0 } else { 20_000.0 },
+            soft_limits: Some(SoftLimits { min: [-100.0, -110.0, -40.0], max: [100.0, 110.0, 40.0] }),
+            homing: HomingConfig {
+                sequence: [0b100, 0b010, 0b001],
+                axes: [screw, joint(true), joint(false)],
+                acceleration: 2000.0,
+            },
+            home: HomePosition::Cartesian([-100.0, -107.0, 68.0]),
+            must_home: true,
+            stepper: StepperConfig { limit_endstops: 0b0111_0111, ..StepperConfig::default() },
+            ..Self::prusa_i3()
+        }
+    }
+
+    /// Take the tunable values from the settings (`M92`, `M201`, `M203`,
+    /// `M204`, `M205 J`, `M220`, `M221`), milli-units to floats.
+    pub fn apply_settings(&mut self, settings: &Settings) {
+        let is_arm = matches!(self.kinematics, MachineKinematics::Arm(_));
+        for motor in 0..MOTORS {
+            // The arm's joints have no steps/mm: pulses per degree come from
+            // the gearbox and the driver.
+            if !(is_arm && (motor == 1 || motor == 2)) {
+                self.steps_per_mm[motor] = settings.steps_per_mm_milli[motor] as f32 / 1000.0;
+            }
+            self.max_feed[motor] = settings.max_feed_um_per_s[motor] as f32 / 1000.0;
+            self.max_accel[motor] = settings.max_accel_um_per_s2[motor] as f32 / 1000.0;
+        }
+        self.print_accel = settings.print_accel_um_per_s2 as f32 / 1000.0;
+        self.retract_accel = settings.retract_accel_um_per_s2 as f32 / 1000.0;
+        self.travel_accel = settings.travel_accel_um_per_s2 as f32 / 1000.0;
+        self.junction_deviation = settings.junction_deviation_um as f32 / 1000.0;
+        self.feed_factor = settings.feed_percent as f32 / 100.0;
+        self.flow_factor = settings.flow_percent as f32 / 100.0;
+    }
+
+    /// Steps per motor unit of every motor.
+    pub fn steps_per_unit(&self) -> [f32; MOTORS] {
+        let linear = self.kinematics.motor_steps_per_unit([self.steps_per_mm[0], self.steps_per_mm[1], self.steps_per_mm[2]]);
+        [linear[0], linear[1], linear[2], self.steps_per_mm[E]]
+    }
+
+    /// The planner's limits in steps.
+    pub fn motor_limits(&self) -> MotorLimits {
+        let spu = self.steps_per_unit();
+        let mut limits = MotorLimits { max_rate: [0.0; MOTORS], max_accel: [0.0; MOTORS] };
+        for motor in 0..MOTORS {
+            limits.max_rate[motor] = (self.max_feed[motor] * spu[motor]).min(self.max_step_rate);
+            limits.max_accel[motor] = self.max_accel[motor] * spu[motor];
+        }
+        limits
+    }
+
+    /// What the step interrupt needs ([`StepQueues::split`]).
+    pub fn stepper(&self) -> StepperConfig {
+        self.stepper
+    }
+}
+
+/// Why a motion command did nothing (or stopped).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MotionError {
+    /// A previous command is still being cut into the planner: retry.
+    Busy,
+    Unreachable(KinematicsError),
+    OutsideSoftLimits,
+    /// The machine must be homed first (`G28`).
+    NotHomed,
+    Arc(ArcError),
+    /// These motors' switches did not trigger (or release) in time.
+    HomingFailed(u8),
+    /// The step interrupt stopped everything; the position is lost.
+    Fault(StepFault),
+}
+
+/// The centre of an arc: `I`/`J` offsets from the start, or `R`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ArcCentre {
+    /// µm.
+    Offset([i32; 2]),
+    /// µm; negative: the arc over half a turn.
+    Radius(i32),
+}
+
+/// What the board must do to the generator after [`Motion::poll`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StepperRequest {
+    None,
+    /// Call `generator.clear_fault()`: the main loop has flushed.
+    ClearFault,
+    /// Call `generator.halt(StepFault::Stopped)` (`M410`).
+    Halt,
+}
+
+/// A straight line cut into pieces short enough for the kinematics (and
+/// for 16-bit step counts); piece ends are computed as they are needed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LineCut {
+    start: [f32; MOTORS],
+    delta: [f32; MOTORS],
+    target: [f32; MOTORS],
+    pieces: u32,
+    done: u32,
+}
+
+impl LineCut {
+    fn new(start: [f32; MOTORS], target: [f32; MOTORS], config: &MotionConfig) -> Self {
+        let mut delta = [0.0; MOTORS];
+        for axis in 0..MOTORS {
+            delta[axis] = target[axis] - start[axis];
+        }
+        let length = sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]);
+        let mut pieces = match config.kinematics.segment_mm() {
+            Some(segment) if segment > 0.0 => length / segment,
+            _ => 0.0,
+        };
+        // Keep each motor within a block's 16-bit step count (with room for
+        // the delta's up-to-3× carriage travel).
+        let spu = config.steps_per_unit();
+        let headroom = MAX_BLOCK_STEPS as f32 / 4.0;
+        for axis in 0..LINEAR_AXES {
+            pieces = pieces.max(math::abs(delta[axis]) * config.steps_per_mm[axis].max(spu[axis]) / headroom);
+        }
+        pieces = pieces.max(math::abs(delta[E]) * spu[E] * config.flow_factor / headroom);
+        let pieces = (pieces.min(1.0e7) as u32).saturating_add(1);
+        Self { start, delta, target, pieces, done: 0 }
+    }
+}
+
+impl Iterator for LineCut {
+    type Item = [f32; MOTORS];
+
+    fn next(&mut self) -> Option<[f32; MOTORS]> {
+        if self.done >= self.pieces {
+            return None;
+        }
+        self.done += 1;
+        if self.done == self.pieces {
+            return Some(self.target);
+        }
+        let fraction = self.done as f32 / self.pieces as f32;
+        let mut point = [0.0; MOTORS];
+        for axis in 0..MOTORS {
+            point[axis] = self.start[axis] + self.delta[axis] * fraction;
+        }
+        Some(point)
+    }
+}
+
+/// Work accepted from the executor and not yet all in the planner.
+#[derive(Clone, Debug, PartialEq)]
+enum Pending {
+    Nothing,
+    Line { cut: LineCut, feed: f32 },
+    Arc { arc: ArcCutter, cut: Option<LineCut>, feed: f32 },
+}
+
+/// The main loop's motion state.
+pub struct Motion<'q> {
+    pub config: MotionConfig,
+    planner: Planner,
+    prep: Prep,
+    feeder: StepFeeder<'q>,
+    /// Where the queued motion ends: Cartesian X, Y, Z and E, mm.
+    position: [f32; MOTORS],
+    /// The same in motor steps.
+    motor_steps: [i32; MOTORS],
+    /// E steps owed (rounding of flow-scaled extrusion), steps.
+    e_remainder: f32,
+    pending: Pending,
+    homing: Homing,
+    homing_requested: Option<u8>,
+    homing_move: Option<(u16, [i32; MOTORS])>,
+    homed: u8,
+    error: Option<MotionError>,
+    stop_requested: bool,
+    fault_seen: bool,
+    status: StepperStatus,
+}
+
+impl<'q> Motion<'q> {
+    pub fn new(config: MotionConfig, feeder: StepFeeder<'q>) -> Self {
+        let mut motion = Self {
+            config,
+            planner: Planner::new(),
+            prep: Prep::new(),
+            feeder,
+            position: [0.0; MOTORS],
+            motor_steps: [0; MOTORS],
+            e_remainder: 0.0,
+            pending: Pending::Nothing,
+            homing: Homing::new(),
+            homing_requested: None,
+            homing_move: None,
+            homed: 0,
+            error: None,
+            stop_requested: false,
+            fault_seen: false,
+            status: StepperStatus::default(),
+        };
+        motion.configure();
+        motion.set_position_mm(motion.reachable_start());
+        motion
+    }
+
+    /// Where a machine starts before homing: the origin if reachable, else
+    /// the home position (a delta's origin is reachable; the arm's too).
+    fn reachable_start(&self) -> [f32; MOTORS] {
+        [0.0; MOTORS]
+    }
+
+    fn configure(&mut self) {
+        self.planner.junction_deviation = self.config.junction_deviation;
+        let min_ticks = (stepper::TIMER_HZ as f32 / self.config.max_step_rate).max(4.0);
+        self.prep.min_interval_q8 = (min_ticks * 256.0) as u32;
+    }
+
+    /// New settings (`M92`, `M201`, `M203`, `M204`, `M205`, `M220`, `M221`).
+    /// Motor positions are re-derived from the Cartesian position, as
+    /// Marlin does after `M92`.
+    pub fn apply_settings(&mut self, settings: &Settings) {
+        self.config.apply_settings(settings);
+        self.configure();
+        let position = self.position;
+        self.set_position_mm(position);
+    }
+
+    /// Declare the current position (mm) without moving (after homing, or
+    /// for tests). Motor steps follow from the inverse kinematics.
+    pub fn set_position_mm(&mut self, position: [f32; MOTORS]) {
+        self.position = position;
+        let spu = self.config.steps_per_unit();
+        if let Ok(motors) = self.config.kinematics.inverse([position[0], position[1], position[2]]) {
+            let steps = to_steps(motors, [spu[0], spu[1], spu[2]]);
+            self.motor_steps[..LINEAR_AXES].copy_from_slice(&steps);
+        }
+        self.motor_steps[E] = round_to_i32(position[E] * spu[E]);
+        self.e_remainder = 0.0;
+    }
+
+    /// Can a new motion command be accepted now?
+    pub fn ready(&self) -> bool {
+        matches!(self.pending, Pending::Nothing) && !self.homing.is_active() && self.homing_requested.is_none()
+    }
+
+    /// Everything accepted has been stepped out.
+    pub fn is_idle(&self) -> bool {
+        self.ready() && self.planner.is_empty() && !self.prep.is_active() && !self.status.busy
+    }
+
+    pub fn is_homing(&self) -> bool {
+        self.homing.is_active() || self.homing_requested.is_some()
+    }
+
+    /// Motors homed since the last fault (bit i: motor i).
+    pub fn homed(&self) -> u8 {
+        self.homed
+    }
+
+    /// The error to report, once.
+    pub fn take_error(&mut self) -> Option<MotionError> {
+        self.error.take()
+    }
+
+    /// Where the queued motion ends, µm (X, Y, Z, E).
+    pub fn position_um(&self) -> [i32; MOTORS] {
+        self.position.map(|mm| round_to_i32(mm * 1000.0))
+    }
+
+    /// Where the queued motion ends, in motor steps.
+    pub fn motor_steps(&self) -> [i32; MOTORS] {
+        self.motor_steps
+    }
+
+    /// Blocks in the planner (for reports and tests).
+    pub fn planner(&self) -> &Planner {
+        &self.planner
+    }
+
+    /// `M410`: stop now; the position is lost.
+    pub fn request_stop(&mut self) {
+        self.stop_requested = true;
+    }
+
+    /// `G0`/`G1` to a machine position (µm) at a feed rate (µm/s).
+    pub fn line_to(&mut self, target_um: [i32; MOTORS], feed_um_per_s: i32) -> Result<(), MotionError> {
+        let target = target_um.map(|um| um as f32 / 1000.0);
+        self.check_accepting()?;
+        self.check_target(target)?;
+        let feed = feed_um_per_s as f32 / 1000.0 * self.config.feed_factor;
+        self.pending = Pending::Line { cut: LineCut::new(self.position, target, &self.config), feed };
+        self.feed_planner();
+        Ok(())
+    }
+
+    /// `G2` (clockwise) / `G3` to a machine position (µm) around a centre.
+    pub fn arc_to(&mut self, target_um: [i32; MOTORS], centre: ArcCentre, clockwise: bool, feed_um_per_s: i32) -> Result<(), MotionError> {
+        let target = target_um.map(|um| um as f32 / 1000.0);
+        self.check_accepting()?;
+        self.check_target(target)?;
+        let tolerance = self.config.arc_tolerance;
+        let arc = match centre {
+            ArcCentre::Offset([i, j]) => {
+                ArcCutter::with_centre(self.position, target, [i as f32 / 1000.0, j as f32 / 1000.0], clockwise, tolerance)
+            }
+            ArcCentre::Radius(r) => ArcCutter::with_radius(self.position, target, r as f32 / 1000.0, clockwise, tolerance),
+        }
+        .map_err(MotionError::Arc)?;
+        let feed = feed_um_per_s as f32 / 1000.0 * self.config.feed_factor;
+        self.pending = Pending::Arc { arc, cut: None, feed };
+        self.feed_planner();
+        Ok(())
+    }
+
+    /// `G28`: home these motors (bit i: motor i; 0: all), once the queued
+    /// motion has finished. Watch [`Self::is_homing`].
+    pub fn home(&mut self, motors: u8) -> Result<(), MotionError> {
+        if !self.ready() {
+            return Err(MotionError::Busy);
+        }
+        let motors = if motors & 0b111 == 0 { 0b111 } else { motors & 0b111 };
+        // A delta homes its towers together or not at all.
+        let motors = if matches!(self.config.kinematics, MachineKinematics::Delta(_)) { 0b111 } else { motors };
+        self.homing_requested = Some(motors);
+        Ok(())
+    }
+
+    fn check_accepting(&self) -> Result<(), MotionError> {
+        if !self.ready() {
+            return Err(MotionError::Busy);
+        }
+        if self.config.must_home && self.homed & 0b111 != 0b111 {
+            return Err(MotionError::NotHomed);
+        }
+        Ok(())
+    }
+
+    fn check_target(&self, target: [f32; MOTORS]) -> Result<(), MotionError> {
+        let point = [target[0], target[1], target[2]];
+        if let Some(limits) = self.config.soft_limits {
+            let inside = (0..LINEAR_AXES).all(|axis| point[axis] >= limits.min[axis] - 1e-4 && point[axis] <= limits.max[axis] + 1e-4);
+            let at_home = match self.config.home {
+                HomePosition::Cartesian(home) => (0..LINEAR_AXES).all(|axis| math::abs(point[axis] - home[axis]) < 1e-3),
+                HomePosition::DeltaTop => false,
+            };
+            if !inside && !at_home {
+                return Err(MotionError::OutsideSoftLimits);
+            }
+        }
+        self.config.kinematics.inverse(point).map_err(MotionError::Unreachable)?;
+        Ok(())
+    }
+
+    /// Every pass of the main loop: take in the interrupt's status, cut
+    /// pending work into the planner, drive homing, and refill the step
+    /// queues.
+    pub fn poll(&mut self, status: &StepperStatus, now_ms: u32) -> StepperRequest {
+        self.status = *status;
+        if let Some(fault) = status.fault {
+            if !self.fault_seen {
+                self.fault_seen = true;
+                self.flush();
+                self.homed = 0;
+                self.error = Some(MotionError::Fault(fault));
+            }
+            return StepperRequest::ClearFault;
+        }
+        self.fault_seen = false;
+        if self.stop_requested {
+            self.stop_requested = false;
+            self.flush();
+            self.homed = 0;
+            return StepperRequest::Halt;
+        }
+        // A block the interrupt finished before it was fully prepared was
+        // abandoned (a homing move stopped by its switches).
+        if self.prep.is_active() && status.blocks_done == self.prep.blocks_started() {
+            self.prep.reset();
+            self.planner.discard_current();
+        }
+        self.drive_homing(status, now_ms);
+        self.feed_planner();
+        self.prep.fill(&mut self.planner, &mut self.feeder);
+        StepperRequest::None
+    }
+
+    /// Forget everything queued (fault, stop). The interrupt drops its
+    /// queues itself.
+    fn flush(&mut self) {
+        self.pending = Pending::Nothing;
+        self.planner.clear();
+        self.prep.reset();
+        self.homing.abort();
+        self.homing_requested = None;
+        self.homing_move = None;
+    }
+
+    /// Cut pending lines and arcs into the planner while it has room.
+    fn feed_planner(&mut self) {
+        while !self.planner.is_full() {
+            let (point, feed) = match &mut self.pending {
+                Pending::Nothing => return,
+                Pending::Line { cut, feed } => match cut.next() {
+                    Some(point) => (point, *feed),
+                    None => {
+                        self.pending = Pending::Nothing;
+                        return;
+                    }
+                },
+                Pending::Arc { arc, cut, feed } => {
+                    let feed = *feed;
+                    match cut.as_mut().and_then(|c| c.next()) {
+                        Some(point) => (point, feed),
+                        None => match arc.next() {
+                            Some(chord_end) => {
+                                let mut chord = LineCut::new(self.position, chord_end, &self.config);
+                                let point = chord.next().unwrap_or(chord_end);
+                                *cut = Some(chord);
+                                (point, feed)
+                            }
+                            None => {
+                                self.pending = Pending::Nothing;
+                                return;
+                            }
+                        },
+                    }
+                }
+            };
+            if let Err(error) = self.queue_piece(point, feed) {
+                self.error = Some(error);
+                self.pending = Pending::Nothing;
+                return;
+            }
+        }
+    }
+
+    /// One straight piece to the planner (the planner has room).
+    fn queue_piece(&mut self, target: [f32; MOTORS], feed: f32) -> Result<(), MotionError> {
+        let spu = self.config.steps_per_unit();
+        let motors = self.config.kinematics.inverse([target[0], target[1], target[2]]).map_err(MotionError::Unreachable)?;
+        let linear = to_steps(motors, [spu[0], spu[1], spu[2]]);
+        let e_exact = (target[E] - self.position[E]) * spu[E] * self.config.flow_factor + self.e_remainder;
+        let e_steps = round_to_i32(e_exact);
+        let mut steps = [0; MOTORS];
+        for motor in 0..LINEAR_AXES {
+            steps[motor] = linear[motor] - self.motor_steps[motor];
+        }
+        steps[E] = e_steps;
+        let mut delta = [0.0; MOTORS];
+        for axis in 0..MOTORS {
+            delta[axis] = target[axis] - self.position[axis];
+        }
+        let xyz = sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]);
+        let (millimetres, unit, acceleration) = if xyz > 1.0e-5 {
+            let unit = [delta[0] / xyz, delta[1] / xyz, delta[2] / xyz, 0.0];
+            let acceleration = if e_steps != 0 { self.config.print_accel } else { self.config.travel_accel };
+            (xyz, unit, acceleration)
+        } else {
+            (math::abs(delta[E]), [0.0; MOTORS], self.config.retract_accel)
+        };
+        let motion = PlannerMove { steps, millimetres, unit, speed: feed, acceleration, watch: 0, watch_release: false };
+        if self.planner.push(&motion, &self.config.motor_limits()).is_err() {
+            // The caller checked for room; never drop a piece silently.
+            return Err(MotionError::Busy);
+        }
+        self.motor_steps[..LINEAR_AXES].copy_from_slice(&linear);
+        self.motor_steps[E] += e_steps;
+        self.e_remainder = e_exact - e_steps as f32;
+        self.position = target;
+        Ok(())
+    }
+
+    /// Run the homing state machine as far as it goes without waiting.
+    fn drive_homing(&mut self, status: &StepperStatus, now_ms: u32) {
+        if let Some(motors) = self.homing_requested {
+            if !(self.planner.is_empty() && !self.prep.is_active() && !status.busy) {
+                return;
+            }
+            self.homing_requested = None;
+            self.homed &= !motors;
+            self.homing.start(motors);
+        }
+        if !self.homing.is_active() {
+            return;
+        }
+        let mut stopped = 0;
+        if let Some((expected_done, steps)) = self.homing_move {
+            let finished = status.blocks_done == expected_done && !status.busy && self.planner.is_empty() && !self.prep.is_active();
+            if !finished {
+                return;
+            }
+            self.homing_move = None;
+            stopped = status.stopped;
+            for motor in 0..MOTORS {
+                let sign = if steps[motor] < 0 { -1 } else { 1 };
+                self.motor_steps[motor] += if stopped & (1 << motor) != 0 { sign * status.stopped_steps[motor] as i32 } else { steps[motor] };
+            }
+        }
+        loop {
+            match self.homing.next(&self.config.homing, stopped, now_ms) {
+                HomingStep::Move { steps, rate, watch, release } => {
+                    let dominant = steps.iter().map(|s| s.unsigned_abs()).max().unwrap_or(0);
+                    let motion = PlannerMove {
+                        steps,
+                        millimetres: dominant as f32,
+                        unit: [0.0; MOTORS],
+                        speed: rate,
+                        acceleration: self.config.homing.acceleration,
+                        watch,
+                        watch_release: release,
+                    };
+                    if dominant == 0 || self.planner.push(&motion, &self.config.motor_limits()).is_err() {
+                        self.error = Some(MotionError::HomingFailed(self.homing.group()));
+                        self.homing.abort();
+                        return;
+                    }
+                    self.homing_move = Some((status.blocks_done.wrapping_add(1), steps));
+                    return;
+                }
+                HomingStep::Wait => return,
+                HomingStep::SetHome(motors) => {
+                    self.set_home(motors);
+                    stopped = 0;
+                }
+                HomingStep::Done => {
+                    self.finish_homing();
+                    return;
+                }
+                HomingStep::Failed(motors) => {
+                    self.error = Some(MotionError::HomingFailed(motors));
+                    return;
+                }
+            }
+        }
+    }
+
+    fn set_home(&mut self, motors: u8) {
+        let spu = self.config.steps_per_unit();
+        let home = match (self.config.home, self.config.kinematics) {
+            (HomePosition::DeltaTop, MachineKinematics::Delta(delta)) => Ok(delta.homed_carriage_heights()),
+            (HomePosition::Cartesian(point), kinematics) => kinematics.inverse(point),
+            (HomePosition::DeltaTop, kinematics) => kinematics.inverse([0.0; LINEAR_AXES]),
+        };
+        let Ok(home) = home else {
+            self.error = Some(MotionError::HomingFailed(motors));
+            return;
+        };
+        let steps = to_steps(home, [spu[0], spu[1], spu[2]]);
+        for motor in 0..LINEAR_AXES {
+            if motors & (1 << motor) != 0 {
+                self.motor_steps[motor] = steps[motor];
+                self.homed |= 1 << motor;
+            }
+        }
+    }
+
+    /// Homing is over: the Cartesian position follows from the motors.
+    fn finish_homing(&mut self) {
+        let spu = self.config.steps_per_unit();
+        let motors = kinematics::from_steps(
+            [self.motor_steps[0], self.motor_steps[1], self.motor_steps[2]],
+            [spu[0], spu[1], spu[2]],
+        );
+        if let Ok(point) = self.config.kinematics.forward(motors) {
+            // Keep exact figures where the homed position is a given point.
+            let point = match self.config.home {
+                HomePosition::Cartesian(home) if self.homed & 0b111 == 0b111 => home,
+                _ => point,
+            };
+            self.position[..LINEAR_AXES].copy_from_slice(&point);
+        }
+    }
+}
+
+/// The executor's endstop layout (bit 0 X_MIN, 1 X_MAX, 2 Y_MIN, 3 Y_MAX,
+/// 4 Z_MIN, 5 Z_MAX) to the step generator's (bit i: motor i min, 4 + i:
+/// max). Polarity must already be applied (1 = triggered).
+pub const fn pairs_to_endstop_bits(pairs: u8) -> u8 {
+    let mut bits = 0;
+    let mut axis = 0;
+    while axis < 3 {
+        if pairs & (1 << (2 * axis)) != 0 {
+            bits |= 1 << axis;
+        }
+        if pairs & (2 << (2 * axis)) != 0 {
+            bits |= 0x10 << axis;
+        }
+        axis += 1;
+    }
+    bits
+}

@@ -1,0 +1,222 @@
+//! Arcs (`G2` clockwise, `G3` counter-clockwise) in the XY plane, cut into
+//! straight chords that stay within a tolerance of the true circle.
+//!
+//! The cutter is an iterator of line end points, computed one at a time (no
+//! arrays: the AVR has no RAM for them). Z and E move linearly along the
+//! arc (a helix for Z). The last point is the programmed end point exactly,
+//! so rounding never accumulates from one arc to the next.
+//!
+//! A chord of angle φ on radius r strays r·(1 − cos(φ/2)) from the circle;
+//! keeping that below the tolerance τ means a chord no longer than
+//! 2·√(τ·(2r − τ)), so the arc of length |sweep|·r needs
+//! n = ⌈|sweep|·r / (2·√(τ·(2r − τ)))⌉ chords. Each point is computed
+//! directly from its angle (no incremental rotation, so no drift).
+//!
+//! Validity checks follow Grbl: with a centre (I/J), the start and end
+//! radii may differ by at most 0.5 mm, and by at most 0.1 % of the radius
+//! beyond 0.005 mm; with a radius (R), the end point must be within 2·|R|,
+//! and a negative R asks for the arc longer than half a turn. I/J with the
+//! end point on the start point is a full circle.
+
+use super::math::{atan2, sin_cos, sqrt, PI};
+
+/// X, Y, Z, E in mm.
+pub type Point = [f32; 4];
+
+/// Why an arc cannot be cut.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ArcError {
+    /// The radius is zero (centre on the start point).
+    ZeroRadius,
+    /// Start and end are not on one circle around the given centre.
+    RadiusMismatch,
+    /// An R arc whose end point is farther than 2·|R| or on the start.
+    RadiusTooSmall,
+}
+
+/// The chord end points of one arc.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ArcCutter {
+    centre: [f32; 2],
+    radius: f32,
+    start_angle: f32,
+    sweep: f32,
+    start: Point,
+    target: Point,
+    chords: u32,
+    done: u32,
+}
+
+impl ArcCutter {
+    /// `G2`/`G3` with `I`/`J`: the centre is `start + offset`.
+    pub fn with_centre(start: Point, target: Point, offset: [f32; 2], clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
+        let centre = [start[0] + offset[0], start[1] + offset[1]];
+        let radius = sqrt(offset[0] * offset[0] + offset[1] * offset[1]);
+        if !(radius > 0.0) {
+            return Err(ArcError::ZeroRadius);
+        }
+        let (ex, ey) = (target[0] - centre[0], target[1] - centre[1]);
+        let mismatch = (sqrt(ex * ex + ey * ey) - radius).abs();
+        if mismatch > 0.5 || (mismatch > 0.005 && mismatch > 0.001 * radius) {
+            return Err(ArcError::RadiusMismatch);
+        }
+        Ok(Self::new(start, target, centre, radius, clockwise, tolerance))
+    }
+
+    /// `G2`/`G3` with `R`: the centre is where a circle of radius |R|
+    /// passes through both points; R < 0 picks the arc over half a turn.
+    pub fn with_radius(start: Point, target: Point, radius: f32, clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
+        let (dx, dy) = (target[0] - start[0], target[1] - start[1]);
+        let chord = sqrt(dx * dx + dy * dy);
+        let r = radius.abs();
+        let half = chord / 2.0;
+        if !(chord > 0.0) || !(r >= half) {
+            return Err(ArcError::RadiusTooSmall);
+        }
+        // Distance from the chord's midpoint to the centre; for an arc of
+        // at most half a turn the centre lies to the right of the chord when
+        // going clockwise, to the left when counter-clockwise.
+        let rise = sqrt((r * r - half * half).max(0.0));
+        let (ux, uy) = (dx / chord, dy / chord);
+        let mut side = if clockwise { 1.0 } else { -1.0 };
+        if radius < 0.0 {
+            side = -side;
+        }
+        let centre = [start[0] + dx / 2.0 + side * rise * uy, start[1] + dy / 2.0 - side * rise * ux];
+        Ok(Self::new(start, target, centre, r, clockwise, tolerance))
+    }
+
+    fn new(start: Point, target: Point, centre: [f32; 2], radius: f32, clockwise: bool, tolerance: f32) -> Self {
+        let start_angle = atan2(start[1] - centre[1], start[0] - centre[0]);
+        let end_angle = atan2(target[1] - centre[1], target[0] - centre[0]);
+        let mut sweep = end_angle - start_angle;
+        const EPSILON: f32 = 5.0e-7;
+        if clockwise {
+            if sweep >= -EPSILON {
+                sweep -= 2.0 * PI;
+            }
+        } else if sweep <= EPSILON {
+            sweep += 2.0 * PI;
+        }
+        let tolerance = tolerance.clamp(1.0e-4, radius);
+        let chord = 2.0 * sqrt(tolerance * (2.0 * radius - tolerance));
+        let chords = (sweep.abs() * radius / chord).max(1.0);
+        // Round up, saturating far beyond any real arc.
+        let chords = (chords.min(1.0e6) as u32 + 1).min(1_000_000);
+        Self { centre, radius, start_angle, sweep, start, target, chords, done: 0 }
+    }
+
+    /// Chords in this arc.
+    pub fn chords(&self) -> u32 {
+        self.chords
+    }
+
+    /// Signed angle swept, radians (negative: clockwise).
+    pub fn sweep(&self) -> f32 {
+        self.sweep
+    }
+
+    pub fn radius(&self) -> f32 {
+        self.radius
+    }
+
+    pub fn centre(&self) -> [f32; 2] {
+        self.centre
+    }
+}
+
+impl Iterator for ArcCutter {
+    type Item = Point;
+
+    fn next(&mut self) -> Option<Point> {
+        if self.done >= self.chords {
+            return None;
+        }
+        self.done += 1;
+        if self.done == self.chords {
+            return Some(self.target);
+        }
+        let fraction = self.done as f32 / self.chords as f32;
+        let (sin, cos) = sin_cos(self.start_angle + self.sweep * fraction);
+        Some([
+            self.centre[0] + self.radius * cos,
+            self.centre[1] + self.radius * sin,
+            self.start[2] + (self.target[2] - self.start[2]) * fraction,
+            self.start[3] + (self.target[3] - self.start[3]) * fraction,
+        ])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::vec::Vec;
+
+    fn distance_to_circle(p: Point, centre: [f32; 2], r: f32) -> f32 {
+        (sqrt((p[0] - centre[0]).powi(2) + (p[1] - centre[1]).powi(2)) - r).abs()
+    }
+
+    #[test]
+    fn quarter_circle_clockwise_with_centre() {
+        // (0,10) → (10,0) around the origin, clockwise: a quarter turn.
+        let arc = ArcCutter::with_centre([0.0, 10.0, 0.0, 0.0], [10.0, 0.0, 2.0, 1.0], [0.0, -10.0], true, 0.002).unwrap();
+        assert!((arc.sweep() + PI / 2.0).abs() < 1e-5);
+        let chords = arc.chords();
+        let points: Vec<Point> = arc.clone().collect();
+        assert_eq!(points.len() as u32, chords);
+        assert_eq!(*points.last().unwrap(), [10.0, 0.0, 2.0, 1.0]);
+        let mut previous = [0.0, 10.0, 0.0, 0.0];
+        for p in &points {
+            assert!(distance_to_circle(*p, [0.0, 0.0], 10.0) < 1e-4);
+            // The chord's midpoint is within the tolerance of the circle.
+            let mid = [(p[0] + previous[0]) / 2.0, (p[1] + previous[1]) / 2.0, 0.0, 0.0];
+            assert!(distance_to_circle(mid, [0.0, 0.0], 10.0) <= 0.002 + 1e-4);
+            assert!(p[0] >= previous[0] - 1e-5, "clockwise from the top goes +X");
+            previous = *p;
+        }
+        // ≈ 15.7 mm of arc in chords of 2·√(0.002·19.998) = 0.4 mm.
+        assert!((39..=41).contains(&chords), "{chords}");
+    }
+
+    #[test]
+    fn full_circle_when_end_equals_start() {
+        let arc = ArcCutter::with_centre([10.0, 0.0, 0.0, 0.0], [10.0, 0.0, 0.0, 0.0], [-10.0, 0.0], false, 0.01).unwrap();
+        assert!((arc.sweep() - 2.0 * PI).abs() < 1e-5);
+        let points: Vec<Point> = arc.collect();
+        // Counter-clockwise from (10, 0): first points have y > 0.
+        assert!(points[0][1] > 0.0);
+        assert!(points.iter().all(|p| distance_to_circle(*p, [0.0, 0.0], 10.0) < 1e-4));
+    }
+
+    #[test]
+    fn radius_form_picks_the_right_centre() {
+        let start = [0.0, 0.0, 0.0, 0.0];
+        let target = [10.0, 0.0, 0.0, 0.0];
+        // R 10 clockwise from (0,0) to (10,0): the short arc bulges to +Y,
+        // centre below the chord.
+        let arc = ArcCutter::with_radius(start, target, 10.0, true, 0.002).unwrap();
+        assert!((arc.centre()[0] - 5.0).abs() < 1e-5 && arc.centre()[1] < 0.0);
+        assert!(arc.sweep() < 0.0 && arc.sweep() > -PI);
+        let mid = arc.clone().nth(arc.chords() as usize / 2).unwrap();
+        assert!(mid[1] > 0.0);
+        // R −10: the long way round.
+        let long = ArcCutter::with_radius(start, target, -10.0, true, 0.002).unwrap();
+        assert!(long.sweep() < -PI);
+        assert!(long.centre()[1] > 0.0);
+        // Counter-clockwise short arc bulges to −Y.
+        let ccw = ArcCutter::with_radius(start, target, 10.0, false, 0.002).unwrap();
+        let mid = ccw.clone().nth(ccw.chords() as usize / 2).unwrap();
+        assert!(mid[1] < 0.0);
+        assert_eq!(ArcCutter::with_radius(start, target, 4.0, true, 0.002), Err(ArcError::RadiusTooSmall));
+        assert_eq!(ArcCutter::with_radius(start, start, 4.0, true, 0.002), Err(ArcError::RadiusTooSmall));
+    }
+
+    #[test]
+    fn mismatched_radii_and_zero_radius_are_refused() {
+        let start = [0.0, 10.0, 0.0, 0.0];
+        assert_eq!(ArcCutter::with_centre(start, [11.0, 0.0, 0.0, 0.0], [0.0, -10.0], true, 0.002), Err(ArcError::RadiusMismatch));
+        assert_eq!(ArcCutter::with_centre(start, [10.0, 0.0, 0.0, 0.0], [0.0, 0.0], true, 0.002), Err(ArcError::ZeroRadius));
+        // Within 0.1 % of the radius is accepted (slicer rounding).
+        assert!(ArcCutter::with_centre(start, [10.008, 0.0, 0.0, 0.0], [0.0, -10.0], true, 0.002).is_ok());
+    }
+}

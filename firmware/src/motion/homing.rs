@@ -1,0 +1,303 @@
+//! Homing (`G28`): the per-axis sequence as a state machine that the motion
+//! layer drives one move at a time.
+//!
+//! For each group of motors homed together (one axis at a time on a
+//! Cartesian printer or the arm, all three towers at once on a delta):
+//!
+//! 1. *approach* towards the endstop at the fast rate, up to the axis'
+//!    travel; each motor stops on its own switch (the step interrupt does it,
+//!    so the stop comes within one step);
+//! 2. optionally *pause* (the arm: 500 ms);
+//! 3. either *back off* a fixed distance and *re-approach* slowly (the
+//!    RepRap way), or back off slowly until the switch *releases* (the
+//!    arm's thesis: that release point is home);
+//! 4. *set* the motors of the group to their home position.
+//!
+//! A switch that never triggers (or never releases) within the allowed
+//! travel fails homing for that group: the machine stays unhomed.
+//!
+//! Rates and distances are in steps, so one description fits carriages,
+//! lead screws and joints alike; the presets convert from mm.
+
+use super::stepper::MOTORS;
+
+/// How one motor homes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AxisHoming {
+    /// Home at the max endstop (else the min endstop).
+    pub towards_max: bool,
+    /// Approach rate, steps/s.
+    pub fast_rate: f32,
+    /// Re-approach (or release) rate, steps/s.
+    pub slow_rate: f32,
+    /// Back-off distance (or the most to back off looking for the release).
+    pub backoff_steps: u32,
+    /// The longest approach before giving up (the axis' travel and some).
+    pub max_travel_steps: u32,
+    /// Back off slowly until the switch releases, instead of bump homing.
+    pub release: bool,
+    /// Pause after the approach, ms.
+    pub pause_ms: u16,
+}
+
+impl AxisHoming {
+    /// Marlin-like bump homing from mm figures.
+    pub fn bump(towards_max: bool, steps_per_mm: f32, feed_mm_s: f32, travel_mm: f32, backoff_mm: f32) -> Self {
+        Self {
+            towards_max,
+            fast_rate: feed_mm_s * steps_per_mm,
+            slow_rate: feed_mm_s * steps_per_mm / 2.0,
+            backoff_steps: (backoff_mm * steps_per_mm) as u32,
+            max_travel_steps: (travel_mm * 1.5 * steps_per_mm) as u32,
+            release: false,
+            pause_ms: 0,
+        }
+    }
+}
+
+/// The order of homing and each motor's way.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HomingConfig {
+    /// Motor masks homed together, in order (0: unused slot).
+    pub sequence: [u8; 3],
+    pub axes: [AxisHoming; 3],
+    /// Acceleration of homing moves, steps/s².
+    pub acceleration: f32,
+}
+
+/// The endstop bit of a motor's homing switch (`StepBlock::watch` layout).
+pub fn endstop_bit(motor: usize, towards_max: bool) -> u8 {
+    if towards_max {
+        0x10 << motor
+    } else {
+        1 << motor
+    }
+}
+
+/// What the motion layer should do next.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum HomingStep {
+    /// Queue this motor-space move, then call again once it has finished.
+    Move { steps: [i32; MOTORS], rate: f32, watch: u8, release: bool },
+    /// Nothing yet (pausing); call again later.
+    Wait,
+    /// Set these motors to their home position, then call again.
+    SetHome(u8),
+    /// Every requested motor is homed.
+    Done,
+    /// These motors' switches did not trigger (or release) in time.
+    Failed(u8),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Phase {
+    NextGroup,
+    AfterApproach,
+    Pausing { until_ms: u32 },
+    AfterBackoff,
+    AfterReapproach,
+    AfterRelease,
+}
+
+/// The state machine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Homing {
+    requested: u8,
+    group_index: u8,
+    group: u8,
+    phase: Phase,
+    active: bool,
+}
+
+impl Default for Homing {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Homing {
+    pub const fn new() -> Self {
+        Self { requested: 0, group_index: 0, group: 0, phase: Phase::NextGroup, active: false }
+    }
+
+    /// Begin homing these motors (a mask of motors 0–2).
+    pub fn start(&mut self, motors: u8) {
+        *self = Self { requested: motors & 0b111, active: true, ..Self::new() };
+    }
+
+    pub fn is_active(&self) -> bool {
+        self.active
+    }
+
+    pub fn abort(&mut self) {
+        self.active = false;
+    }
+
+    /// The motors being homed right now.
+    pub fn group(&self) -> u8 {
+        self.group
+    }
+
+    /// The next step. `stopped`: the motors that their endstop stopped in
+    /// the move that just finished (ignored when no move was asked for).
+    pub fn next(&mut self, config: &HomingConfig, stopped: u8, now_ms: u32) -> HomingStep {
+        if !self.active {
+            return HomingStep::Done;
+        }
+        let group = self.group;
+        let lead = config.axes[group.trailing_zeros().min(2) as usize];
+        match self.phase {
+            Phase::NextGroup => self.start_next_group(config),
+            Phase::AfterApproach => {
+                if stopped & group != group {
+                    return self.fail(group & !stopped);
+                }
+                if lead.pause_ms > 0 {
+                    self.phase = Phase::Pausing { until_ms: now_ms.wrapping_add(lead.pause_ms as u32) };
+                    return HomingStep::Wait;
+                }
+                self.back_off(config)
+            }
+            Phase::Pausing { until_ms } => {
+                if (now_ms.wrapping_sub(until_ms) as i32) < 0 {
+                    return HomingStep::Wait;
+                }
+                self.back_off(config)
+            }
+            Phase::AfterBackoff => {
+                self.phase = Phase::AfterReapproach;
+                self.group_move(config, true, |axis| (axis.backoff_steps.saturating_mul(2), axis.slow_rate), true, false)
+            }
+            Phase::AfterReapproach | Phase::AfterRelease => {
+                if stopped & group != group {
+                    return self.fail(group & !stopped);
+                }
+                self.phase = Phase::NextGroup;
+                HomingStep::SetHome(group)
+            }
+        }
+    }
+
+    fn start_next_group(&mut self, config: &HomingConfig) -> HomingStep {
+        while (self.group_index as usize) < config.sequence.len() {
+            let group = config.sequence[self.group_index as usize] & self.requested;
+            self.group_index += 1;
+            if group != 0 {
+                self.group = group;
+                self.phase = Phase::AfterApproach;
+                return self.group_move(config, true, |axis| (axis.max_travel_steps, axis.fast_rate), true, false);
+            }
+        }
+        self.active = false;
+        self.group = 0;
+        HomingStep::Done
+    }
+
+    fn back_off(&mut self, config: &HomingConfig) -> HomingStep {
+        let lead = config.axes[self.group.trailing_zeros().min(2) as usize];
+        if lead.release {
+            self.phase = Phase::AfterRelease;
+            self.group_move(config, false, |axis| (axis.backoff_steps, axis.slow_rate), true, true)
+        } else {
+            self.phase = Phase::AfterBackoff;
+            self.group_move(config, false, |axis| (axis.backoff_steps, axis.fast_rate), false, false)
+        }
+    }
+
+    /// A move of every motor of the group, towards (or away from) its
+    /// switch, watching it or not.
+    fn group_move(
+        &self,
+        config: &HomingConfig,
+        towards: bool,
+        distance_and_rate: impl Fn(&AxisHoming) -> (u32, f32),
+        watch: bool,
+        release: bool,
+    ) -> HomingStep {
+        let mut steps = [0_i32; MOTORS];
+        let mut rate = f32::MAX;
+        let mut watch_bits = 0;
+        for (motor, axis) in config.axes.iter().enumerate() {
+            if self.group & (1 << motor) == 0 {
+                continue;
+            }
+            let (distance, axis_rate) = distance_and_rate(axis);
+            let distance = distance.min(i32::MAX as u32) as i32;
+            let positive = axis.towards_max == towards;
+            steps[motor] = if positive { distance } else { -distance };
+            rate = rate.min(axis_rate);
+            if watch {
+                watch_bits |= endstop_bit(motor, axis.towards_max);
+            }
+        }
+        HomingStep::Move { steps, rate, watch: watch_bits, release }
+    }
+
+    fn fail(&mut self, motors: u8) -> HomingStep {
+        self.active = false;
+        HomingStep::Failed(motors)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn arm_config() -> HomingConfig {
+        let joint = |towards_max| AxisHoming {
+            towards_max,
+            fast_rate: 200.0,
+            slow_rate: 20.0,
+            backoff_steps: 2000,
+            max_travel_steps: 20_000,
+            release: true,
+            pause_ms: 500,
+        };
+        HomingConfig { sequence: [0b100, 0b010, 0b001], axes: [joint(true), joint(true), joint(false)], acceleration: 1000.0 }
+    }
+
+    #[test]
+    fn arm_sequence_is_z_then_y_then_x_with_pause_and_release() {
+        let config = arm_config();
+        let mut homing = Homing::new();
+        homing.start(0b111);
+        let mut now = 0;
+        for (motor, sign) in [(2_usize, -1), (1, 1), (0, 1)] {
+            let bit = 1 << motor;
+            let HomingStep::Move { steps, rate, watch, release } = homing.next(&config, 0, now) else { panic!() };
+            assert_eq!(steps[motor], sign * 20_000, "approach of motor {motor}");
+            assert_eq!((rate, release), (200.0, false));
+            assert_eq!(watch, endstop_bit(motor, sign > 0));
+            // Switch hit: pause 500 ms.
+            assert_eq!(homing.next(&config, bit, now), HomingStep::Wait);
+            now += 499;
+            assert_eq!(homing.next(&config, bit, now), HomingStep::Wait);
+            now += 1;
+            let HomingStep::Move { steps, rate, release, .. } = homing.next(&config, bit, now) else { panic!() };
+            assert_eq!((steps[motor], rate, release), (-sign * 2000, 20.0, true));
+            assert_eq!(homing.next(&config, bit, now), HomingStep::SetHome(bit));
+        }
+        assert_eq!(homing.next(&config, 0, now), HomingStep::Done);
+        assert!(!homing.is_active());
+    }
+
+    #[test]
+    fn bump_homing_and_failure() {
+        let axis = AxisHoming::bump(false, 100.0, 50.0, 200.0, 5.0);
+        let config = HomingConfig { sequence: [0b001, 0b010, 0b100], axes: [axis; 3], acceleration: 100_000.0 };
+        let mut homing = Homing::new();
+        homing.start(0b001);
+        let HomingStep::Move { steps, .. } = homing.next(&config, 0, 0) else { panic!() };
+        assert_eq!(steps[0], -30_000);
+        let HomingStep::Move { steps, watch, .. } = homing.next(&config, 1, 0) else { panic!() };
+        assert_eq!((steps[0], watch), (500, 0));
+        let HomingStep::Move { steps, rate, watch, .. } = homing.next(&config, 0, 0) else { panic!() };
+        assert_eq!((steps[0], rate, watch), (-1000, 2500.0, 1));
+        assert_eq!(homing.next(&config, 1, 0), HomingStep::SetHome(1));
+        assert_eq!(homing.next(&config, 0, 0), HomingStep::Done);
+        // A switch that never triggers.
+        homing.start(0b010);
+        homing.next(&config, 0, 0);
+        assert_eq!(homing.next(&config, 0, 0), HomingStep::Failed(0b010));
+    }
+}

@@ -1,0 +1,425 @@
+//! The look-ahead planner: a ring of blocks whose entry speeds are raised as
+//! high as the cornering and acceleration limits allow, while every block can
+//! still stop within the buffer.
+//!
+//! # Algorithm (Grbl's, re-derived)
+//!
+//! A block is one straight move of all motors. For each block the planner
+//! knows its length L (mm, along the Cartesian path, or |E| for an
+//! extruder-only move), its nominal speed v (mm/s), its acceleration a
+//! (mm/s²) and the largest speed it may be entered with, `max_entry`:
+//!
+//! - the junction speed with the previous block by *junction deviation*:
+//!   the corner is taken as if it were a circular arc that stays within δ of
+//!   the corner point, at the centripetal acceleration a. With
+//!   cos θ = −u_prev·u (u: unit vectors) and sin(θ/2) = √((1 − cos θ)/2),
+//!   v² = a·δ·sin(θ/2)/(1 − sin(θ/2)). Straight on: unlimited; reversal: 0.
+//!   No trigonometry, one square root.
+//! - and the nominal speeds of both blocks.
+//!
+//! Entry speeds (squared, so that a·d terms add: v₁² = v₀² + 2·a·d) are then
+//! set by two passes each time a block is added:
+//!
+//! 1. *Backward*, newest to oldest: the newest block must stop at its end;
+//!    each block's entry is the lower of its `max_entry` and what it can
+//!    decelerate from to reach its successor's entry.
+//! 2. *Forward*, oldest to newest: a block cannot be entered faster than its
+//!    predecessor can accelerate to.
+//!
+//! # Invariants
+//!
+//! - The newest block always exits at 0: whatever the host sends next, the
+//!   machine can stop within the buffer.
+//! - Entry speeds only ever rise as blocks are added (more room to stop), so
+//!   the segment preparation, which works ahead of the planner, is never
+//!   asked to have gone slower than it did.
+//! - `planned`: every block up to it is optimal (at its `max_entry`, or
+//!   accelerating at full rate from an optimal block) and never changes
+//!   again; the passes only run over the blocks after it. This keeps the
+//!   cost per new block at a few blocks instead of the whole buffer.
+//! - The oldest block (`tail`) belongs to the segment preparation, which
+//!   rewrites its `entry_speed_sqr` and `millimetres` to its current speed
+//!   and remaining length as it goes; it is never changed by the passes.
+//!
+//! Speeds and lengths are `f32`: this runs in the main loop only (Marlin
+//! does the same on the AVR). The step interrupt never reads a block.
+
+use super::stepper::MOTORS;
+use super::math::sqrt;
+
+/// Blocks in the ring (one stays empty: 23 usable). Look-ahead must hold
+/// the distance to stop from full speed, v²/(2a): 3.3 mm at 100 mm/s and
+/// 1500 mm/s², which 0.2 mm slicer segments fill only with ≥ 17 blocks.
+/// 24 × 33 bytes on the AVR.
+pub const PLANNER_SLOTS: usize = 24;
+/// Largest step count of one motor in one block (16-bit Bresenham).
+pub const MAX_BLOCK_STEPS: u32 = u16::MAX as u32;
+
+/// One straight move, ready for look-ahead and stepping.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Block {
+    /// Steps of every motor.
+    pub steps: [u16; MOTORS],
+    /// The largest of `steps`.
+    pub events: u16,
+    /// Bit i set: motor i moves positive.
+    pub direction: u8,
+    /// Endstops watched while this block runs (homing), see `StepBlock`.
+    pub watch: u8,
+    pub watch_release: bool,
+    /// Remaining path length (mm); shrinks while the block is prepared.
+    pub millimetres: f32,
+    /// Entry speed² ((mm/s)²); the current speed² once preparation began.
+    pub entry_speed_sqr: f32,
+    pub max_entry_speed_sqr: f32,
+    pub nominal_speed_sqr: f32,
+    /// mm/s², within every motor's limit.
+    pub acceleration: f32,
+}
+
+/// A move as the motion layer hands it over.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PlannerMove {
+    /// Signed steps of every motor (each |·| ≤ [`MAX_BLOCK_STEPS`]).
+    pub steps: [i32; MOTORS],
+    /// Path length, mm (> 0).
+    pub millimetres: f32,
+    /// Unit vector of the move in (X, Y, Z, E) for cornering; all zero:
+    /// the move starts and ends at rest (homing, changes of kind).
+    pub unit: [f32; MOTORS],
+    /// Requested speed, mm/s.
+    pub speed: f32,
+    /// Requested acceleration, mm/s².
+    pub acceleration: f32,
+    pub watch: u8,
+    pub watch_release: bool,
+}
+
+/// Per-motor limits in steps: rate (steps/s) and acceleration (steps/s²).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotorLimits {
+    pub max_rate: [f32; MOTORS],
+    pub max_accel: [f32; MOTORS],
+}
+
+/// The ring of blocks.
+pub struct Planner {
+    blocks: [Block; PLANNER_SLOTS],
+    head: u8,
+    tail: u8,
+    planned: u8,
+    previous_unit: [f32; MOTORS],
+    previous_nominal_speed_sqr: f32,
+    /// `M205 J`, mm.
+    pub junction_deviation: f32,
+}
+
+impl Default for Planner {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+const fn next(index: u8) -> u8 {
+    if index as usize + 1 == PLANNER_SLOTS {
+        0
+    } else {
+        index + 1
+    }
+}
+
+const fn prev(index: u8) -> u8 {
+    if index == 0 {
+        PLANNER_SLOTS as u8 - 1
+    } else {
+        index - 1
+    }
+}
+
+impl Planner {
+    pub const fn new() -> Self {
+        const EMPTY: Block = Block {
+            steps: [0; MOTORS],
+            events: 0,
+            direction: 0,
+            watch: 0,
+            watch_release: false,
+            millimetres: 0.0,
+            entry_speed_sqr: 0.0,
+            max_entry_speed_sqr: 0.0,
+            nominal_speed_sqr: 0.0,
+            acceleration: 0.0,
+        };
+        Self {
+            blocks: [EMPTY; PLANNER_SLOTS],
+            head: 0,
+            tail: 0,
+            planned: 0,
+            previous_unit: [0.0; MOTORS],
+            previous_nominal_speed_sqr: 0.0,
+            junction_deviation: 0.013,
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.head == self.tail
+    }
+
+    pub fn is_full(&self) -> bool {
+        next(self.head) == self.tail
+    }
+
+    /// Blocks queued (the one being prepared included).
+    pub fn len(&self) -> usize {
+        (self.head as usize + PLANNER_SLOTS - self.tail as usize) % PLANNER_SLOTS
+    }
+
+    /// The oldest block: the one the segment preparation works on.
+    pub fn current(&self) -> Option<&Block> {
+        (!self.is_empty()).then(|| &self.blocks[self.tail as usize])
+    }
+
+    pub fn current_mut(&mut self) -> Option<&mut Block> {
+        if self.is_empty() {
+            None
+        } else {
+            Some(&mut self.blocks[self.tail as usize])
+        }
+    }
+
+    /// Speed² the oldest block must end with: the next block's entry, or 0.
+    pub fn exit_speed_sqr(&self) -> f32 {
+        let following = next(self.tail);
+        if self.is_empty() || following == self.head {
+            0.0
+        } else {
+            self.blocks[following as usize].entry_speed_sqr
+        }
+    }
+
+    /// The oldest block is fully prepared: drop it.
+    pub fn discard_current(&mut self) {
+        if self.is_empty() {
+            return;
+        }
+        if self.planned == self.tail {
+            self.planned = next(self.tail);
+        }
+        self.tail = next(self.tail);
+        if self.is_empty() {
+            self.planned = self.tail;
+        }
+    }
+
+    /// Drop every block (after a fault or an abandoned homing move).
+    pub fn clear(&mut self) {
+        self.tail = self.head;
+        self.planned = self.head;
+        self.previous_unit = [0.0; MOTORS];
+        self.previous_nominal_speed_sqr = 0.0;
+    }
+
+    /// The blocks after the one being prepared, oldest first (for tests and
+    /// reports).
+    pub fn blocks(&self) -> impl Iterator<Item = &Block> {
+        let mut index = self.tail;
+        core::iter::from_fn(move || {
+            if index == self.head {
+                return None;
+            }
+            let block = &self.blocks[index as usize];
+            index = next(index);
+            Some(block)
+        })
+    }
+
+    /// Add a move. `Err` gives it back when the ring is full; a move without
+    /// steps is accepted and dropped.
+    pub fn push(&mut self, motion: &PlannerMove, limits: &MotorLimits) -> Result<(), PlannerMove> {
+        if self.is_full() {
+            return Err(*motion);
+        }
+        let mut block = Block { watch: motion.watch, watch_release: motion.watch_release, ..Block::default() };
+        let mut speed = motion.speed;
+        let mut acceleration = motion.acceleration;
+        for motor in 0..MOTORS {
+            let steps = motion.steps[motor].unsigned_abs().min(MAX_BLOCK_STEPS);
+            if steps == 0 {
+                continue;
+            }
+            block.steps[motor] = steps as u16;
+            block.events = block.events.max(steps as u16);
+            if motion.steps[motor] > 0 {
+                block.direction |= 1 << motor;
+            }
+            // A motor covers steps/L steps per mm of path: cap the path's
+            // speed and acceleration so that it stays within its own limits.
+            let steps_per_mm = steps as f32 / motion.millimetres;
+            speed = speed.min(limits.max_rate[motor] / steps_per_mm);
+            acceleration = acceleration.min(limits.max_accel[motor] / steps_per_mm);
+        }
+        if block.events == 0 || !(motion.millimetres > 0.0) || !(speed > 0.0) || !(acceleration > 0.0) {
+            return Ok(());
+        }
+        block.millimetres = motion.millimetres;
+        block.acceleration = acceleration;
+        block.nominal_speed_sqr = speed * speed;
+        block.max_entry_speed_sqr = if self.is_empty() {
+            0.0
+        } else {
+            self.junction_speed_sqr(&motion.unit, acceleration)
+                .min(block.nominal_speed_sqr)
+                .min(self.previous_nominal_speed_sqr)
+        };
+        block.entry_speed_sqr = 0.0;
+        self.previous_unit = motion.unit;
+        self.previous_nominal_speed_sqr = block.nominal_speed_sqr;
+        self.blocks[self.head as usize] = block;
+        self.head = next(self.head);
+        self.recalculate();
+        Ok(())
+    }
+
+    /// Junction deviation (see the module comment).
+    fn junction_speed_sqr(&self, unit: &[f32; MOTORS], acceleration: f32) -> f32 {
+        let mut cos_theta = 0.0;
+        let mut previous_length = 0.0;
+        let mut length = 0.0;
+        for motor in 0..MOTORS {
+            cos_theta -= self.previous_unit[motor] * unit[motor];
+            previous_length += self.previous_unit[motor] * self.previous_unit[motor];
+            length += unit[motor] * unit[motor];
+        }
+        if previous_length < 0.5 || length < 0.5 {
+            // No direction (homing, a change between printing and
+            // extruder-only moves): start from rest.
+            return 0.0;
+        }
+        if cos_theta > 0.999_999 {
+            return 0.0;
+        }
+        if cos_theta < -0.999_999 {
+            return f32::MAX;
+        }
+        let sin_half = sqrt(0.5 * (1.0 - cos_theta));
+        acceleration * self.junction_deviation * sin_half / (1.0 - sin_half)
+    }
+
+    fn recalculate(&mut self) {
+        let newest = prev(self.head);
+        // Backward pass over the blocks after `planned`.
+        let mut index = newest;
+        let mut next_entry_sqr = 0.0;
+        while index != self.planned {
+            let block = &mut self.blocks[index as usize];
+            if block.entry_speed_sqr != block.max_entry_speed_sqr {
+                let reachable = next_entry_sqr + 2.0 * block.acceleration * block.millimetres;
+                block.entry_speed_sqr = block.max_entry_speed_sqr.min(reachable);
+            }
+            next_entry_sqr = block.entry_speed_sqr;
+            index = prev(index);
+        }
+        // Forward pass from `planned`.
+        let mut index = self.planned;
+        while index != newest {
+            let following = next(index);
+            let current = self.blocks[index as usize];
+            let block = &mut self.blocks[following as usize];
+            if current.entry_speed_sqr < block.entry_speed_sqr {
+                let reachable = current.entry_speed_sqr + 2.0 * current.acceleration * current.millimetres;
+                if reachable < block.entry_speed_sqr {
+                    // Full acceleration through `current`: nothing before
+                    // `block` can improve any more.
+                    block.entry_speed_sqr = reachable;
+                    self.planned = following;
+                }
+            }
+            if block.entry_speed_sqr == block.max_entry_speed_sqr {
+                self.planned = following;
+            }
+            index = following;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LIMITS: MotorLimits = MotorLimits { max_rate: [30_000.0; MOTORS], max_accel: [300_000.0; MOTORS] };
+
+    fn line(dx: f32, dy: f32, speed: f32) -> PlannerMove {
+        let length = sqrt(dx * dx + dy * dy);
+        PlannerMove {
+            steps: [(dx * 100.0) as i32, (dy * 100.0) as i32, 0, 0],
+            millimetres: length,
+            unit: [dx / length, dy / length, 0.0, 0.0],
+            speed,
+            acceleration: 1000.0,
+            watch: 0,
+            watch_release: false,
+        }
+    }
+
+    #[test]
+    fn newest_block_always_stops_and_straight_lines_keep_speed() {
+        let mut planner = Planner::new();
+        for _ in 0..10 {
+            planner.push(&line(10.0, 0.0, 100.0), &LIMITS).unwrap();
+        }
+        let blocks: std::vec::Vec<_> = planner.blocks().copied().collect();
+        assert_eq!(blocks[0].entry_speed_sqr, 0.0);
+        // 10 mm at 1000 mm/s² from rest reaches √(2·1000·10) = 141 > 100.
+        for block in &blocks[1..] {
+            assert_eq!(block.entry_speed_sqr, 100.0 * 100.0);
+        }
+        let last = blocks.last().unwrap();
+        // It can still stop: entry² ≤ 2·a·L.
+        assert!(last.entry_speed_sqr <= 2.0 * last.acceleration * last.millimetres);
+    }
+
+    #[test]
+    fn junction_deviation_matches_grbl_formula() {
+        let mut planner = Planner::new();
+        planner.push(&line(10.0, 0.0, 200.0), &LIMITS).unwrap();
+        planner.push(&line(0.0, 10.0, 200.0), &LIMITS).unwrap();
+        planner.push(&line(10.0, 0.0, 200.0), &LIMITS).unwrap();
+        // 90°: sin(45°) = 0.7071; v² = a·δ·s/(1 − s) = 1000·0.013·2.4142.
+        let expected = 1000.0 * 0.013 * (0.707_106_77 / (1.0 - 0.707_106_77));
+        let second = planner.blocks().nth(1).unwrap();
+        assert!((second.max_entry_speed_sqr - expected).abs() < 1e-3, "{}", second.max_entry_speed_sqr);
+        assert!((second.entry_speed_sqr - expected).abs() < 1e-3);
+        // A reversal stops.
+        let mut planner = Planner::new();
+        planner.push(&line(10.0, 0.0, 100.0), &LIMITS).unwrap();
+        planner.push(&line(-10.0, 0.0, 100.0), &LIMITS).unwrap();
+        assert_eq!(planner.blocks().nth(1).unwrap().max_entry_speed_sqr, 0.0);
+    }
+
+    #[test]
+    fn per_motor_limits_cap_speed_and_acceleration() {
+        let limits = MotorLimits { max_rate: [5_000.0, 30_000.0, 30_000.0, 30_000.0], max_accel: [50_000.0, 300_000.0, 300_000.0, 300_000.0] };
+        let mut planner = Planner::new();
+        planner.push(&line(10.0, 0.0, 100.0), &limits).unwrap();
+        let block = planner.current().unwrap();
+        // 100 steps/mm: 5000 steps/s = 50 mm/s, 50 000 steps/s² = 500 mm/s².
+        assert_eq!(block.nominal_speed_sqr, 2500.0);
+        assert_eq!(block.acceleration, 500.0);
+    }
+
+    #[test]
+    fn ring_fills_and_drains() {
+        let mut planner = Planner::new();
+        let mut accepted = 0;
+        while planner.push(&line(1.0, 0.0, 50.0), &LIMITS).is_ok() {
+            accepted += 1;
+        }
+        assert_eq!(accepted, PLANNER_SLOTS - 1);
+        assert!(planner.is_full());
+        planner.discard_current();
+        assert!(!planner.is_full());
+        assert_eq!(planner.len(), PLANNER_SLOTS - 2);
+        planner.clear();
+        assert!(planner.is_empty());
+    }
+}

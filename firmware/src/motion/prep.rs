@@ -1,0 +1,301 @@
+//! Segment preparation: turns the planner's oldest block into timed
+//! [`Segment`]s for the step interrupt, a little ahead of it (main loop).
+//!
+//! # Algorithm
+//!
+//! The block is measured in *events* (steps of its dominant motor). From the
+//! current speed v₀, the events left D, the nominal speed V, the exit speed
+//! vₓ (the next block's entry, re-read every segment because look-ahead may
+//! raise it) and the acceleration A (all in events and seconds), the rest of
+//! the block is a trapezoid: accelerate to V (or to the peak of a triangle),
+//! cruise, decelerate to vₓ. Event e (counted from now) happens at the exact
+//! time t(e) of that profile.
+//!
+//! The profile is cut into segments of k events. Within a segment the
+//! interrupt's wait grows linearly (`interval`, `add`); the two are chosen
+//! so that the first wait is exact and the segment's total time is exact:
+//! add = 2·(T − k·I₀)/(k·(k − 1)). Segments are short where the speed
+//! changes fast relative to itself (at most [`SPEED_RATIO`] apart) and at
+//! most [`MAX_SEGMENT_S`] long, so the linear wait is a close fit and the
+//! queued work (≤ 15 segments) stays re-plannable.
+//!
+//! Times are converted to 1/256 timer ticks; what rounding leaves over
+//! (`time_debt_q8`) is taken off the next segment, so the step times never
+//! drift from the profile by more than a fraction of a tick.
+//!
+//! As it goes it writes the block's current speed and remaining length back
+//! into the planner (`entry_speed_sqr`, `millimetres`), which is what lets
+//! the look-ahead raise the exit speed of a block already under way.
+
+use super::math::sqrt;
+use super::planner::Planner;
+use super::stepper::{Segment, StepBlock, StepFeeder, TIMER_HZ};
+
+/// Longest segment, seconds: bounds the queued (committed) motion to
+/// ≈ 15 × 5 ms, so look-ahead can still change what follows.
+pub const MAX_SEGMENT_S: f32 = 0.005;
+/// Largest ratio of speeds at the two ends of an accelerating segment.
+pub const SPEED_RATIO: f32 = 1.2;
+/// Q24.8 ticks per second.
+const Q8_PER_S: f32 = TIMER_HZ as f32 * 256.0;
+
+/// The preparation state.
+pub struct Prep {
+    /// A block is under way (its `StepBlock` is queued).
+    active: bool,
+    events_left: u16,
+    events_per_mm: f32,
+    /// Speed at the end of the last queued segment, events/s.
+    speed: f32,
+    /// Queued time minus ideal time, 1/256 ticks.
+    time_debt_q8: f32,
+    /// Shortest wait the interrupt may be given, 1/256 ticks.
+    pub min_interval_q8: u32,
+    /// Blocks handed to the interrupt so far (wrapping; compare with
+    /// `StepperStatus::blocks_done`).
+    blocks_started: u16,
+}
+
+impl Default for Prep {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Where the rest of a block is in its trapezoid (events, events/s).
+#[derive(Clone, Copy, Debug)]
+struct Profile {
+    start_speed: f32,
+    accel: f32,
+    peak: f32,
+    /// Events from now where acceleration ends and deceleration begins.
+    accel_end: f32,
+    decel_start: f32,
+}
+
+impl Profile {
+    fn new(start_speed: f32, distance: f32, nominal: f32, exit: f32, accel: f32) -> Self {
+        let v0_sqr = start_speed * start_speed;
+        let peak_sqr_nominal = nominal * nominal;
+        let exit_sqr = exit * exit;
+        let two_a = 2.0 * accel;
+        let accel_distance = (peak_sqr_nominal - v0_sqr) / two_a;
+        let decel_distance = (peak_sqr_nominal - exit_sqr) / two_a;
+        if start_speed <= nominal && accel_distance + decel_distance <= distance {
+            return Self {
+                start_speed,
+                accel,
+                peak: nominal,
+                accel_end: accel_distance,
+                decel_start: distance - decel_distance,
+            };
+        }
+        // A triangle: the peak where the two ramps meet. If the exit cannot
+        // be reached (it always can, by the planner's passes, but rounding
+        // happens) accelerate throughout; if the speed is too high to slow
+        // to the exit (likewise), decelerate throughout.
+        let peak_sqr = ((two_a * distance + v0_sqr + exit_sqr) * 0.5).max(v0_sqr);
+        let peak = sqrt(peak_sqr).max(start_speed);
+        let accel_end = ((peak_sqr - v0_sqr) / two_a).clamp(0.0, distance);
+        Self { start_speed, accel, peak, accel_end, decel_start: accel_end }
+    }
+
+    /// Speed after `e` events.
+    fn speed_at(&self, e: f32) -> f32 {
+        if e <= self.accel_end {
+            sqrt(self.start_speed * self.start_speed + 2.0 * self.accel * e)
+        } else if e <= self.decel_start {
+            self.peak
+        } else {
+            sqrt((self.peak * self.peak - 2.0 * self.accel * (e - self.decel_start)).max(0.0))
+        }
+    }
+
+    /// Time from now to event `e`, seconds.
+    fn time_at(&self, e: f32) -> f32 {
+        if e <= self.accel_end {
+            return (self.speed_at(e) - self.start_speed) / self.accel;
+        }
+        let accel_time = (self.peak - self.start_speed) / self.accel;
+        if e <= self.decel_start {
+            return accel_time + (e - self.accel_end) / self.peak;
+        }
+        let cruise_time = (self.decel_start - self.accel_end) / self.peak;
+        accel_time + cruise_time + (self.peak - self.speed_at(e)) / self.accel
+    }
+
+    /// Events in the next segment (≥ 1, ≤ `left`).
+    fn segment_events(&self, left: u16) -> u16 {
+        let v = self.start_speed;
+        let (mut target, boundary) = if self.accel_end >= 0.5 {
+            let faster = (v * SPEED_RATIO).min(self.peak);
+            ((faster * faster - v * v) / (2.0 * self.accel), self.accel_end)
+        } else if self.decel_start >= 0.5 {
+            (f32::MAX, self.decel_start)
+        } else {
+            let slower = v / SPEED_RATIO;
+            ((v * v - slower * slower) / (2.0 * self.accel), left as f32)
+        };
+        let within_time = v * MAX_SEGMENT_S + 0.5 * self.accel * MAX_SEGMENT_S * MAX_SEGMENT_S;
+        target = target.min(within_time);
+        // End near the phase boundary rather than just past it.
+        if target > boundary {
+            target = boundary + 0.5;
+        }
+        let events = if target >= left as f32 { left } else { target as u16 };
+        events.clamp(1, left.max(1))
+    }
+}
+
+impl Prep {
+    pub const fn new() -> Self {
+        Self {
+            active: false,
+            events_left: 0,
+            events_per_mm: 0.0,
+            speed: 0.0,
+            time_debt_q8: 0.0,
+            min_interval_q8: 8 << 8,
+            blocks_started: 0,
+        }
+    }
+
+    /// A block is under way.
+    pub fn is_active(&self) -> bool {
+        self.active
+    }
+
+    /// Blocks handed to the interrupt so far (wrapping).
+    pub fn blocks_started(&self) -> u16 {
+        self.blocks_started
+    }
+
+    /// Forget the block under way (after a fault or an abandoned homing
+    /// move; the interrupt drops what was queued).
+    pub fn reset(&mut self) {
+        self.active = false;
+        self.events_left = 0;
+        self.time_debt_q8 = 0.0;
+    }
+
+    /// Queue segments while there is room and something to prepare.
+    /// Returns the number of segments queued.
+    pub fn fill(&mut self, planner: &mut Planner, feeder: &mut StepFeeder<'_>) -> usize {
+        let mut queued = 0;
+        loop {
+            let starts_block = !self.active;
+            if starts_block {
+                let Some(block) = planner.current() else { break };
+                if !feeder.block_room() {
+                    break;
+                }
+                let step_block = StepBlock {
+                    steps: block.steps,
+                    events: block.events,
+                    direction: block.direction,
+                    watch: block.watch,
+                    watch_release: block.watch_release,
+                };
+                self.events_per_mm = block.events as f32 / block.millimetres;
+                self.speed = sqrt(block.entry_speed_sqr) * self.events_per_mm;
+                self.events_left = block.events;
+                self.active = true;
+                feeder.push_block(step_block);
+                self.blocks_started = self.blocks_started.wrapping_add(1);
+            } else if !feeder.segment_room() {
+                break;
+            }
+            let exit_sqr = planner.exit_speed_sqr();
+            let Some(block) = planner.current_mut() else { break };
+            let segment = self.next_segment(block.nominal_speed_sqr, exit_sqr, block.acceleration, starts_block);
+            feeder.push_segment(segment);
+            queued += 1;
+            block.millimetres = self.events_left as f32 / self.events_per_mm;
+            let speed_mm = self.speed / self.events_per_mm;
+            block.entry_speed_sqr = speed_mm * speed_mm;
+            if self.events_left == 0 {
+                self.active = false;
+                planner.discard_current();
+            }
+        }
+        queued
+    }
+
+    fn next_segment(&mut self, nominal_speed_sqr: f32, exit_speed_sqr: f32, acceleration: f32, starts_block: bool) -> Segment {
+        let epm = self.events_per_mm;
+        let profile = Profile::new(
+            self.speed,
+            self.events_left as f32,
+            sqrt(nominal_speed_sqr) * epm,
+            sqrt(exit_speed_sqr) * epm,
+            acceleration * epm,
+        );
+        let events = profile.segment_events(self.events_left);
+        let duration = profile.time_at(events as f32);
+        let first = if events == 1 { duration } else { profile.time_at(1.0) };
+        let (interval, add, actual_q8) = self.fit(events, duration * Q8_PER_S - self.time_debt_q8, first * Q8_PER_S);
+        self.time_debt_q8 += actual_q8 - duration * Q8_PER_S;
+        self.speed = profile.speed_at(events as f32);
+        self.events_left -= events;
+        Segment { interval, add, events, starts_block }
+    }
+
+    /// Interval and add (Q24.8) for `events` events lasting `total_q8`,
+    /// the first `first_q8`; also the total the interrupt will really take.
+    fn fit(&self, events: u16, total_q8: f32, first_q8: f32) -> (u32, i32, f32) {
+        let k = events as f32;
+        let min = self.min_interval_q8 as f32;
+        let total_q8 = total_q8.max(min * k);
+        if events == 1 {
+            let interval = total_q8 + 0.5;
+            return (interval as u32, 0, (interval as u32) as f32);
+        }
+        let pairs = k * (k - 1.0) * 0.5;
+        let mut add = round_f32((total_q8 - k * first_q8) / pairs);
+        // Keep every wait above the minimum: the last one is I₀ + (k−1)·add.
+        let mut interval = round_f32((total_q8 - add * pairs) / k);
+        if interval < min || interval + add * (k - 1.0) < min {
+            add = 0.0;
+            interval = round_f32(total_q8 / k).max(min);
+        }
+        let actual = k * interval + add * pairs;
+        (interval as u32, add as i32, actual)
+    }
+}
+
+fn round_f32(value: f32) -> f32 {
+    super::math::round_to_i32(value) as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn profile_times_match_the_analytic_trapezoid() {
+        // 1000 events, 0 → 10 000 ev/s at 100 000 ev/s²: 500 to accelerate,
+        // 500 to stop: a triangle peaking at 10 000 after 0.1 s.
+        let p = Profile::new(0.0, 1000.0, 20_000.0, 0.0, 100_000.0);
+        assert!((p.peak - 10_000.0).abs() < 1.0);
+        assert!((p.time_at(500.0) - 0.1).abs() < 1e-5);
+        assert!((p.time_at(1000.0) - 0.2).abs() < 1e-5);
+        // Trapezoid: cruise at 5000.
+        let p = Profile::new(0.0, 1000.0, 5_000.0, 0.0, 100_000.0);
+        assert!((p.accel_end - 125.0).abs() < 1e-3 && (p.decel_start - 875.0).abs() < 1e-3);
+        assert!((p.time_at(1000.0) - (0.05 + 0.15 + 0.05)).abs() < 1e-5);
+    }
+
+    #[test]
+    fn segments_cover_the_block_exactly() {
+        let p = Profile::new(3000.0, 700.0, 8000.0, 1000.0, 200_000.0);
+        let mut left = 700_u16;
+        let mut chunks = 0;
+        while left > 0 {
+            let k = Profile::new(p.speed_at((700 - left) as f32), left as f32, 8000.0, 1000.0, 200_000.0).segment_events(left);
+            assert!(k >= 1 && k <= left);
+            left -= k;
+            chunks += 1;
+        }
+        assert!(chunks < 40, "{chunks}");
+    }
+}
