@@ -63,7 +63,9 @@ pub struct StepRecorder {
     /// Virtual time of the next action, ticks.
     pub now: u64,
     pub timer_hz: u32,
-    /// Direction pin bits that mean "negative" (the wiring inversion).
+    /// Direction pin bits that are inverted by the wiring (pin high means
+    /// negative for these motors). Before the first action every motor's
+    /// logical direction is negative.
     pub dir_invert: u8,
     pub motors: [MotorTrace; 4],
     /// Actions that changed a direction pin while stepping that motor.
@@ -128,12 +130,13 @@ mod tests {
     #[test]
     fn records_positions_times_and_violations() {
         let mut recorder = StepRecorder::new(2_000_000, 0b10);
-        recorder.record(0b01, 0b01, 100); // motor 0 +, motor 1 pin low = + (inverted)
+        recorder.record(0, 0b01, 100); // directions first: motor 0 +, motor 1 pin low = + (inverted)
+        recorder.record(0b01, 0b01, 100);
         recorder.record(0b11, 0b01, 100);
         recorder.record(0b01, 0b00, 100); // direction change with a step: violation
         assert_eq!(recorder.positions(), [1, 1, 0, 0]);
         assert_eq!(recorder.setup_violations, 1);
-        assert_eq!(recorder.motors[0].times().collect::<Vec<_>>(), [0, 100, 200]);
+        assert_eq!(recorder.motors[0].times().collect::<Vec<_>>(), [100, 200, 300]);
         assert_eq!(recorder.motors[0].min_interval(), Some(100));
         let speeds = recorder.motors[0].speeds(1, 2e6, 1000);
         assert_eq!(speeds[0].1, 20_000.0);
