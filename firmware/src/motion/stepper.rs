@@ -20,11 +20,13 @@
 //! ```text
 //! wait   = frac + interval          (Q24.8 timer ticks; frac keeps the 1/256s)
 //! interval += add ; events_left -= 1
-//! for each moving motor: Bresenham (16-bit compare, add or subtract)
+//! mask = motors that step on every event
+//!      | Bresenham of the others (16-bit compare, then add or subtract)
 //! ```
 //!
-//! which is a handful of 8/16/32-bit additions on the AVR, no loop over
-//! idle motors, and no multiplication.
+//! which is a handful of 8/16/32-bit additions on the AVR and no
+//! multiplication. A single-motor move or a 45° diagonal skips the
+//! Bresenham loop altogether; changing segment or block is out of line.
 //!
 //! # Invariants
 //!
@@ -241,6 +243,10 @@ pub struct StepGenerator<'a> {
     counters: [u16; MOTORS],
     /// Motors with steps in this block.
     moving: u8,
+    /// Motors that step on every event (as many steps as events): no
+    /// Bresenham needed. The others (`minor`) run the counters.
+    always: u8,
+    minor: u8,
     events: u16,
     events_done: u16,
     direction: u8,
@@ -280,6 +286,8 @@ impl<'a> StepGenerator<'a> {
             thresholds: [0; MOTORS],
             counters: [0; MOTORS],
             moving: 0,
+            always: 0,
+            minor: 0,
             events: 0,
             events_done: 0,
             direction: 0,
@@ -327,13 +335,23 @@ impl<'a> StepGenerator<'a> {
         ticks as u16
     }
 
-    #[inline]
+    #[inline(always)]
     fn bresenham(&mut self) -> u8 {
         self.events_done = self.events_done.wrapping_add(1);
+        if self.minor == 0 {
+            // One motor, or a 45° diagonal: nothing to decide.
+            return self.always;
+        }
+        self.always | self.minor_steps()
+    }
+
+    /// Bresenham for the motors that step on some events only.
+    #[inline(always)]
+    fn minor_steps(&mut self) -> u8 {
         let mut mask = 0;
         let mut bit = 1;
         for motor in 0..MOTORS {
-            if self.moving & bit != 0 {
+            if self.minor & bit != 0 {
                 let counter = self.counters[motor];
                 let threshold = self.thresholds[motor];
                 if counter >= threshold {
@@ -350,6 +368,8 @@ impl<'a> StepGenerator<'a> {
 
     /// A wait too long for 16 bits, or the lead of a direction change: an
     /// action without steps that presents the coming event's directions.
+    #[cold]
+    #[inline(never)]
     fn wait_longer(&mut self) -> TimerAction {
         let piece = if self.long_wait > 0xFFFF { LONG_WAIT_PIECE } else { self.long_wait };
         self.long_wait -= piece;
@@ -357,6 +377,8 @@ impl<'a> StepGenerator<'a> {
     }
 
     /// The running segment is used up: take the next one (and its block).
+    /// Out of line, so that the per-event path keeps few registers.
+    #[inline(never)]
     fn next_segment(&mut self) -> u16 {
         self.pending_mask = 0;
         if self.fault.is_some() {
@@ -441,20 +463,27 @@ impl<'a> StepGenerator<'a> {
         self.stopped = 0;
         self.stopped_steps = [0; MOTORS];
         self.moving = 0;
+        self.always = 0;
+        self.minor = 0;
         for motor in 0..MOTORS {
             let steps = block.steps[motor].min(block.events);
             self.steps[motor] = steps;
             self.thresholds[motor] = block.events - steps;
             self.counters[motor] = 0;
-            if steps != 0 {
-                self.moving |= 1 << motor;
+            if steps == block.events && steps != 0 {
+                self.always |= 1 << motor;
+            } else if steps != 0 {
+                self.minor |= 1 << motor;
             }
         }
+        self.moving = self.always | self.minor;
     }
 
     fn finish_block(&mut self) {
         self.in_block = false;
         self.moving = 0;
+        self.always = 0;
+        self.minor = 0;
         self.blocks_done = self.blocks_done.wrapping_add(1);
     }
 
@@ -497,6 +526,8 @@ impl<'a> StepGenerator<'a> {
 
     /// Stop some motors of a homing block; abandon the block once every
     /// watched motor has stopped. Cold path (a division per motor).
+    #[cold]
+    #[inline(never)]
     fn stop_motors(&mut self, motors: u8) {
         // The pending event has not fired: it is not counted.
         let fired = self.events_done - (self.pending_mask != 0) as u16;
