@@ -86,6 +86,11 @@
 //! - `M665`/`M666`: change `config.kinematics` (`Delta::set_geometry`,
 //!   `endstop_trim`) while idle, then re-home.
 
+// Comparisons are written `!(x > 0.0)` on purpose: they reject NaN too.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Per-motor arrays read clearest indexed by motor number, as in the SPEC.
+#![allow(clippy::needless_range_loop)]
+
 pub mod arc;
 pub mod homing;
 pub mod kinematics;

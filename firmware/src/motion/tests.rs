@@ -19,6 +19,9 @@ enum Command {
     Home(u8),
 }
 
+/// Simulated switches: motor positions (steps) → triggered endstop bits.
+type Endstops = Box<dyn Fn(&[i64; 4]) -> u8>;
+
 struct Rig {
     motion: Motion<'static>,
     generator: StepGenerator<'static>,
@@ -26,7 +29,7 @@ struct Rig {
     commands: VecDeque<Command>,
     next_main: u64,
     /// Endstops as a function of the motor positions (steps).
-    endstops: Box<dyn Fn(&[i64; 4]) -> u8>,
+    endstops: Endstops,
     errors: Vec<MotionError>,
     /// Entry speed of the block after the one being prepared, mm/s.
     planner_samples: Vec<f32>,
@@ -371,7 +374,7 @@ fn extrusion_follows_flow_and_retracts_use_their_acceleration() {
     assert_eq!(rig.recorder.positions()[3], -84);
     // The print move's X and E end together.
     let x_last = rig.recorder.motors[0].last_step();
-    let e_forward_last = e.steps.iter().filter(|s| s.1 > 0).last().map(|s| s.0);
+    let e_forward_last = e.steps.iter().rfind(|s| s.1 > 0).map(|s| s.0);
     assert_eq!(x_last, e_forward_last);
 }
 
@@ -653,12 +656,12 @@ fn arm_lines_pure_z_pure_x_and_no_overshoot() {
     rig.line([0.0, 0.0, 0.0, 0.0], 30.0).run(60.0);
     let arm = Arm::spec_arm(200);
     // Pure Z (0,0) → (0,30): every sampled point on the line, Z monotonic.
-    let before = rig.recorder.positions();
     let motors_before = rig.motion.motor_steps();
     rig.recorder.clear_steps();
     rig.line([0.0, 0.0, 30.0, 0.0], 20.0).run(60.0);
     let ppd = arm.joint_steps_per_degree as f64;
-    let joint = |rig: &Rig, m: usize, t: u64| motors_before[m] as f64 + (rig.position_at(m, t) - 0 * before[m]) as f64;
+    // Steps recorded since `clear_steps`, on top of the motor positions.
+    let joint = |rig: &Rig, m: usize, t: u64| motors_before[m] as f64 + rig.position_at(m, t) as f64;
     let (start, end) = (rig.recorder.motors[1].first_step().unwrap_or(0).min(rig.recorder.motors[2].first_step().unwrap()), rig.recorder.now);
     let mut last_z = -1.0;
     let mut t = start;
