@@ -74,6 +74,16 @@ pub fn endstop_bit(motor: usize, towards_max: bool) -> u8 {
     }
 }
 
+/// Endstop pin levels → triggered bits (`StepBlock::watch` layout), with
+/// the polarity of each switch: a bit of `active_high` set means that
+/// switch reads high when triggered (a normally-closed switch with a
+/// pull-up, so an open wire reads as triggered, as SPEC §3 wants); clear
+/// means active low (a normally-open switch to ground). Switches not in
+/// `present` never trigger.
+pub const fn endstops_triggered(levels: u8, active_high: u8, present: u8) -> u8 {
+    !(levels ^ active_high) & present
+}
+
 /// What the motion layer should do next.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum HomingStep {
@@ -279,6 +289,15 @@ mod tests {
         }
         assert_eq!(homing.next(&config, 0, now), HomingStep::Done);
         assert!(!homing.is_active());
+    }
+
+    #[test]
+    fn endstop_polarity() {
+        // X min NC (active high), Y min NO (active low), nothing else fitted.
+        let (active_high, present) = (0b0000_0001, 0b0000_0011);
+        assert_eq!(endstops_triggered(0b0000_0010, active_high, present), 0);
+        assert_eq!(endstops_triggered(0b0000_0001, active_high, present), 0b11);
+        assert_eq!(endstops_triggered(0b1111_0011, active_high, present), 0b01);
     }
 
     #[test]

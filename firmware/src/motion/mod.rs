@@ -46,7 +46,10 @@
 //! The generator never presents a direction change together with a step;
 //! it gives the new directions `dir_setup_ticks` ahead (config).
 //! [`pairs_to_endstop_bits`] converts the executor's X_MIN, X_MAX, Y_MIN…
-//! layout.
+//! layout; [`homing::endstops_triggered`] applies each switch's polarity
+//! (NO/NC, active level). Reading pins only when `endstop_mask()` is
+//! non-zero keeps them out of the per-step cost outside homing unless the
+//! machine has hard limits (the arm).
 //!
 //! **Main loop, every pass:**
 //! ```text
@@ -71,7 +74,8 @@
 //!   coordinates of the target (X, Y, Z, E in µm, `G92` offsets removed) and
 //!   the modal feed in µm/s. `M220`/`M221` are applied inside from the
 //!   settings given to [`Motion::apply_settings`], as are `M92`, `M201`,
-//!   `M203`, `M204`, `M205 J`. Errors (`Unreachable`, `OutsideSoftLimits`,
+//!   `M203`, `M204`, `M205 J`; they apply to moves accepted after the
+//!   change (blocks already planned keep their speeds). Errors (`Unreachable`, `OutsideSoftLimits`,
 //!   `NotHomed`) mean nothing moved: answer `Error:` and keep the position.
 //! - `G2`/`G3`: `motion.arc_to(target_um, ArcCentre::Offset([i, j]) or
 //!   ArcCentre::Radius(r), clockwise, feed_um_per_s)`, all µm.

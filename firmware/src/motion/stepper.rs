@@ -457,7 +457,6 @@ impl<'a> StepGenerator<'a> {
         self.discarding = false;
         self.events = block.events;
         self.events_done = 0;
-        self.direction = block.direction & 0x0F;
         self.watch = block.watch;
         self.watch_release = block.watch_release;
         self.stopped = 0;
@@ -477,6 +476,9 @@ impl<'a> StepGenerator<'a> {
             }
         }
         self.moving = self.always | self.minor;
+        // Motors that stay still keep their direction pins: no needless
+        // direction change (and its set-up lead) when another motor turns.
+        self.direction = (block.direction & self.moving) | (self.pending_dir & !self.moving & 0x0F);
     }
 
     fn finish_block(&mut self) {
