@@ -23,6 +23,13 @@
 //! (`time_debt_q8`) is taken off the next segment, so the step times never
 //! drift from the profile by more than a fraction of a tick.
 //!
+//! Why not AVR446's ramp (c₀ = f·√(2/α)·0.676, cₙ = cₙ₋₁ − 2cₙ₋₁/(4n+1)),
+//! which SPEC §3 mentions for the arm: its recurrence needs a division per
+//! step in the interrupt, and the 0.676 fudge only corrects the
+//! recurrence's own error. Here every machine gets the exact trapezoid: the
+//! first step from rest comes after exactly √(2/A) (AVR446's c₀ without
+//! the fudge), short moves become triangles, and the interrupt only adds.
+//!
 //! As it goes it writes the block's current speed and remaining length back
 //! into the planner (`entry_speed_sqr`, `millimetres`), which is what lets
 //! the look-ahead raise the exit speed of a block already under way.
