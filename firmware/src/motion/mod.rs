@@ -459,14 +459,10 @@ impl<'q> Motion<'q> {
             status: StepperStatus::default(),
         };
         motion.configure();
-        motion.set_position_mm(motion.reachable_start());
+        // Until homed, the machine believes it is at the origin (reachable
+        // on all three machine families).
+        motion.set_position_mm([0.0; MOTORS]);
         motion
-    }
-
-    /// Where a machine starts before homing: the origin if reachable, else
-    /// the home position (a delta's origin is reachable; the arm's too).
-    fn reachable_start(&self) -> [f32; MOTORS] {
-        [0.0; MOTORS]
     }
 
     fn configure(&mut self) {
