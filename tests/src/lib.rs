@@ -3,6 +3,7 @@
 
 pub mod printcore;
 pub mod qemu;
+pub mod qemu_arm;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

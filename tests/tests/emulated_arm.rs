@@ -1,0 +1,102 @@
+//! The SKR Pro release ELF (STM32F407, Cortex-M4F) boots on QEMU's
+//! netduinoplus2 (STM32F405) and answers over USART1 exactly as the Mega
+//! 2560 build does: the same core, another board.
+
+use end_to_end::qemu_arm::{measure_step_cost, print_arm_benchmark, skr_pro_bench_elf, skr_pro_elf, ArmBoard, Elf};
+use std::time::Duration;
+
+fn booted_board() -> ArmBoard {
+    let mut board = ArmBoard::boot(&skr_pro_elf());
+    let banner = board.read_until(Duration::from_secs(20), |l| l.ends_with("Settings Loaded") || l.contains("retrieved"));
+    assert_eq!(banner[0], "start", "banner: {banner:?}");
+    assert!(banner[1].starts_with("echo:Ferrostep "), "banner: {banner:?}");
+    // Settings live in RAM on this board for now: every boot starts blank.
+    assert_eq!(banner[2..], ["echo:No stored settings", "echo:Hardcoded Default Settings Loaded"], "banner: {banner:?}");
+    board
+}
+
+#[test]
+fn m115_reports_the_firmware_name_and_capabilities() {
+    let mut board = booted_board();
+    let reply = board.command("M115");
+    assert!(reply[0].starts_with("FIRMWARE_NAME:Ferrostep "), "{reply:?}");
+    assert!(reply[0].contains("PROTOCOL_VERSION:1.0"), "{reply:?}");
+    let caps: Vec<&String> = reply.iter().filter(|l| l.starts_with("Cap:")).collect();
+    assert!(caps.iter().any(|l| l.starts_with("Cap:EEPROM:")), "{reply:?}");
+    assert!(caps.iter().all(|l| l.ends_with(":0") || l.ends_with(":1")), "{reply:?}");
+    assert_eq!(reply.last().unwrap(), "ok");
+}
+
+#[test]
+fn a_short_gcode_stream_gets_the_same_replies_as_on_the_mega2560() {
+    let mut board = booted_board();
+    let temperatures = board.command("M105");
+    assert_eq!(temperatures.len(), 1, "{temperatures:?}");
+    assert!(temperatures[0].starts_with("ok T:"), "{temperatures:?}");
+    assert!(temperatures[0].contains(" B:") && temperatures[0].contains(" @:"), "{temperatures:?}");
+    assert_eq!(board.command("M114"), ["X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0", "ok"]);
+    assert_eq!(board.command("G92 X5 E2"), ["ok"]);
+    assert_eq!(board.command("M114"), ["X:5.00 Y:0.00 Z:0.00 E:2.00 Count X:0 Y:0 Z:0", "ok"]);
+    assert_eq!(board.command("M118 E1 hello from the ARM"), ["echo:hello from the ARM", "ok"]);
+    assert_eq!(board.command("M9999 S1"), ["echo:Unknown command: \"M9999 S1\"", "ok"]);
+}
+
+#[test]
+fn a_dwell_keeps_the_host_informed_on_the_millisecond_tick() {
+    let mut board = booted_board();
+    // G4 waits on the SysTick milliseconds; the core says busy every 2 s.
+    let reply = board.command("G4 P2500");
+    assert_eq!(reply, ["echo:busy: processing", "ok"]);
+}
+
+#[test]
+fn a_line_longer_than_the_buffer_is_an_error_and_the_board_keeps_answering() {
+    let mut board = booted_board();
+    let long = format!("G1 X1 ;{}", "x".repeat(300));
+    assert_eq!(board.command(&long), ["Error:Line too long", "ok"]);
+    assert_eq!(board.command("M114").last().unwrap(), "ok");
+}
+
+#[test]
+fn a_numbered_line_with_a_bad_checksum_asks_for_a_resend() {
+    let mut board = booted_board();
+    assert_eq!(board.command("N1 M114*0"), ["Error:checksum mismatch, Last Line: 0", "Resend: 1", "ok"]);
+}
+
+#[test]
+fn m112_halts_from_the_receive_interrupt_and_the_board_keeps_answering() {
+    let mut board = booted_board();
+    board.send(b"M112\n");
+    let reply = board.read_until(Duration::from_secs(10), |l| l == "ok" || l.starts_with("ok "));
+    assert!(reply.iter().any(|l| l.starts_with("Error:")), "{reply:?}");
+    assert_eq!(board.command("M114").last().unwrap(), "ok");
+}
+
+#[test]
+fn the_firmware_fits_the_flash_behind_the_bootloader() {
+    let elf = Elf::read(&skr_pro_elf());
+    assert_eq!(elf.vector_table(), 0x0800_8000, "linked for BTT's SD-card bootloader");
+    let flash = elf.flash_bytes();
+    println!("arm_flash_bytes={flash}");
+    assert!(flash > 4096 && flash < 992 * 1024, "{flash} bytes");
+}
+
+#[test]
+fn one_step_event_costs_a_bounded_number_of_instructions() {
+    let cost = measure_step_cost(&skr_pro_bench_elf());
+    println!("{cost:?}");
+    assert_eq!(cost.printed.get("queued").map(String::as_str), Some("1"), "{cost:?}");
+    // The hot path: about 125 instructions today, Klipper's is far shorter;
+    // this guards against a regression into loops or divisions.
+    assert!((40..=250).contains(&cost.instructions), "{cost:?}");
+    assert!(cost.cycles_min <= cost.cycles_max && cost.cycles_min >= cost.instructions, "{cost:?}");
+    assert!(cost.step_rate_hz() > 100_000, "{cost:?}");
+}
+
+/// The benchmark keys for `cargo benchmark`:
+/// `cargo test -p end-to-end --test emulated_arm -- --ignored --nocapture arm_benchmark`
+#[test]
+#[ignore = "prints the ARM benchmark figures; run on demand"]
+fn arm_benchmark() {
+    print_arm_benchmark();
+}
