@@ -71,7 +71,10 @@ pub struct Elf {
 impl Elf {
     pub fn read(path: &Path) -> Self {
         let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
-        assert!(bytes.len() > 52 && &bytes[..4] == b"\x7fELF" && bytes[4] == 1 && bytes[5] == 1, "not an ELF32 LE file");
+        assert!(
+            bytes.len() > 52 && &bytes[..4] == b"\x7fELF" && bytes[4] == 1 && bytes[5] == 1,
+            "not an ELF32 LE file"
+        );
         Self { bytes }
     }
 
@@ -325,13 +328,8 @@ fn instruction_cycles(mnemonic: &str, operands: &str, taken: bool, after_single_
         "sdiv" | "udiv" => (2, 12),
         "mla" | "mls" => (2, 2),
         _ if base.starts_with("it") => (0, 1),
-        _ if is_branch => {
-            if taken {
-                (2, 4)
-            } else {
-                (1, 1)
-            }
-        }
+        // Not taken, a branch costs 1, as the default below.
+        _ if is_branch && taken => (2, 4),
         _ => (1, 1),
     }
 }
@@ -396,7 +394,8 @@ pub fn measure_step_cost(bench_elf: &Path) -> StepCost {
             let Some((address, rest)) = rest.split_once(':') else { continue };
             let Ok(pc) = u32::from_str_radix(address, 16) else { continue };
             let fields: Vec<&str> = rest.split_whitespace().collect();
-            let hex_words = fields.iter().take_while(|f| f.len() == 4 && f.chars().all(|c| c.is_ascii_hexdigit())).count();
+            let hex_words =
+                fields.iter().take_while(|f| f.len() == 4 && f.chars().all(|c| c.is_ascii_hexdigit())).count();
             if hex_words == 0 || fields.len() <= hex_words {
                 continue;
             }
@@ -441,7 +440,8 @@ pub fn measure_step_cost(bench_elf: &Path) -> StepCost {
         .map(|window| {
             let execs: Vec<u32> =
                 window.iter().filter_map(|e| if let Event::Exec(pc) = e { Some(*pc) } else { None }).collect();
-            let (mut min, mut max) = (EXCEPTION_ENTRY_CYCLES + EXCEPTION_RETURN_CYCLES, EXCEPTION_ENTRY_CYCLES + EXCEPTION_RETURN_CYCLES);
+            let (mut min, mut max) =
+                (EXCEPTION_ENTRY_CYCLES + EXCEPTION_RETURN_CYCLES, EXCEPTION_ENTRY_CYCLES + EXCEPTION_RETURN_CYCLES);
             let mut previous_single = false;
             for (i, pc) in execs.iter().enumerate() {
                 let (size, mnemonic, operands) = code.get(pc).cloned().unwrap_or((2, String::from("?"), String::new()));
@@ -469,7 +469,12 @@ pub fn measure_step_cost(bench_elf: &Path) -> StepCost {
     }
     let (&(instructions, cycles_min, cycles_max, peripheral_accesses), _) =
         counts.iter().max_by_key(|(cost, n)| (**n, cost.0)).expect("windows");
-    let number = |key: &str| printed.get(key).and_then(|v| v.parse::<u32>().ok()).unwrap_or_else(|| panic!("bench did not print {key}: {printed:?}"));
+    let number = |key: &str| {
+        printed
+            .get(key)
+            .and_then(|v| v.parse::<u32>().ok())
+            .unwrap_or_else(|| panic!("bench did not print {key}: {printed:?}"))
+    };
     StepCost {
         instructions,
         cycles_min,

@@ -7,11 +7,16 @@ use std::time::Duration;
 
 fn booted_board() -> ArmBoard {
     let mut board = ArmBoard::boot(&skr_pro_elf());
-    let banner = board.read_until(Duration::from_secs(20), |l| l.ends_with("Settings Loaded") || l.contains("retrieved"));
+    let banner =
+        board.read_until(Duration::from_secs(20), |l| l.ends_with("Settings Loaded") || l.contains("retrieved"));
     assert_eq!(banner[0], "start", "banner: {banner:?}");
     assert!(banner[1].starts_with("echo:Ferrostep "), "banner: {banner:?}");
     // Settings live in RAM on this board for now: every boot starts blank.
-    assert_eq!(banner[2..], ["echo:No stored settings", "echo:Hardcoded Default Settings Loaded"], "banner: {banner:?}");
+    assert_eq!(
+        banner[2..],
+        ["echo:No stored settings", "echo:Hardcoded Default Settings Loaded"],
+        "banner: {banner:?}"
+    );
     board
 }
 

@@ -73,7 +73,12 @@ fn wait_for(mut ready: impl FnMut() -> bool) -> bool {
 
 /// Switch to 168 MHz (or the best fallback) and report the result.
 pub fn init(rcc: &pac::RCC, flash: &pac::FLASH) -> Clocks {
-    let emulated = Clocks { sysclk_hz: SYSCLK_HZ, apb2_hz: SYSCLK_HZ / 2, apb1_timer_hz: SYSCLK_HZ / 2, source: ClockSource::Emulated };
+    let emulated = Clocks {
+        sysclk_hz: SYSCLK_HZ,
+        apb2_hz: SYSCLK_HZ / 2,
+        apb1_timer_hz: SYSCLK_HZ / 2,
+        source: ClockSource::Emulated,
+    };
     if rcc.cr().read().bits() == 0 {
         return emulated;
     }
@@ -91,13 +96,18 @@ pub fn init(rcc: &pac::RCC, flash: &pac::FLASH) -> Clocks {
     let plln = 168;
     let pllp_div2 = 0b00;
     let pllq = 7;
-    rcc.pllcfgr().write(|w| unsafe { w.bits(pllm | (plln << 6) | (pllp_div2 << 16) | (pllsrc_hse << 22) | (pllq << 24)) });
+    rcc.pllcfgr()
+        .write(|w| unsafe { w.bits(pllm | (plln << 6) | (pllp_div2 << 16) | (pllsrc_hse << 22) | (pllq << 24)) });
     rcc.cr().modify(|r, w| unsafe { w.bits(r.bits() | PLLON) });
     if !wait_for(|| rcc.cr().read().bits() & PLLRDY != 0) {
         return on_rc;
     }
     // Slow the flash down before the clock goes up.
     flash.acr().write(|w| unsafe { w.bits(FLASH_ACR_168MHZ) });
+    // RM0090 §3.5.1: the new latency must read back before the switch.
+    if !wait_for(|| flash.acr().read().bits() & 0b111 == FLASH_ACR_168MHZ & 0b111) {
+        return on_rc;
+    }
     rcc.cfgr().write(|w| unsafe { w.bits(HPRE_DIV1 | PPRE1_DIV4 | PPRE2_DIV2) });
     rcc.cfgr().modify(|r, w| unsafe { w.bits(r.bits() | SW_PLL) });
     if !wait_for(|| rcc.cfgr().read().bits() & SWS_MASK == SWS_PLL) {

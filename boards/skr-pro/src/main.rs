@@ -73,7 +73,9 @@ fn main() -> ! {
         let _ = link.service(&mut rx, &mut settings, now, &mut tx);
         if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
             next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
-            let read = |channel| celsius_from_adc(&NTC100K_B3950_4K7, adc::read_10bit(&dp.ADC3, channel)).unwrap_or(Celsius(0));
+            let read = |channel| {
+                celsius_from_adc(&NTC100K_B3950_4K7, adc::read_10bit(&dp.ADC3, channel)).unwrap_or(Celsius(0))
+            };
             link.machine.set_measured(read(pins::HOTEND_THERMISTOR_CHANNEL), read(pins::BED_THERMISTOR_CHANNEL));
             link.machine.set_endstop_levels(pins::endstop_levels());
         }

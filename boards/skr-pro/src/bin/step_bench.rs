@@ -163,12 +163,16 @@ fn main() -> ! {
 
     let _ = uwrite!(tx, "bench:start\n");
     let _ = uwrite!(tx, "counter={}\n", if counter == Counter::Cycles { "dwt_cycles" } else { "tim2_ticks" });
-    let _ = uwrite!(tx, "clock_source={}\n", match clocks.source {
-        clock::ClockSource::Crystal => "crystal",
-        clock::ClockSource::InternalRcPll => "internal_rc_pll",
-        clock::ClockSource::InternalRc => "internal_rc",
-        clock::ClockSource::Emulated => "emulated",
-    });
+    let _ = uwrite!(
+        tx,
+        "clock_source={}\n",
+        match clocks.source {
+            clock::ClockSource::Crystal => "crystal",
+            clock::ClockSource::InternalRcPll => "internal_rc_pll",
+            clock::ClockSource::InternalRc => "internal_rc",
+            clock::ClockSource::Emulated => "emulated",
+        }
+    );
     let _ = uwrite!(tx, "sysclk_hz={}\n", clocks.sysclk_hz);
     let _ = uwrite!(tx, "step_timer_hz={}\n", TIMER_HZ);
     let _ = uwrite!(tx, "queued={}\n", u8::from(queued));
