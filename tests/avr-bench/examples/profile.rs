@@ -1,0 +1,48 @@
+//! Where the cycles go: send G-code lines to the real ELF on simavr and
+//! print the replies and the cycles spent per function while handling them.
+//!
+//!   cargo run --release -p avr-bench --example profile -- "G1 X103.474 Y98.612 E.02538" M105
+//!   cargo run --release -p avr-bench --example profile -- --elf path/to.elf M503
+//!
+//! Lines go out one at a time after each `ok`, verbatim, at 115200 baud.
+
+use avr_bench::bench;
+use avr_bench::board::RampsConfig;
+use avr_bench::build::mega2560_elf;
+use avr_bench::host::HostConfig;
+use std::path::PathBuf;
+
+fn main() {
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let elf = match args.iter().position(|a| a == "--elf") {
+        Some(i) => {
+            args.remove(i);
+            PathBuf::from(args.remove(i))
+        }
+        None => mega2560_elf(),
+    };
+    if args.is_empty() {
+        args.push("G1 X103.474 Y98.612 E.02538".into());
+    }
+    let mut config = RampsConfig::stock(115_200);
+    config.host = HostConfig::raw(115_200);
+    let mut board = bench::boot(&elf, config).unwrap_or_else(|e| panic!("{e}"));
+    board.profile(true);
+    let start = board.cycle();
+    let isr_start = board.stats().isr_cycles;
+    let lines: Vec<&str> = args.iter().map(String::as_str).collect();
+    for reply in bench::exchange(&mut board, &lines, 30.0).unwrap_or_else(|e| panic!("{e}")) {
+        println!("< {reply}");
+    }
+    let total = board.cycle() - start;
+    println!(
+        "{} cycles ({:.2} ms) from the first byte sent to the last ok, {} in interrupt handlers",
+        total,
+        total as f64 / 16_000.0,
+        board.stats().isr_cycles - isr_start
+    );
+    println!("(the main loop's idle polling is part of its own line)");
+    for (function, cycles) in board.profile_by_function().iter().take(25) {
+        println!("{cycles:>10} {:5.1} %  {function}", *cycles as f64 * 100.0 / total as f64);
+    }
+}

@@ -1,0 +1,476 @@
+//! The measurements behind `cargo benchmark`, one function per figure.
+//! Each boots a fresh board, so phases cannot disturb one another.
+
+use crate::board::{Board, Endstop, RampsConfig, CPU_HZ, X, Y, Z};
+use crate::elf::{ElfInfo, RAM_BYTES};
+use crate::host::{with_checksum, HostConfig};
+use crate::steps::{judge, MovePlan, Verdict};
+use std::path::Path;
+use std::time::Duration;
+
+/// Stack budget: 8 KiB of SRAM minus the static data minus a 512 B margin.
+pub const STACK_MARGIN_BYTES: u32 = 512;
+/// Static RAM budget (`.data` + `.bss`).
+pub const STATIC_RAM_BUDGET_BYTES: u32 = 5 * 1024;
+
+/// What a bench phase leaves behind besides its own figure.
+#[derive(Clone, Debug, Default)]
+pub struct PhaseLog {
+    pub name: String,
+    pub simulated_s: f64,
+    pub wall: Duration,
+    pub stack_peak_sp: u32,
+    pub stack_peak_paint: u32,
+    pub deepest_function: Option<String>,
+    pub isr_share: f64,
+    pub i_clear_share: f64,
+    pub rx_overruns: u64,
+    pub resets: u64,
+    pub halted: Option<String>,
+}
+
+impl PhaseLog {
+    pub fn of(name: &str, board: &Board) -> Self {
+        let stats = board.stats();
+        let cycles = board.cycle().max(1) as f64;
+        Self {
+            name: name.to_string(),
+            simulated_s: board.seconds(),
+            wall: board.wall_time(),
+            stack_peak_sp: board.stack_peak_sp(),
+            stack_peak_paint: board.stack_peak_paint(),
+            deepest_function: board.symbol_at(stats.min_sp_pc).map(crate::board::demangle),
+            isr_share: stats.isr_cycles as f64 / cycles,
+            i_clear_share: stats.i_clear_cycles as f64 / cycles,
+            rx_overruns: board.rx_overruns(),
+            resets: stats.resets,
+            halted: board.halted_reason().map(str::to_string),
+        }
+    }
+}
+
+/// Boot a board and wait for the banner (`echo:… ready`) and the
+/// start-up messages after it, as a host does before sending.
+pub fn boot(elf: &Path, config: RampsConfig) -> Result<Board, String> {
+    let mut board = Board::load(elf, config)?;
+    let ready = |board: &Board| board.host().replies.iter().any(|r| r.text.starts_with("echo:") && r.text.ends_with("ready"));
+    let end = board.cycle() + u64::from(CPU_HZ) / 2;
+    while board.cycle() < end && !ready(&board) && board.halted_reason().is_none() {
+        let next = board.cycle() + u64::from(CPU_HZ) / 1000;
+        board.run_until(next);
+    }
+    if !ready(&board) {
+        return Err(format!("no banner within 0.5 s: {:?}", board.host().transcript()));
+    }
+    // Let the start-up messages (stored settings) finish.
+    board.run_for_ms(20.0);
+    Ok(board)
+}
+
+/// The replies to one batch of lines.
+pub fn exchange(board: &mut Board, lines: &[&str], timeout_s: f64) -> Result<Vec<String>, String> {
+    let before = board.host().replies.len();
+    board.send(lines.iter().copied());
+    if !board.run_until_host_done(timeout_s) {
+        return Err(format!(
+            "no ok within {timeout_s} s for {:?}; got {:?}",
+            lines,
+            board.host().replies[before..].iter().map(|r| r.text.clone()).collect::<Vec<_>>()
+        ));
+    }
+    Ok(board.host().replies[before..].iter().map(|r| r.text.clone()).collect())
+}
+
+/// A typical session for the stack high-water mark: start-up, capability
+/// and status reports, settings report and save, motion and arc lines,
+/// errors and resends.
+pub const COMMAND_TOUR: &[&str] = &[
+    "M115", "M105", "M114", "M119", "M503", "M92 X100 Y100 Z400 E93", "M203 X300 Y300 Z5 E25", "M201 X3000 Y3000 Z100 E10000",
+    "M204 P1500 R1500 T1500", "M205 J0.013", "M500", "M501", "G28", "G90", "G92 X0 Y0 Z0 E0", "M83", "G1 Z0.3 F720",
+    "G1 X103.474 Y98.612 E.02538 F1800", "G2 X110 Y110 I5 J5 E0.5", "G4 P1", "M106 S128", "M107", "M104 S200", "M140 S60",
+    "M155 S1", "M155 S0", "M118 E1 tour done",
+];
+
+/// Stack peak and CPU shares over [`COMMAND_TOUR`] (host with printcore
+/// numbering at 115200 baud).
+pub fn command_tour(elf: &Path) -> Result<PhaseLog, String> {
+    let mut board = boot(elf, RampsConfig::stock(115_200))?;
+    exchange(&mut board, COMMAND_TOUR, 20.0)?;
+    // Errors and protocol paths too (raw lines).
+    board.host_mut().config = HostConfig::raw(115_200);
+    exchange(&mut board, &["N1 G28*0", &"X".repeat(120), "G1 X1e99", "M999"], 5.0)?;
+    Ok(PhaseLog::of("command tour", &board))
+}
+
+/// A typical slicer G1 line (PrusaSlicer's perimeter output).
+pub const TYPICAL_G1: &[&str] = &[
+    "G1 X103.474 Y98.612 E.02538",
+    "G1 X104.126 Y99.033 E.02071",
+    "G1 X104.713 Y99.541 E.02075",
+    "G1 X105.224 Y100.124 E.02071",
+    "G1 X105.651 Y100.772 E.02074",
+    "G1 X105.986 Y101.474 E.02078",
+    "G1 X106.222 Y102.215 E.02079",
+    "G1 X106.356 Y102.981 E.02078",
+];
+
+#[derive(Clone, Debug)]
+pub struct ParseResult {
+    /// Median main-loop cycles from a G1 line's `\n` to its first reply
+    /// byte, and the same for the empty numbered line.
+    pub g1_median: f64,
+    pub baseline_median: f64,
+    pub lines: usize,
+    /// Mean length of the G1 lines as sent (with `N…` and `*…`), bytes.
+    pub g1_bytes: f64,
+    pub first_g1_reply: String,
+    pub log: PhaseLog,
+}
+
+impl ParseResult {
+    pub fn cycles_per_line(&self) -> f64 {
+        self.g1_median - self.baseline_median
+    }
+}
+
+/// Cycles the main loop spends on a G1 line beyond an empty line.
+///
+/// The host sends, one at a time after each `ok`, numbered lines as
+/// printcore would: `N<n> <G1 line>*<sum>` alternating with the empty
+/// numbered line `N<n> *<sum>`. For each line the window runs from the
+/// cycle at which its `\n` is complete in the receiver (RXC) to the cycle
+/// at which the firmware writes the first byte of its reply to UDR0;
+/// interrupt handler cycles inside the window are subtracted. The figure is
+/// median(G1 windows) − median(empty-line windows): checksum over the
+/// extra bytes, lexing, parsing and executing the G1 up to its first reply
+/// byte. Today a G1 is validated but not planned (the firmware answers
+/// "echo:Motion is not available yet…"); once motion lands the same
+/// window includes planning.
+pub fn parse_cycles(elf: &Path, repeats: usize) -> Result<ParseResult, String> {
+    let mut board = boot(elf, RampsConfig::stock(115_200))?;
+    board.host_mut().config = HostConfig::raw(115_200);
+    exchange(&mut board, &["M110 N0", "G92 X100 Y100 E0", "M83"], 5.0)?;
+    let mut lines = Vec::new();
+    let mut is_g1 = Vec::new();
+    let mut n = 1;
+    for r in 0..repeats {
+        for g1 in TYPICAL_G1 {
+            let _ = r;
+            lines.push(with_checksum(&format!("N{n} {g1}")));
+            is_g1.push(true);
+            n += 1;
+            lines.push(with_checksum(&format!("N{n} ")));
+            is_g1.push(false);
+            n += 1;
+        }
+    }
+    let sent_before = board.host().sent.len();
+    board.record_isr_intervals(true);
+    let refs: Vec<&str> = lines.iter().map(String::as_str).collect();
+    exchange(&mut board, &refs, 60.0)?;
+    let frame = board.avr_frame_cycles();
+    let mut g1 = Vec::new();
+    let mut base = Vec::new();
+    let mut first_g1_reply = String::new();
+    for (i, sent) in board.host().sent[sent_before..].iter().enumerate() {
+        let (Some(end), Some(reply)) = (sent.last_byte_start_cycle, sent.first_reply) else {
+            return Err(format!("line {:?} has no reply", sent.text));
+        };
+        let reply = &board.host().replies[reply];
+        let rx_complete = end + frame;
+        let window = reply.first_byte_cycle.saturating_sub(rx_complete);
+        let isr = board.isr_cycles_between(rx_complete, reply.first_byte_cycle);
+        let main = (window - isr) as f64;
+        if is_g1[i] {
+            if first_g1_reply.is_empty() {
+                first_g1_reply = reply.text.clone();
+            }
+            if reply.text.starts_with("Error") {
+                return Err(format!("the firmware refused {:?}: {}", sent.text, reply.text));
+            }
+            g1.push(main);
+        } else {
+            base.push(main);
+        }
+    }
+    let g1_bytes = lines.iter().zip(&is_g1).filter(|(_, g)| **g).map(|(l, _)| l.len() as f64 + 1.0).sum::<f64>()
+        / g1.len().max(1) as f64;
+    Ok(ParseResult {
+        g1_median: median(&mut g1),
+        baseline_median: median(&mut base),
+        lines: g1.len(),
+        g1_bytes,
+        first_g1_reply,
+        log: PhaseLog::of("parse", &board),
+    })
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(|a, b| a.total_cmp(b));
+    match values.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => values[n / 2],
+        n => (values[n / 2 - 1] + values[n / 2]) / 2.0,
+    }
+}
+
+/// Endstops that never trip (normally closed, far away): inputs read
+/// "open", so a firmware with hard limits lets the bench moves run.
+pub fn far_endstops() -> [Option<Endstop>; 6] {
+    let mut endstops = [None; 6];
+    for (i, slot) in endstops.iter_mut().enumerate() {
+        let is_min = i % 2 == 0;
+        *slot = Some(Endstop {
+            axis: i / 2,
+            at_steps: if is_min { -1_000_000_000 } else { 1_000_000_000 },
+            is_min,
+            pressed_level: true,
+        });
+    }
+    endstops
+}
+
+/// One step-rate trial's outcome.
+#[derive(Clone, Debug)]
+pub struct Trial {
+    pub rate_hz: f64,
+    /// Per moving axis.
+    pub verdicts: Vec<Verdict>,
+    pub replies: Vec<String>,
+}
+
+impl Trial {
+    pub fn failure(&self) -> Option<String> {
+        self.verdicts.iter().zip(["X", "Y", "Z"]).find_map(|(v, a)| v.failure.as_ref().map(|f| format!("{a} {f}")))
+    }
+}
+
+/// Steps per mm the trials configure on every axis (SPEC §1's 100).
+pub const TRIAL_STEPS_PER_MM: f64 = 100.0;
+/// Steps per axis in a trial move.
+pub const TRIAL_STEPS: u64 = 4_000;
+
+/// Move `axes` (X; or X, Y and Z together) by [`TRIAL_STEPS`] with a
+/// cruise rate of `rate_hz` steps/s per axis, and judge each axis.
+/// Acceleration is chosen so that each ramp takes 20 % of the move.
+pub fn step_trial(board: &mut Board, axes: usize, rate_hz: f64) -> Result<Trial, String> {
+    let s = TRIAL_STEPS_PER_MM;
+    let axis_mm = TRIAL_STEPS as f64 / s;
+    let axis_v = rate_hz / s;
+    let axis_a = axis_v * axis_v / (2.0 * 0.2 * axis_mm);
+    let path_scale = (axes as f64).sqrt();
+    let (path_v, path_a) = (axis_v * path_scale, axis_a * path_scale);
+    let letters = &["X", "Y", "Z"][..axes];
+    let each = |value: f64| letters.iter().map(|l| format!("{l}{value:.3}")).collect::<Vec<_>>().join(" ");
+    let setup = [
+        format!("M92 {}", each(s)),
+        format!("M203 {}", each(axis_v * 1.5)),
+        format!("M201 {}", each(axis_a)),
+        format!("M204 P{path_a:.3} T{path_a:.3}"),
+        "M17".to_string(),
+        format!("G92 {}", each(0.0)),
+        "G90".to_string(),
+    ];
+    let setup_refs: Vec<&str> = setup.iter().map(String::as_str).collect();
+    let mut replies = exchange(board, &setup_refs, 5.0)?;
+    if let Some(error) = replies.iter().find(|r| r.starts_with("Error")) {
+        return Err(format!("the firmware refused the trial set-up: {error}"));
+    }
+    board.clear_step_edges();
+    let plan = MovePlan { steps: TRIAL_STEPS, steps_per_mm: s, feed_mm_s: axis_v, accel_mm_s2: axis_a };
+    let timeout = plan.duration() * 3.0 + 1.0;
+    let g1 = format!("G1 {} F{:.1}", each(axis_mm), path_v * 60.0);
+    replies.extend(exchange(board, &[g1.as_str(), "M400"], timeout)?);
+    let verdicts = [X, Y, Z][..axes].iter().map(|&a| judge(&plan, board.step_edges(a))).collect();
+    Ok(Trial { rate_hz, verdicts, replies })
+}
+
+/// Rates tried in order until one fails; then bisected.
+pub const TRIAL_RATES_HZ: &[f64] =
+    &[2_000.0, 5_000.0, 10_000.0, 15_000.0, 20_000.0, 25_000.0, 30_000.0, 40_000.0, 50_000.0, 60_000.0, 80_000.0, 100_000.0, 120_000.0, 160_000.0, 200_000.0];
+
+#[derive(Clone, Debug)]
+pub struct StepRateResult {
+    /// Highest on-time rate per axis, steps/s.
+    pub per_axis_hz: f64,
+    pub axes: usize,
+    /// The first failing rate and why.
+    pub limit: Option<(f64, String)>,
+    pub trials: Vec<(f64, Option<String>)>,
+    pub log: PhaseLog,
+}
+
+impl StepRateResult {
+    pub fn total_hz(&self) -> f64 {
+        self.per_axis_hz * self.axes as f64
+    }
+}
+
+/// The highest sustained step rate with `axes` steppers moving together.
+/// Err when the firmware does not step at all (or fails the lowest rate).
+pub fn step_rate(elf: &Path, axes: usize) -> Result<StepRateResult, String> {
+    let mut config = RampsConfig::stock(115_200);
+    config.endstops = far_endstops();
+    let mut board = boot(elf, config)?;
+    let mut trials = Vec::new();
+    let mut best: Option<f64> = None;
+    let mut limit = None;
+    for &rate in TRIAL_RATES_HZ {
+        let trial = step_trial(&mut board, axes, rate)?;
+        if trial.verdicts.iter().all(|v| v.steps == 0) {
+            let said = trial.replies.iter().find(|r| !r.starts_with("ok")).cloned().unwrap_or_else(|| "only ok".into());
+            return Err(format!("no STEP edges: stepping is not built yet (G1 answered: {said})"));
+        }
+        let failure = trial.failure();
+        trials.push((rate, failure.clone()));
+        match failure {
+            None => best = Some(rate),
+            Some(why) => {
+                limit = Some((rate, why));
+                break;
+            }
+        }
+    }
+    let Some(mut low) = best else {
+        let (rate, why) = limit.unwrap_or_default();
+        return Err(format!("steps come late already at {rate:.0} steps/s: {why}"));
+    };
+    if let Some((mut high, _)) = limit.clone() {
+        // Three bisections between the last good and the first bad rate.
+        for _ in 0..3 {
+            let mid = ((low + high) / 2.0 / 100.0).round() * 100.0;
+            if mid <= low || mid >= high {
+                break;
+            }
+            let trial = step_trial(&mut board, axes, mid)?;
+            let failure = trial.failure();
+            trials.push((mid, failure.clone()));
+            match failure {
+                None => low = mid,
+                Some(why) => {
+                    high = mid;
+                    limit = Some((mid, why));
+                }
+            }
+        }
+    }
+    Ok(StepRateResult { per_axis_hz: low, axes, limit, trials, log: PhaseLog::of(&format!("step rate, {axes} axes"), &board) })
+}
+
+/// Share of cycles in interrupt handlers while X cruises at `rate_hz`.
+pub fn isr_share_at(elf: &Path, rate_hz: f64) -> Result<(f64, PhaseLog), String> {
+    let mut config = RampsConfig::stock(115_200);
+    config.endstops = far_endstops();
+    let mut board = boot(elf, config)?;
+    let trial = step_trial(&mut board, 1, rate_hz)?;
+    let verdict = &trial.verdicts[0];
+    if verdict.steps == 0 {
+        let said = trial.replies.iter().find(|r| !r.starts_with("ok")).cloned().unwrap_or_else(|| "only ok".into());
+        return Err(format!("no STEP edges: stepping is not built yet (G1 answered: {said})"));
+    }
+    if let Some(f) = &verdict.failure {
+        return Err(format!("X does not hold {rate_hz:.0} steps/s: {f}"));
+    }
+    let (first, last) = verdict.cruise_span.ok_or("no cruise plateau")?;
+    let edges = board.step_edges(X);
+    let at = |cycle: u64| edges.iter().find(|e| e.rising && e.cycle == cycle).map(|e| e.isr_cycles);
+    let (Some(i0), Some(i1)) = (at(first), at(last)) else { return Err("cruise edges not found".into()) };
+    Ok(((i1 - i0) as f64 / (last - first) as f64, PhaseLog::of("ISR share", &board)))
+}
+
+/// Short slicer-like segments: a spiral of 0.3–0.6 mm moves with extrusion.
+pub fn short_segments(count: usize) -> Vec<String> {
+    let mut lines = vec!["G90".to_string(), "M83".to_string(), "G92 X100 Y100 E0".to_string(), "G1 F1800".to_string()];
+    let (cx, cy) = (100.0f64, 100.0f64);
+    for i in 0..count {
+        let angle = i as f64 * 0.05;
+        let r = 20.0 + i as f64 * 0.002;
+        lines.push(format!("G1 X{:.3} Y{:.3} E.0{:04}", cx + r * angle.cos(), cy + r * angle.sin(), 1700 + (i * 37) % 500));
+    }
+    lines
+}
+
+#[derive(Clone, Debug)]
+pub struct StreamResult {
+    pub lines_per_s: f64,
+    pub lines: usize,
+    /// The same stream's limit if the firmware answered instantly: the
+    /// wire time of each line and its replies, back to back.
+    pub wire_bound_lines_per_s: f64,
+    pub mean_reply_bytes: f64,
+    pub log: PhaseLog,
+}
+
+/// Lines per second from a file of short G1 segments at `baud` with
+/// printcore numbering and ok flow control: lines acknowledged, divided by
+/// the time from the first segment's first byte to the last segment's `ok`
+/// arriving at the host.
+pub fn stream_rate(elf: &Path, baud: u32, segments: usize) -> Result<StreamResult, String> {
+    let mut board = boot(elf, RampsConfig::stock(baud))?;
+    let expected_frame = 10 * u64::from(CPU_HZ) / u64::from(baud);
+    let frame = board.avr_frame_cycles();
+    if frame.abs_diff(expected_frame) * 20 > expected_frame {
+        return Err(format!(
+            "the ELF runs its UART at {:.0} baud, not {baud} (build it with --features baud-250000)",
+            10.0 * f64::from(CPU_HZ) / frame as f64
+        ));
+    }
+    let job = short_segments(segments);
+    let header = 4;
+    board.send(job.iter());
+    let timeout = segments as f64 * 0.05 + 5.0;
+    if !board.run_until_host_done(timeout) {
+        return Err(format!("the stream did not finish within {timeout} s"));
+    }
+    let host = board.host();
+    let segment_lines: Vec<_> = host.sent.iter().filter(|s| s.job_index.is_some_and(|i| i >= header)).collect();
+    if let Some(error) = host.replies.iter().find(|r| r.text.starts_with("Error")) {
+        return Err(format!("the firmware answered {:?}", error.text));
+    }
+    let first = segment_lines.first().ok_or("no segments sent")?;
+    let last = segment_lines.last().ok_or("no segments sent")?;
+    let ok = &host.replies[last.ok_reply.ok_or("last segment without ok")?];
+    let seconds = (ok.arrived_cycle - first.start_cycle) as f64 / f64::from(CPU_HZ);
+    // Reply bytes per segment line (everything from its '\n' to its ok).
+    let mut reply_bytes = 0usize;
+    let mut line_bytes = 0usize;
+    for sent in &segment_lines {
+        line_bytes += sent.text.len() + 1;
+        if let (Some(a), Some(b)) = (sent.first_reply, sent.ok_reply) {
+            reply_bytes += host.replies[a..=b].iter().map(|r| r.text.len() + 1).sum::<usize>();
+        }
+    }
+    let n = segment_lines.len() as f64;
+    let bytes_per_s = f64::from(baud) / 10.0;
+    Ok(StreamResult {
+        lines_per_s: n / seconds,
+        lines: segment_lines.len(),
+        wire_bound_lines_per_s: bytes_per_s / ((line_bytes + reply_bytes) as f64 / n),
+        mean_reply_bytes: reply_bytes as f64 / n,
+        log: PhaseLog::of(&format!("stream at {baud}"), &board),
+    })
+}
+
+/// Flash and static RAM from the ELF.
+pub fn sizes(elf: &Path) -> Result<(u32, u32), String> {
+    let info = ElfInfo::read(elf)?;
+    Ok((info.flash_bytes(), info.ram_static_bytes()))
+}
+
+/// The stack budget for a given static RAM use.
+pub fn stack_budget(ram_static: u32) -> u32 {
+    RAM_BYTES - ram_static - STACK_MARGIN_BYTES
+}
+
+/// Samples of the thermal history while the firmware holds the hot end at
+/// `target` °C for `seconds` (if it can heat yet): (board, replies).
+pub fn heat_run(elf: &Path, target: u32, seconds: f64) -> Result<(Board, Vec<String>), String> {
+    let mut board = boot(elf, RampsConfig::stock(115_200))?;
+    let mut replies = exchange(&mut board, &[&format!("M104 S{target}"), "M106 S128"], 5.0)?;
+    board.run_for_ms(seconds * 1000.0);
+    replies.extend(exchange(&mut board, &["M105"], 5.0)?);
+    Ok((board, replies))
+}
+
+/// `Y`/`Z` re-exported for callers that build trials by hand.
+pub const TRIAL_AXES: [usize; 3] = [X, Y, Z];

@@ -1,0 +1,292 @@
+//! `cargo benchmark`: build the Mega 2560 release ELF (and its 250000-baud
+//! variant), run it on simavr with the virtual RAMPS, print the figures
+//! beside SPEC.md's anchors and write them as flat JSON (key → number) to
+//! `$CARGO_TARGET_DIR/benchmark.json` (default `target/benchmark.json`).
+//!
+//! A figure whose subsystem is not built yet is printed as
+//! `missing: <reason>` and left out of the JSON (never written as zero).
+//!
+//! Options: `--elf <path>` uses a prebuilt ELF (no build; the 250000-baud
+//! figure then needs `--elf-250000 <path>` too), `--json <path>` writes
+//! elsewhere.
+
+use avr_bench::bench::{self, PhaseLog};
+use avr_bench::build::{build_variant, target_dir};
+use avr_bench::elf::{FLASH_BYTES, RAM_BYTES};
+use std::path::PathBuf;
+use std::time::Instant;
+
+struct Row {
+    key: &'static str,
+    value: Result<f64, String>,
+    shown: String,
+    anchor: String,
+}
+
+fn main() {
+    let started = Instant::now();
+    let mut args = std::env::args().skip(1);
+    let (mut elf, mut elf_250k, mut json) = (None, None, target_dir().join("benchmark.json"));
+    while let Some(arg) = args.next() {
+        match arg.as_str() {
+            "--elf" => elf = args.next().map(PathBuf::from),
+            "--elf-250000" => elf_250k = args.next().map(PathBuf::from),
+            "--json" => json = args.next().map(PathBuf::from).unwrap_or(json),
+            "-h" | "--help" => {
+                println!("cargo benchmark [-- --elf <elf> [--elf-250000 <elf>] [--json <path>]]");
+                return;
+            }
+            other => {
+                eprintln!("unknown argument {other:?} (try --help)");
+                std::process::exit(2);
+            }
+        }
+    }
+    let prebuilt = elf.is_some();
+    let elf = match elf {
+        Some(e) => e,
+        None => build_variant(&target_dir(), &[], true).unwrap_or_else(|e| fail(&e)),
+    };
+    let elf_250k: Result<PathBuf, String> = match (elf_250k, prebuilt) {
+        (Some(e), _) => Ok(e),
+        (None, true) => Err("no --elf-250000 given with --elf".into()),
+        (None, false) => build_variant(&target_dir().join("avr-bench-baud250000"), &["baud-250000"], true),
+    };
+    eprintln!("benchmark: ELF {}", elf.display());
+
+    let mut phases: Vec<PhaseLog> = Vec::new();
+    let mut rows = Vec::new();
+
+    // Sizes.
+    let (flash, ram_static) = bench::sizes(&elf).unwrap_or_else(|e| fail(&e));
+    rows.push(Row {
+        key: "flash_bytes",
+        value: Ok(f64::from(flash)),
+        shown: format!("{} B ({:.1} % of 256 KiB)", group(f64::from(flash)), 100.0 * f64::from(flash) / f64::from(FLASH_BYTES)),
+        anchor: "Marlin 66–177 KiB on a Mega2560 depending on options; Grbl-Mega ≈ 31 KiB".into(),
+    });
+    rows.push(Row {
+        key: "ram_static_bytes",
+        value: Ok(f64::from(ram_static)),
+        shown: format!("{} B (.data + .bss)", group(f64::from(ram_static))),
+        anchor: format!(
+            "Grbl-Mega ≈ 3.3 KiB; budget ≤ {} B of {} B",
+            bench::STATIC_RAM_BUDGET_BYTES,
+            RAM_BYTES
+        ),
+    });
+
+    eprintln!("benchmark: command tour (stack high-water mark) …");
+    let tour = bench::command_tour(&elf);
+    if let Ok(log) = &tour {
+        phases.push(log.clone());
+    }
+
+    eprintln!("benchmark: cycles per parsed G1 line …");
+    let parse = bench::parse_cycles(&elf, 4);
+    if let Ok(p) = &parse {
+        phases.push(p.log.clone());
+    }
+
+    eprintln!("benchmark: step rate, 1 stepper …");
+    let rate1 = bench::step_rate(&elf, 1);
+    eprintln!("benchmark: step rate, 3 steppers …");
+    let rate3 = bench::step_rate(&elf, 3);
+    eprintln!("benchmark: ISR share at 10 k steps/s …");
+    let isr = bench::isr_share_at(&elf, 10_000.0);
+    for r in [&rate1, &rate3] {
+        if let Ok(r) = r {
+            phases.push(r.log.clone());
+        }
+    }
+    if let Ok((_, log)) = &isr {
+        phases.push(log.clone());
+    }
+
+    eprintln!("benchmark: G1 stream at 250000 baud …");
+    let stream = elf_250k.and_then(|e| bench::stream_rate(&e, 250_000, 400));
+    if let Ok(s) = &stream {
+        phases.push(s.log.clone());
+    }
+
+    // Stack: the deepest of every phase (SP watched after each instruction).
+    let budget = bench::stack_budget(ram_static);
+    let deepest = phases.iter().max_by_key(|p| p.stack_peak_sp);
+    rows.push(Row {
+        key: "stack_peak_bytes",
+        value: deepest.map(|p| f64::from(p.stack_peak_sp)).ok_or_else(|| format!("no phase ran: {:?}", tour.as_ref().err())),
+        shown: deepest.map_or(String::new(), |p| {
+            format!(
+                "{} B (in {}; {} B touched by paint)",
+                group(f64::from(p.stack_peak_sp)),
+                p.name,
+                group(f64::from(p.stack_peak_paint))
+            )
+        }),
+        anchor: format!("budget {} B = 8 KiB − static − {} B margin", group(f64::from(budget)), bench::STACK_MARGIN_BYTES),
+    });
+
+    let wire_250k = |bytes: f64| bytes * 640.0;
+    rows.push(match &parse {
+        Ok(p) => Row {
+            key: "parse_cycles_per_g1_line",
+            value: Ok(p.cycles_per_line().round()),
+            shown: format!(
+                "{} cycles ({:.0} µs; G1 {} − empty line {}, medians of {})",
+                group(p.cycles_per_line().round()),
+                p.cycles_per_line() / 16.0,
+                group(p.g1_median),
+                group(p.baseline_median),
+                p.lines
+            ),
+            anchor: format!(
+                "the line's own wire time at 250000 baud: {} cycles; measures lex+parse+protocol (G1 is not planned yet: {:?})",
+                group(wire_250k(p.g1_bytes)),
+                p.first_g1_reply
+            ),
+        },
+        Err(e) => missing("parse_cycles_per_g1_line", e, String::new()),
+    });
+
+    let step_anchor_1 = "Marlin ≈ 14 k (≈ 47 k with 16× multi-stepping); Grbl 30 k; FastAccelStepper 50 k; Klipper 157 k";
+    rows.push(match &rate1 {
+        Ok(r) => Row {
+            key: "step_rate_1_stepper_hz",
+            value: Ok(r.per_axis_hz),
+            shown: format!("{} steps/s{}", group(r.per_axis_hz), limit_note(&r.limit)),
+            anchor: step_anchor_1.into(),
+        },
+        Err(e) => missing("step_rate_1_stepper_hz", e, step_anchor_1.into()),
+    });
+    let step_anchor_3 = "Klipper 99 k total with three steppers";
+    rows.push(match &rate3 {
+        Ok(r) => Row {
+            key: "step_rate_3_steppers_total_hz",
+            value: Ok(r.total_hz()),
+            shown: format!("{} steps/s ({} per axis){}", group(r.total_hz()), group(r.per_axis_hz), limit_note(&r.limit)),
+            anchor: step_anchor_3.into(),
+        },
+        Err(e) => missing("step_rate_3_steppers_total_hz", e, step_anchor_3.into()),
+    });
+    let isr_anchor = "Klipper ≈ 6 % (derived: 16 MHz / 157 k = 102 cycles a step); Marlin ≈ 70 % (derived: 10 k of its ≈ 14 k ceiling)";
+    rows.push(match &isr {
+        Ok((share, _)) => Row {
+            key: "isr_share_at_10k_steps",
+            value: Ok(*share),
+            shown: format!("{:.1} % of cycles in interrupt handlers", share * 100.0),
+            anchor: isr_anchor.into(),
+        },
+        Err(e) => missing("isr_share_at_10k_steps", e, isr_anchor.into()),
+    });
+    rows.push(match &stream {
+        Ok(s) => Row {
+            key: "g1_lines_per_s_at_250000_baud",
+            value: Ok(s.lines_per_s),
+            shown: format!("{:.0} lines/s ({} segments, {:.1} reply bytes a line)", s.lines_per_s, s.lines, s.mean_reply_bytes),
+            anchor: format!("wire limit of this stream with ok flow control: {:.0} lines/s", s.wire_bound_lines_per_s),
+        },
+        Err(e) => missing("g1_lines_per_s_at_250000_baud", e, String::new()),
+    });
+
+    print_table(&rows);
+    print_runner(&phases, started);
+    if let Err(e) = &tour {
+        println!("command tour failed: {e}");
+    }
+    write_json(&json, &rows);
+}
+
+fn missing(key: &'static str, reason: &str, anchor: String) -> Row {
+    Row { key, value: Err(reason.to_string()), shown: format!("missing: {reason}"), anchor }
+}
+
+fn limit_note(limit: &Option<(f64, String)>) -> String {
+    match limit {
+        Some((rate, why)) => format!("; at {} steps/s: {why}", group(*rate)),
+        None => "; every rate tried was on time".into(),
+    }
+}
+
+fn print_table(rows: &[Row]) {
+    println!();
+    println!("Ferrostep on the Arduino Mega 2560 + RAMPS 1.4 (simavr, 16 MHz, the release ELF)");
+    println!();
+    let key_width = rows.iter().map(|r| r.key.len()).max().unwrap_or(0);
+    for row in rows {
+        println!("{:<key_width$}  {}", row.key, row.shown);
+        if !row.anchor.is_empty() {
+            println!("{:<key_width$}    anchors: {}", "", row.anchor);
+        }
+    }
+    println!();
+}
+
+fn print_runner(phases: &[PhaseLog], started: Instant) {
+    let simulated: f64 = phases.iter().map(|p| p.simulated_s).sum();
+    let wall: f64 = phases.iter().map(|p| p.wall.as_secs_f64()).sum();
+    println!("runner: {:.2} simulated s in {:.2} s of simulation ({:.1}× real time); {:.1} s in all with builds", simulated, wall, simulated / wall.max(1e-9), started.elapsed().as_secs_f64());
+    println!("{:<22} {:>8} {:>9} {:>10} {:>10} {:>9} {:>9}  deepest stack in", "phase", "sim s", "stack SP", "ISR share", "I clear", "overruns", "resets");
+    for p in phases {
+        println!(
+            "{:<22} {:>8.2} {:>8} B {:>9.2} % {:>9.2} % {:>9} {:>9}  {}",
+            p.name,
+            p.simulated_s,
+            p.stack_peak_sp,
+            p.isr_share * 100.0,
+            p.i_clear_share * 100.0,
+            p.rx_overruns,
+            p.resets,
+            p.deepest_function.as_deref().unwrap_or("?")
+        );
+        if let Some(h) = &p.halted {
+            println!("  halted: {h}");
+        }
+    }
+    println!("(ISR share: cycles from interrupt entry to RETI, +5 per entry; I clear: cycles of instructions begun with SREG.I = 0, ISRs and critical sections)");
+}
+
+fn write_json(path: &PathBuf, rows: &[Row]) {
+    let body = rows
+        .iter()
+        .filter_map(|r| r.value.as_ref().ok().map(|v| format!("  \"{}\": {}", r.key, json_number(*v))))
+        .collect::<Vec<_>>()
+        .join(",\n");
+    let text = format!("{{\n{body}\n}}\n");
+    if let Some(dir) = path.parent() {
+        let _ = std::fs::create_dir_all(dir);
+    }
+    match std::fs::write(path, text) {
+        Ok(()) => println!("wrote {}", path.display()),
+        Err(e) => fail(&format!("cannot write {}: {e}", path.display())),
+    }
+}
+
+fn json_number(v: f64) -> String {
+    if v.fract() == 0.0 && v.abs() < 1e15 {
+        format!("{}", v as i64)
+    } else {
+        format!("{v:.6}")
+    }
+}
+
+/// 12345.0 → "12 345".
+fn group(v: f64) -> String {
+    let digits = format!("{:.0}", v.abs());
+    let mut out = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i) % 3 == 0 {
+            out.push(' ');
+        }
+        out.push(c);
+    }
+    if v < 0.0 {
+        format!("-{out}")
+    } else {
+        out
+    }
+}
+
+fn fail(message: &str) -> ! {
+    eprintln!("benchmark: {message}");
+    std::process::exit(1)
+}

@@ -1,0 +1,1088 @@
+//! The Mega 2560 on simavr with a virtual RAMPS 1.4 around it.
+//!
+//! simavr executes the release ELF one instruction per `avr_run` call
+//! (`run_cycle_limit` stays 1), so after every instruction the run loop
+//! here sees the cycle counter, SREG's I flag, the interrupt nesting and SP.
+//! Pins, the UART and the ADC are wired through simavr's IRQ API:
+//! notifications on port-pin IRQs record STEP/DIR/heater edges with their
+//! cycle; raising port-pin IRQs drives the endstop inputs; raising ADC IRQs
+//! sets the thermistor voltages; UART0's IRQs carry bytes both ways.
+//!
+//! Corrections of simavr applied here (see README.md):
+//! - UART frame time: simavr counts 11 bits per byte with parity off, and
+//!   recomputes it only on a UBRRnL write (so U2X set afterwards is ignored,
+//!   which halves the rate of this firmware). The bench wraps the write
+//!   handlers of UBRR0L/H and UCSR0A/B/C and sets the frame from the
+//!   registers: 1 start + data + parity (if on) + stop bits.
+//! - Interrupt entry: simavr charges 0 cycles; the ATmega2560 takes 5 (PC
+//!   push of 3 bytes, I clear, vector fetch). The run loop adds them to the
+//!   cycle counter when an interrupt is entered.
+//! - `sleep`: simavr's default sleep callback calls usleep(); the bench's
+//!   does nothing (time still advances in cycles).
+//! - UART polling: simavr usleep()s on UCSRnA reads by default
+//!   (AVR_UART_FLAG_POLL_SLEEP); turned off.
+
+use crate::elf::{ElfInfo, RAM_END};
+use crate::host::{Host, HostConfig};
+use crate::thermal::{SensorInput, ThermalPlant, Thermistor};
+use simavr_ffi as ffi;
+use std::ffi::{c_void, CString};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+pub const CPU_HZ: u32 = 16_000_000;
+
+const fn ioctl(a: u8, b: u8, c: u8, d: u8) -> u32 {
+    (a as u32) << 24 | (b as u32) << 16 | (c as u32) << 8 | d as u32
+}
+
+// Data-space addresses of the ATmega2560 registers the bench touches.
+const SPL: usize = 0x5D;
+const SPH: usize = 0x5E;
+const UCSR0A: u16 = 0xC0;
+const UCSR0B: u16 = 0xC1;
+const UCSR0C: u16 = 0xC2;
+const UBRR0L: u16 = 0xC4;
+const UBRR0H: u16 = 0xC5;
+/// DOR0 in UCSR0A.
+const DOR0: u8 = 1 << 3;
+
+/// One pin: port letter and bit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Pin {
+    pub port: u8,
+    pub bit: u8,
+}
+
+pub const fn pin(port: u8, bit: u8) -> Pin {
+    Pin { port, bit }
+}
+
+/// STEP/DIR pins of one stepper socket.
+#[derive(Clone, Copy, Debug)]
+pub struct AxisPins {
+    pub name: &'static str,
+    pub step: Pin,
+    pub dir: Pin,
+}
+
+/// RAMPS 1.4 stepper sockets (Marlin's pin map, DESIGN.md).
+pub const AXES: [AxisPins; 5] = [
+    AxisPins { name: "X", step: pin(b'F', 0), dir: pin(b'F', 1) },
+    AxisPins { name: "Y", step: pin(b'F', 6), dir: pin(b'F', 7) },
+    AxisPins { name: "Z", step: pin(b'L', 3), dir: pin(b'L', 1) },
+    AxisPins { name: "E0", step: pin(b'A', 4), dir: pin(b'A', 6) },
+    AxisPins { name: "E1", step: pin(b'C', 1), dir: pin(b'C', 3) },
+];
+pub const X: usize = 0;
+pub const Y: usize = 1;
+pub const Z: usize = 2;
+pub const E0: usize = 3;
+pub const E1: usize = 4;
+
+/// Endstop inputs in the firmware's order: X_MIN, X_MAX, Y_MIN, Y_MAX,
+/// Z_MIN, Z_MAX.
+pub const ENDSTOP_PINS: [Pin; 6] = [pin(b'E', 5), pin(b'E', 4), pin(b'J', 1), pin(b'J', 0), pin(b'D', 3), pin(b'D', 2)];
+pub const ENDSTOP_NAMES: [&str; 6] = ["X_MIN", "X_MAX", "Y_MIN", "Y_MAX", "Z_MIN", "Z_MAX"];
+
+/// Heater and fan MOSFET gates.
+pub const HOTEND_PIN: Pin = pin(b'B', 4);
+pub const BED_PIN: Pin = pin(b'H', 5);
+pub const FAN_PIN: Pin = pin(b'H', 6);
+
+/// One recorded STEP edge.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StepEdge {
+    pub cycle: u64,
+    pub rising: bool,
+    /// DIR level at the edge.
+    pub dir: bool,
+    /// Cycles spent in interrupt handlers since boot, at this edge.
+    pub isr_cycles: u64,
+}
+
+/// A limit switch at a position on an axis.
+#[derive(Clone, Copy, Debug)]
+pub struct Endstop {
+    /// Index into [`AXES`] whose position moves the switch.
+    pub axis: usize,
+    /// The switch is pressed at or beyond this position (in steps).
+    pub at_steps: i64,
+    /// Pressed when the position is ≤ `at_steps` (a MIN switch) or ≥ (MAX).
+    pub is_min: bool,
+    /// Pin level while pressed (high: a normally-closed switch to ground
+    /// opens and the pull-up wins; low: a normally-open switch to ground).
+    pub pressed_level: bool,
+}
+
+/// How one thermistor input is produced.
+#[derive(Clone, Debug)]
+pub struct SensorConfig {
+    pub adc_channel: u8,
+    /// The heater pin that heats this sensor's plant, if any.
+    pub heater: Option<Pin>,
+    pub plant: ThermalPlant,
+    pub thermistor: Thermistor,
+    pub input: SensorInput,
+}
+
+/// The virtual RAMPS around the chip.
+#[derive(Clone, Debug)]
+pub struct RampsConfig {
+    pub host: HostConfig,
+    /// Per axis: DIR high means positive motion.
+    pub dir_high_is_positive: [bool; 5],
+    /// Per endstop input (X_MIN … Z_MAX): a switch, or none (the pull-up
+    /// reads high).
+    pub endstops: [Option<Endstop>; 6],
+    pub sensors: Vec<SensorConfig>,
+    /// Thermal plant update period, seconds.
+    pub plant_period_s: f64,
+    /// Thermal history sample period, seconds.
+    pub sample_period_s: f64,
+    /// Add the 5 cycles simavr leaves out of each interrupt entry.
+    pub correct_interrupt_entry: bool,
+    /// Emulate the USART's 2-byte receive FIFO: a byte arriving while two
+    /// are unread is lost and DOR0 is set (simavr buffers 64).
+    pub hardware_rx_fifo: bool,
+}
+
+impl RampsConfig {
+    pub fn stock(baud: u32) -> Self {
+        Self {
+            host: HostConfig::printcore(baud),
+            dir_high_is_positive: [true; 5],
+            endstops: [None; 6],
+            sensors: vec![
+                SensorConfig {
+                    adc_channel: 13,
+                    heater: Some(HOTEND_PIN),
+                    plant: ThermalPlant::hotend(),
+                    thermistor: Thermistor::NTC100K_B3950_4K7,
+                    input: SensorInput::Plant,
+                },
+                SensorConfig {
+                    adc_channel: 14,
+                    heater: Some(BED_PIN),
+                    plant: ThermalPlant::bed(),
+                    thermistor: Thermistor::NTC100K_B3950_4K7,
+                    input: SensorInput::Plant,
+                },
+                SensorConfig {
+                    adc_channel: 15,
+                    heater: None,
+                    plant: ThermalPlant::unheated(),
+                    thermistor: Thermistor::NTC100K_B3950_4K7,
+                    input: SensorInput::Plant,
+                },
+            ],
+            plant_period_s: 0.001,
+            sample_period_s: 0.1,
+            correct_interrupt_entry: true,
+            hardware_rx_fifo: true,
+        }
+    }
+}
+
+/// CPU-time accounting, updated after every instruction.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CpuStats {
+    pub instructions: u64,
+    /// Cycles of instructions that began with SREG.I clear (interrupt
+    /// handlers, and critical sections of the main loop), plus interrupt
+    /// entries.
+    pub i_clear_cycles: u64,
+    /// Cycles of instructions inside an interrupt handler (entry to RETI),
+    /// plus interrupt entries.
+    pub isr_cycles: u64,
+    pub sleep_cycles: u64,
+    pub interrupt_entries: u64,
+    /// Lowest SP seen after any instruction, and the PC (byte address)
+    /// of the instruction that took it there.
+    pub min_sp: u16,
+    pub min_sp_pc: u32,
+    /// Times the CPU went back to the reset vector (watchdog, crash).
+    pub resets: u64,
+}
+
+/// Duty bookkeeping of one output pin.
+#[derive(Clone, Copy, Debug, Default)]
+struct DutyMeter {
+    level: bool,
+    since: u64,
+    high_in_tick: u64,
+    high_in_sample: u64,
+    edges: u64,
+}
+
+impl DutyMeter {
+    fn edge(&mut self, now: u64, level: bool) {
+        if level == self.level {
+            return;
+        }
+        if self.level {
+            self.high_in_tick += now - self.since;
+            self.high_in_sample += now - self.since;
+        }
+        self.level = level;
+        self.since = now;
+        self.edges += 1;
+    }
+
+    fn close(&mut self, now: u64) {
+        if self.level {
+            self.high_in_tick += now - self.since;
+            self.high_in_sample += now - self.since;
+        }
+        self.since = now;
+    }
+}
+
+/// One point of the thermal history.
+#[derive(Clone, Debug)]
+pub struct ThermalSample {
+    pub time_s: f64,
+    /// Per sensor (in `RampsConfig::sensors` order): heater duty over the
+    /// sample period (0..1), plant temperature, ADC counts presented.
+    pub duty: Vec<f64>,
+    pub celsius: Vec<f64>,
+    pub adc: Vec<u16>,
+    pub fan_duty: f64,
+}
+
+struct AxisState {
+    step_level: bool,
+    dir_level: bool,
+    position: i64,
+    rising_edges: u64,
+    edges: Vec<StepEdge>,
+    min_high_cycles: Option<u64>,
+    last_rise: u64,
+}
+
+struct Sensor {
+    config: SensorConfig,
+    meter: Option<usize>,
+    irq: *mut ffi::avr_irq_t,
+    counts: u16,
+}
+
+/// Everything the C callbacks touch. Boxed (stable address); accessed only
+/// from the thread that runs the simulation, either inside `avr_run`
+/// (callbacks) or between calls.
+struct Shared {
+    avr: *mut ffi::avr_t,
+    stats: CpuStats,
+    axes: Vec<AxisState>,
+    axis_of_pin: Vec<(*mut ffi::avr_irq_t, usize, bool)>,
+    endstops: [Option<Endstop>; 6],
+    endstop_irqs: [*mut ffi::avr_irq_t; 6],
+    endstop_levels: [bool; 6],
+    dir_high_is_positive: [bool; 5],
+    meters: Vec<(Pin, *mut ffi::avr_irq_t, DutyMeter)>,
+    /// Per meter: the TCCRnA address and bit shift of the compare unit
+    /// that can drive the pin (COMnx1:0).
+    meter_compare: Vec<(u16, u8)>,
+    sensors: Vec<Sensor>,
+    plant_period_cycles: u64,
+    sample_period_cycles: u64,
+    next_sample: u64,
+    samples: Vec<ThermalSample>,
+    host: Host,
+    uart_input_irq: *mut ffi::avr_irq_t,
+    uart0: *mut ffi::avr_uart_t,
+    /// Wrapped write handlers of the UART registers: (addr, original).
+    uart_handlers: Vec<(u16, ffi::avr_io_write_t, *mut c_void)>,
+    avr_frame_cycles: u64,
+    hardware_rx_fifo: bool,
+    rx_overruns: u64,
+    tx_log: Vec<(u64, u8, u64)>,
+    /// Bytes injected into the receiver: (start-bit cycle, byte).
+    rx_log: Vec<(u64, u8)>,
+    record_isr_intervals: bool,
+    isr_entered_at: u64,
+    /// Outermost interrupt handler runs: [entry, after RETI).
+    isr_intervals: Vec<(u64, u64)>,
+    /// Cycles per flash word address, when profiling.
+    profile: Option<Vec<u64>>,
+}
+
+/// The simulated board.
+pub struct Board {
+    avr: *mut ffi::avr_t,
+    shared: Box<Shared>,
+    pub elf: ElfInfo,
+    correct_interrupt_entry: bool,
+    paint_from: u16,
+    wall: Duration,
+    wall_cycles: u64,
+    /// Stop `run_*` when a reply line contains this (e.g. "Error:Firmware panic").
+    halted_reason: Option<String>,
+}
+
+/// The pattern painted over free RAM at load.
+pub const PAINT: u8 = 0xA5;
+
+impl Board {
+    /// Load `elf` on an ATmega2560 at 16 MHz with the virtual RAMPS.
+    pub fn load(elf_path: &Path, config: RampsConfig) -> Result<Self, String> {
+        let elf = ElfInfo::read(elf_path)?;
+        // SAFETY: plain FFI calls on a freshly made simavr instance; every
+        // pointer used below comes from simavr itself or lives in `shared`,
+        // which outlives the instance (terminated in Drop first).
+        unsafe {
+            let name = CString::new("atmega2560").unwrap();
+            let avr = ffi::avr_make_mcu_by_name(name.as_ptr());
+            if avr.is_null() {
+                return Err("simavr has no atmega2560 core".into());
+            }
+            if ffi::avr_init(avr) != 0 {
+                return Err("avr_init failed".into());
+            }
+            (*avr).set_log(0);
+            // simavr logs ELF loading with no instance (so `log` cannot
+            // silence it) on stdout; the bench reports for itself.
+            ffi::avr_global_logger_set(std::mem::transmute::<
+                unsafe extern "C" fn(*mut ffi::avr_t, std::os::raw::c_int, *const std::os::raw::c_char, *mut c_void),
+                ffi::avr_logger_p,
+            >(quiet_logger));
+            let mut firmware: Box<ffi::elf_firmware_t> = Box::new(std::mem::zeroed());
+            let path = CString::new(elf_path.to_string_lossy().as_bytes()).map_err(|e| e.to_string())?;
+            if ffi::elf_read_firmware(path.as_ptr(), &mut *firmware) != 0 {
+                return Err(format!("simavr could not read {}", elf_path.display()));
+            }
+            ffi::avr_load_firmware(avr, &mut *firmware);
+            (*avr).frequency = CPU_HZ;
+            (*avr).avcc = 5000;
+            (*avr).vcc = 5000;
+            (*avr).aref = 5000;
+            (*avr).set_log(0);
+            (*avr).sleep = Some(no_sleep);
+
+            let mut flags: u32 = 0;
+            ffi::avr_ioctl(avr, ioctl(b'u', b'a', b's', b'0'), &mut flags as *mut u32 as *mut c_void);
+
+            let mut host = Host::new(config.host.clone(), CPU_HZ);
+            host.next_start = 0.0;
+            let mut shared = Box::new(Shared {
+                avr,
+                stats: CpuStats { min_sp: RAM_END, ..CpuStats::default() },
+                axes: AXES
+                    .iter()
+                    .map(|_| AxisState {
+                        step_level: false,
+                        dir_level: false,
+                        position: 0,
+                        rising_edges: 0,
+                        edges: Vec::new(),
+                        min_high_cycles: None,
+                        last_rise: 0,
+                    })
+                    .collect(),
+                axis_of_pin: Vec::new(),
+                endstops: config.endstops,
+                endstop_irqs: [std::ptr::null_mut(); 6],
+                endstop_levels: [true; 6],
+                dir_high_is_positive: config.dir_high_is_positive,
+                meters: Vec::new(),
+                meter_compare: Vec::new(),
+                sensors: Vec::new(),
+                plant_period_cycles: (config.plant_period_s * f64::from(CPU_HZ)).round() as u64,
+                sample_period_cycles: (config.sample_period_s * f64::from(CPU_HZ)).round() as u64,
+                next_sample: 0,
+                samples: Vec::new(),
+                host,
+                uart_input_irq: ffi::avr_io_getirq(avr, ioctl(b'u', b'a', b'r', b'0'), ffi::UART_IRQ_INPUT as i32),
+                uart0: find_uart(avr, b'0'),
+                uart_handlers: Vec::new(),
+                avr_frame_cycles: 0,
+                hardware_rx_fifo: config.hardware_rx_fifo,
+                rx_overruns: 0,
+                tx_log: Vec::new(),
+                rx_log: Vec::new(),
+                record_isr_intervals: false,
+                isr_entered_at: 0,
+                isr_intervals: Vec::new(),
+                profile: None,
+            });
+            shared.next_sample = shared.sample_period_cycles;
+            if shared.uart0.is_null() {
+                return Err("simavr's atmega2560 has no UART0".into());
+            }
+            let param = &mut *shared as *mut Shared as *mut c_void;
+
+            // Firmware output.
+            let out = ffi::avr_io_getirq(avr, ioctl(b'u', b'a', b'r', b'0'), ffi::UART_IRQ_OUTPUT as i32);
+            ffi::avr_irq_register_notify(out, Some(on_uart_output), param);
+            // Frame-time fix: wrap the UART configuration registers.
+            for addr in [UBRR0L, UBRR0H, UCSR0A, UCSR0B, UCSR0C] {
+                let slot = &mut (*avr).io[usize::from(addr) - 32].w;
+                shared.uart_handlers.push((addr, slot.c, slot.param));
+                slot.c = Some(on_uart_config_write);
+                slot.param = param;
+            }
+
+            // STEP and DIR pins.
+            for (axis, pins) in AXES.iter().enumerate() {
+                for (p, is_step) in [(pins.step, true), (pins.dir, false)] {
+                    let irq = port_irq(avr, p);
+                    shared.axis_of_pin.push((irq, axis, is_step));
+                    ffi::avr_irq_register_notify(irq, Some(on_axis_pin), param);
+                }
+            }
+            // Heater and fan pins.
+            // OC2A (TCCR2A COM2A, bits 7:6), OC4C (TCCR4A COM4C, 3:2),
+            // OC2B (TCCR2A COM2B, 5:4).
+            for (p, compare) in [(HOTEND_PIN, (0xB0, 6)), (BED_PIN, (0xA0, 2)), (FAN_PIN, (0xB0, 4))] {
+                let irq = port_irq(avr, p);
+                shared.meters.push((p, irq, DutyMeter::default()));
+                shared.meter_compare.push(compare);
+                ffi::avr_irq_register_notify(irq, Some(on_meter_pin), param);
+            }
+            // Thermistors.
+            for sensor in config.sensors {
+                let meter = sensor.heater.and_then(|h| shared.meters.iter().position(|(p, _, _)| *p == h));
+                let irq = ffi::avr_io_getirq(avr, ioctl(b'a', b'd', b'c', b'0'), ffi::ADC_IRQ_ADC0 as i32 + i32::from(sensor.adc_channel));
+                shared.sensors.push(Sensor { config: sensor, meter, irq, counts: 0 });
+            }
+            shared.update_adc_inputs();
+            // Endstops.
+            for (i, p) in ENDSTOP_PINS.iter().enumerate() {
+                shared.endstop_irqs[i] = port_irq(avr, *p);
+            }
+            shared.update_endstops(true);
+            // The thermal plants run on a simavr cycle timer.
+            let period = shared.plant_period_cycles;
+            ffi::avr_cycle_timer_register(avr, period, Some(on_plant_tick), param);
+
+            // Paint free RAM (between the static data and the stack top).
+            let paint_from = elf.static_end();
+            for addr in paint_from..=RAM_END {
+                *(*avr).data.add(usize::from(addr)) = PAINT;
+            }
+            std::mem::forget(firmware);
+            Ok(Self {
+                avr,
+                shared,
+                elf,
+                correct_interrupt_entry: config.correct_interrupt_entry,
+                paint_from,
+                wall: Duration::ZERO,
+                wall_cycles: 0,
+                halted_reason: None,
+            })
+        }
+    }
+
+    pub fn cycle(&self) -> u64 {
+        // SAFETY: `avr` is valid for the board's lifetime.
+        unsafe { (*self.avr).cycle }
+    }
+
+    pub fn seconds(&self) -> f64 {
+        self.cycle() as f64 / f64::from(CPU_HZ)
+    }
+
+    pub fn stats(&self) -> CpuStats {
+        self.shared.stats
+    }
+
+    pub fn host(&self) -> &Host {
+        &self.shared.host
+    }
+
+    pub fn host_mut(&mut self) -> &mut Host {
+        &mut self.shared.host
+    }
+
+    /// Queue lines for the host to send.
+    pub fn send<I, S>(&mut self, lines: I)
+    where
+        I: IntoIterator<Item = S>,
+        S: AsRef<str>,
+    {
+        let now = self.cycle() as f64;
+        let host = &mut self.shared.host;
+        if host.is_done() {
+            host.next_start = host.next_start.max(now);
+        }
+        host.queue(lines);
+    }
+
+    /// Why the run stopped early (CPU crashed or stopped), if it did.
+    pub fn halted_reason(&self) -> Option<&str> {
+        self.halted_reason.as_deref()
+    }
+
+    /// Run until cycle `end` (or the CPU stops).
+    pub fn run_until(&mut self, end: u64) {
+        self.run_while(end, |_| true);
+    }
+
+    pub fn run_for_ms(&mut self, ms: f64) {
+        let end = self.cycle() + (ms * f64::from(CPU_HZ) / 1000.0) as u64;
+        self.run_until(end);
+    }
+
+    /// Run until the host has sent everything and got its `ok`s, or until
+    /// `timeout_s` simulated seconds pass; true if the host finished.
+    pub fn run_until_host_done(&mut self, timeout_s: f64) -> bool {
+        let end = self.cycle() + (timeout_s * f64::from(CPU_HZ)) as u64;
+        let shared: *const Shared = &*self.shared;
+        // SAFETY: read-only peek at the host between instructions.
+        self.run_while(end, |_| unsafe { !(*shared).host.is_done() });
+        self.shared.host.is_done()
+    }
+
+    /// The core loop: one instruction per call, with the accounting.
+    /// `keep_going` is checked every 1024 instructions.
+    pub fn run_while(&mut self, end: u64, mut keep_going: impl FnMut(u64) -> bool) {
+        let avr = self.avr;
+        let started = Instant::now();
+        let start_cycle = self.cycle();
+        let shared: *mut Shared = &mut *self.shared;
+        let mut countdown = 0u32;
+        // SAFETY: `avr` and `shared` are valid; callbacks run only inside
+        // avr_run, on this thread, and touch `shared` through the same
+        // pointer.
+        unsafe {
+            loop {
+                let cycle = (*avr).cycle;
+                if cycle >= end {
+                    break;
+                }
+                if countdown == 0 {
+                    countdown = 1024;
+                    if !keep_going(cycle) {
+                        break;
+                    }
+                }
+                countdown -= 1;
+                if let Some(byte) = (*shared).host.poll_byte(cycle) {
+                    (*shared).inject_rx(byte);
+                }
+                let i_clear = (*avr).sreg[ffi::S_I as usize] == 0;
+                let nesting = (*avr).interrupts.running_ptr;
+                let sleeping = (*avr).state == ffi::cpu_Sleeping as i32;
+                let pc_before = (*avr).pc;
+                let state = ffi::avr_run(avr);
+                let after = (*avr).cycle;
+                let spent = after - cycle;
+                if let Some(profile) = &mut (*shared).profile {
+                    if let Some(slot) = profile.get_mut((pc_before / 2) as usize) {
+                        *slot += spent;
+                    }
+                }
+                let stats = &mut (*shared).stats;
+                stats.instructions += 1;
+                if sleeping {
+                    stats.sleep_cycles += spent;
+                }
+                if i_clear {
+                    stats.i_clear_cycles += spent;
+                }
+                if nesting > 0 {
+                    stats.isr_cycles += spent;
+                }
+                let nesting_after = (*avr).interrupts.running_ptr;
+                if nesting_after > nesting {
+                    stats.interrupt_entries += 1;
+                    if nesting == 0 {
+                        (*shared).isr_entered_at = after;
+                    }
+                    if self.correct_interrupt_entry {
+                        (*avr).cycle += 5;
+                        stats.i_clear_cycles += 5;
+                        stats.isr_cycles += 5;
+                    }
+                } else if nesting_after == 0 && nesting > 0 && (*shared).record_isr_intervals {
+                    let entered = (*shared).isr_entered_at;
+                    (*shared).isr_intervals.push((entered, after));
+                }
+                let sp = u16::from(*(*avr).data.add(SPL)) | u16::from(*(*avr).data.add(SPH)) << 8;
+                if sp < stats.min_sp && sp >= crate::elf::RAM_START {
+                    stats.min_sp = sp;
+                    stats.min_sp_pc = pc_before;
+                }
+                if (*avr).pc == 0 {
+                    stats.resets += 1;
+                }
+                if state == ffi::cpu_Crashed as i32 || state == ffi::cpu_Done as i32 {
+                    self.halted_reason = Some(format!(
+                        "simavr stopped the CPU ({}) at pc 0x{:05x}",
+                        if state == ffi::cpu_Crashed as i32 { "crashed" } else { "done: sleep with interrupts off" },
+                        (*avr).pc
+                    ));
+                    break;
+                }
+            }
+        }
+        self.wall += started.elapsed();
+        self.wall_cycles += self.cycle() - start_cycle;
+    }
+
+    /// Simulated seconds per wall-clock second so far.
+    pub fn speed(&self) -> f64 {
+        let wall = self.wall.as_secs_f64();
+        if wall == 0.0 {
+            return 0.0;
+        }
+        self.wall_cycles as f64 / f64::from(CPU_HZ) / wall
+    }
+
+    pub fn wall_time(&self) -> Duration {
+        self.wall
+    }
+
+    /// Stack high-water mark from SP: RAMEND − lowest SP seen, bytes.
+    pub fn stack_peak_sp(&self) -> u32 {
+        u32::from(RAM_END - self.shared.stats.min_sp)
+    }
+
+    /// Stack high-water mark from the paint: bytes from the lowest RAM byte
+    /// that no longer holds the pattern up to RAMEND (a pushed 0xA5 at the
+    /// very bottom would hide one byte).
+    pub fn stack_peak_paint(&self) -> u32 {
+        for addr in self.paint_from..=RAM_END {
+            // SAFETY: inside simavr's data array.
+            if unsafe { *(*self.avr).data.add(usize::from(addr)) } != PAINT {
+                return u32::from(RAM_END - addr) + 1;
+            }
+        }
+        0
+    }
+
+    /// Free RAM between the static data and the deepest stack use, bytes.
+    pub fn ram_untouched(&self) -> u32 {
+        u32::from(RAM_END - self.paint_from + 1) - self.stack_peak_paint()
+    }
+
+    pub fn read_ram(&self, addr: u16) -> u8 {
+        // SAFETY: inside simavr's data array (64 KiB allocated).
+        unsafe { *(*self.avr).data.add(usize::from(addr)) }
+    }
+
+    /// Net position of an axis in steps (DIR high = + unless configured).
+    pub fn position(&self, axis: usize) -> i64 {
+        self.shared.axes[axis].position
+    }
+
+    pub fn step_count(&self, axis: usize) -> u64 {
+        self.shared.axes[axis].rising_edges
+    }
+
+    pub fn step_edges(&self, axis: usize) -> &[StepEdge] {
+        &self.shared.axes[axis].edges
+    }
+
+    /// Shortest STEP high time seen, cycles.
+    pub fn min_step_pulse_cycles(&self, axis: usize) -> Option<u64> {
+        self.shared.axes[axis].min_high_cycles
+    }
+
+    /// Forget recorded edges (counts and positions are kept).
+    pub fn clear_step_edges(&mut self) {
+        for axis in &mut self.shared.axes {
+            axis.edges.clear();
+        }
+    }
+
+    /// Highest step rate on an axis: `1/Δt` of the shortest interval
+    /// between rising edges (instantaneous), and the highest mean over any
+    /// `window` consecutive intervals.
+    pub fn peak_step_rate(&self, axis: usize, window: usize) -> (f64, f64) {
+        peak_rates(self.step_edges(axis), window)
+    }
+
+    pub fn set_endstop(&mut self, index: usize, endstop: Option<Endstop>) {
+        self.shared.endstops[index] = endstop;
+        // SAFETY: between instructions.
+        unsafe { self.shared.update_endstops(false) };
+    }
+
+    /// The level each endstop input is driven to.
+    pub fn endstop_levels(&self) -> [bool; 6] {
+        self.shared.endstop_levels
+    }
+
+    /// Replace what a sensor channel reads (plant or a fixed count).
+    pub fn set_sensor_input(&mut self, adc_channel: u8, input: SensorInput) {
+        for s in &mut self.shared.sensors {
+            if s.config.adc_channel == adc_channel {
+                s.config.input = input;
+            }
+        }
+        // SAFETY: between instructions.
+        unsafe { self.shared.update_adc_inputs() };
+    }
+
+    /// Set a plant's temperature (as if it had been heated or cooled).
+    pub fn set_plant_celsius(&mut self, adc_channel: u8, celsius: f64) {
+        for s in &mut self.shared.sensors {
+            if s.config.adc_channel == adc_channel {
+                s.config.plant.temperature_c = celsius;
+            }
+        }
+        // SAFETY: between instructions.
+        unsafe { self.shared.update_adc_inputs() };
+    }
+
+    pub fn sensor_celsius(&self, adc_channel: u8) -> Option<f64> {
+        self.shared.sensors.iter().find(|s| s.config.adc_channel == adc_channel).map(|s| s.config.plant.temperature_c)
+    }
+
+    pub fn sensor_counts(&self, adc_channel: u8) -> Option<u16> {
+        self.shared.sensors.iter().find(|s| s.config.adc_channel == adc_channel).map(|s| s.counts)
+    }
+
+    pub fn thermal_history(&self) -> &[ThermalSample] {
+        &self.shared.samples
+    }
+
+    /// Bytes lost to the emulated 2-byte receive FIFO (DOR0 raised).
+    pub fn rx_overruns(&self) -> u64 {
+        self.shared.rx_overruns
+    }
+
+    /// The AVR's UART frame, cycles (from its UBRR0/U2X0/UCSR0C setting).
+    pub fn avr_frame_cycles(&self) -> u64 {
+        self.shared.avr_frame_cycles
+    }
+
+    /// Every byte the firmware wrote to UDR0: (cycle, byte, ISR cycles then).
+    pub fn tx_log(&self) -> &[(u64, u8, u64)] {
+        &self.shared.tx_log
+    }
+
+    /// Every byte the host started sending: (start-bit cycle, byte). The
+    /// firmware sees it (RXC) one AVR frame later.
+    pub fn rx_log(&self) -> &[(u64, u8)] {
+        &self.shared.rx_log
+    }
+
+    /// Record every outermost interrupt handler run from now on (for
+    /// [`Board::isr_cycles_between`]).
+    pub fn record_isr_intervals(&mut self, on: bool) {
+        self.shared.record_isr_intervals = on;
+        if !on {
+            self.shared.isr_intervals.clear();
+        }
+    }
+
+    /// Cycles spent in interrupt handlers within `[from, to)` (needs
+    /// [`Board::record_isr_intervals`] on over that span; the 5-cycle entry
+    /// is part of each handler run).
+    pub fn isr_cycles_between(&self, from: u64, to: u64) -> u64 {
+        let intervals = &self.shared.isr_intervals;
+        let first = intervals.partition_point(|&(_, end)| end <= from);
+        intervals[first..]
+            .iter()
+            .take_while(|&&(start, _)| start < to)
+            .map(|&(start, end)| end.min(to).saturating_sub(start.max(from)))
+            .sum()
+    }
+
+    /// Start (or stop and discard) the per-instruction cycle profile.
+    pub fn profile(&mut self, on: bool) {
+        self.shared.profile = on.then(|| vec![0; (crate::elf::FLASH_BYTES / 2) as usize]);
+    }
+
+    /// Cycles per function since profiling started, highest first
+    /// (demangled names; instructions outside any sized symbol are
+    /// grouped under "?").
+    pub fn profile_by_function(&self) -> Vec<(String, u64)> {
+        let Some(profile) = &self.shared.profile else { return Vec::new() };
+        let mut totals: std::collections::HashMap<String, u64> = std::collections::HashMap::new();
+        for (word, &cycles) in profile.iter().enumerate() {
+            if cycles > 0 {
+                let name = self.symbol_at(word as u32 * 2).map_or("?".to_string(), demangle);
+                *totals.entry(name).or_default() += cycles;
+            }
+        }
+        let mut list: Vec<_> = totals.into_iter().collect();
+        list.sort_by(|a, b| b.1.cmp(&a.1));
+        list
+    }
+
+    /// The function holding a flash byte address, from the ELF symbols.
+    pub fn symbol_at(&self, pc: u32) -> Option<&str> {
+        self.elf
+            .symbols
+            .iter()
+            .filter(|s| s.size > 0 && s.value < crate::elf::DATA_OFFSET && (s.value..s.value + s.size).contains(&pc))
+            .min_by_key(|s| s.size)
+            .map(|s| s.name.as_str())
+    }
+}
+
+impl Drop for Board {
+    fn drop(&mut self) {
+        // SAFETY: the instance is not used after this.
+        unsafe { ffi::avr_terminate(self.avr) };
+    }
+}
+
+/// A symbol as a Rust path without its hash.
+pub fn demangle(symbol: &str) -> String {
+    format!("{:#}", rustc_demangle::demangle(symbol))
+}
+
+/// (instantaneous peak, peak of the mean over `window` intervals), in Hz.
+pub fn peak_rates(edges: &[StepEdge], window: usize) -> (f64, f64) {
+    let rises: Vec<u64> = edges.iter().filter(|e| e.rising).map(|e| e.cycle).collect();
+    let mut best = 0.0f64;
+    for w in rises.windows(2) {
+        if w[1] > w[0] {
+            best = best.max(f64::from(CPU_HZ) / (w[1] - w[0]) as f64);
+        }
+    }
+    let mut best_mean = 0.0f64;
+    let window = window.max(1);
+    if rises.len() > window {
+        for i in window..rises.len() {
+            let span = rises[i] - rises[i - window];
+            if span > 0 {
+                best_mean = best_mean.max(window as f64 * f64::from(CPU_HZ) / span as f64);
+            }
+        }
+    }
+    (best, best_mean)
+}
+
+unsafe fn port_irq(avr: *mut ffi::avr_t, p: Pin) -> *mut ffi::avr_irq_t {
+    ffi::avr_io_getirq(avr, ioctl(b'i', b'o', b'g', p.port), i32::from(p.bit))
+}
+
+unsafe fn find_uart(avr: *mut ffi::avr_t, name: u8) -> *mut ffi::avr_uart_t {
+    let mut io = (*avr).io_port;
+    while !io.is_null() {
+        let kind = std::ffi::CStr::from_ptr((*io).kind);
+        if kind.to_bytes() == b"uart" {
+            let uart = io as *mut ffi::avr_uart_t;
+            if (*uart).name as u8 == name {
+                return uart;
+            }
+        }
+        io = (*io).next;
+    }
+    std::ptr::null_mut()
+}
+
+impl Shared {
+    unsafe fn data(&self, addr: u16) -> u8 {
+        *(*self.avr).data.add(usize::from(addr))
+    }
+
+    /// UART0's frame from its registers: start + data + parity + stop bits,
+    /// each `8·(UBRR+1)` cycles with U2X0, `16·(UBRR+1)` without.
+    unsafe fn fix_uart_frame(&mut self) {
+        let ubrr = u64::from(self.data(UBRR0L)) | u64::from(self.data(UBRR0H) & 0x0F) << 8;
+        let u2x = self.data(UCSR0A) & (1 << 1) != 0;
+        let c = self.data(UCSR0C);
+        let size = (c >> 1) & 0b11 | (self.data(UCSR0B) & (1 << 2));
+        let data_bits = match size {
+            0 => 5,
+            1 => 6,
+            2 => 7,
+            7 => 9,
+            _ => 8,
+        };
+        let parity = u64::from((c >> 4) & 0b11 != 0);
+        let stop = 1 + u64::from(c & (1 << 3) != 0);
+        let bit = (ubrr + 1) * if u2x { 8 } else { 16 };
+        let frame = bit * (1 + data_bits + parity + stop);
+        self.avr_frame_cycles = frame;
+        (*self.uart0).cycles_per_byte = frame;
+        self.host.set_min_frame(frame as f64);
+    }
+
+    /// A byte's start bit reaches the AVR now. simavr raises RXC one frame
+    /// after a byte enters its (empty) input FIFO, i.e. at the stop bit.
+    unsafe fn inject_rx(&mut self, byte: u8) {
+        self.rx_log.push(((*self.avr).cycle, byte));
+        if self.hardware_rx_fifo {
+            let fifo = &(*self.uart0).input;
+            let unread = fifo.write.wrapping_sub(fifo.read) & 63;
+            // The real USART holds two received bytes plus the one in the
+            // shift register; a fourth start bit with two unread means the
+            // byte in the shift register is lost (DOR0).
+            if unread >= 3 {
+                self.rx_overruns += 1;
+                *(*self.avr).data.add(usize::from(UCSR0A)) |= DOR0;
+                return;
+            }
+        }
+        ffi::avr_raise_irq(self.uart_input_irq, u32::from(byte));
+    }
+
+    unsafe fn update_endstops(&mut self, force: bool) {
+        let mut per_port: Vec<(u8, u8, u8)> = Vec::new();
+        for (i, p) in ENDSTOP_PINS.iter().enumerate() {
+            let level = match self.endstops[i] {
+                None => true,
+                Some(e) => {
+                    let pos = self.axes[e.axis].position;
+                    let pressed = if e.is_min { pos <= e.at_steps } else { pos >= e.at_steps };
+                    if pressed {
+                        e.pressed_level
+                    } else {
+                        !e.pressed_level
+                    }
+                }
+            };
+            if force || level != self.endstop_levels[i] {
+                self.endstop_levels[i] = level;
+                ffi::avr_raise_irq(self.endstop_irqs[i], u32::from(level));
+            }
+            match per_port.iter_mut().find(|(port, _, _)| *port == p.port) {
+                Some(entry) => {
+                    entry.1 |= 1 << p.bit;
+                    entry.2 |= u8::from(level) << p.bit;
+                }
+                None => per_port.push((p.port, 1 << p.bit, u8::from(level) << p.bit)),
+            }
+        }
+        // Keep the levels when the firmware rewrites PORTx: simavr re-raises
+        // the pull-up level of every input pin on each PORT/DDR write
+        // unless the port has an "external" state for it.
+        for (port, mask, value) in per_port {
+            let mut external: ffi::avr_ioport_external_t = std::mem::zeroed();
+            external.set_name(u64::from(port) as _);
+            external.set_mask(u64::from(mask) as _);
+            external.set_value(u64::from(value) as _);
+            ffi::avr_ioctl(self.avr, ioctl(b'i', b'o', b'p', port), &mut external as *mut _ as *mut c_void);
+        }
+    }
+
+    unsafe fn update_adc_inputs(&mut self) {
+        for s in &mut self.sensors {
+            let counts = match s.config.input {
+                SensorInput::Plant => s.config.thermistor.adc_counts(s.config.plant.temperature_c),
+                SensorInput::Fixed(c) => c.min(1023),
+            };
+            if counts != s.counts || counts == 0 {
+                s.counts = counts;
+                // simavr converts `mV·1023/AVcc` (floor): the smallest mV
+                // that floors to `counts` presents exactly `counts`.
+                let mv = (u32::from(counts) * 5000).div_ceil(1023);
+                ffi::avr_raise_irq(s.irq, mv);
+            }
+        }
+    }
+
+    unsafe fn plant_tick(&mut self, now: u64) {
+        let dt = self.plant_period_cycles as f64 / f64::from(CPU_HZ);
+        let mut duties = Vec::with_capacity(self.meters.len());
+        for (_, _, meter) in &mut self.meters {
+            meter.close(now);
+            duties.push(meter.high_in_tick as f64 / self.plant_period_cycles as f64);
+            meter.high_in_tick = 0;
+        }
+        for s in &mut self.sensors {
+            let duty = s.meter.map_or(0.0, |m| duties[m]);
+            s.config.plant.step(duty, dt);
+        }
+        self.update_adc_inputs();
+        if now >= self.next_sample {
+            self.next_sample += self.sample_period_cycles;
+            let period = self.sample_period_cycles as f64;
+            let mut sample_duty: Vec<f64> = self.meters.iter().map(|(_, _, m)| m.high_in_sample as f64 / period).collect();
+            for (_, _, m) in &mut self.meters {
+                m.high_in_sample = 0;
+            }
+            let fan_duty = sample_duty.pop().unwrap_or(0.0);
+            self.samples.push(ThermalSample {
+                time_s: now as f64 / f64::from(CPU_HZ),
+                duty: self.sensors.iter().map(|s| s.meter.map_or(0.0, |m| sample_duty[m])).collect(),
+                celsius: self.sensors.iter().map(|s| s.config.plant.temperature_c).collect(),
+                adc: self.sensors.iter().map(|s| s.counts).collect(),
+                fan_duty,
+            });
+        }
+    }
+}
+
+/// Takes simavr's log lines and drops them (the `va_list` is never read,
+/// so its ABI does not matter).
+unsafe extern "C" fn quiet_logger(
+    _avr: *mut ffi::avr_t,
+    _level: std::os::raw::c_int,
+    _format: *const std::os::raw::c_char,
+    _args: *mut c_void,
+) {
+}
+
+unsafe extern "C" fn no_sleep(_avr: *mut ffi::avr_t, _how_long: ffi::avr_cycle_count_t) {}
+
+unsafe extern "C" fn on_uart_output(_irq: *mut ffi::avr_irq_t, value: u32, param: *mut c_void) {
+    let shared = &mut *(param as *mut Shared);
+    let cycle = (*shared.avr).cycle;
+    let frame = shared.avr_frame_cycles;
+    shared.tx_log.push((cycle, value as u8, shared.stats.isr_cycles));
+    shared.host.on_firmware_byte(cycle, value as u8, frame);
+}
+
+unsafe extern "C" fn on_uart_config_write(avr: *mut ffi::avr_t, addr: ffi::avr_io_addr_t, v: u8, param: *mut c_void) {
+    let shared = &mut *(param as *mut Shared);
+    let original = shared.uart_handlers.iter().find(|(a, _, _)| *a == addr).map(|(_, c, p)| (*c, *p));
+    match original {
+        Some((Some(write), p)) => write(avr, addr, v, p),
+        _ => ffi::avr_core_watch_write(avr, addr, v),
+    }
+    shared.fix_uart_frame();
+}
+
+unsafe extern "C" fn on_axis_pin(irq: *mut ffi::avr_irq_t, value: u32, param: *mut c_void) {
+    let shared = &mut *(param as *mut Shared);
+    let level = value & 1 != 0;
+    let now = (*shared.avr).cycle;
+    let Some(&(_, axis, is_step)) = shared.axis_of_pin.iter().find(|(i, _, _)| *i == irq) else { return };
+    let positive_high = shared.dir_high_is_positive[axis];
+    let isr = shared.stats.isr_cycles;
+    let state = &mut shared.axes[axis];
+    if !is_step {
+        state.dir_level = level;
+        return;
+    }
+    if level == state.step_level {
+        return;
+    }
+    state.step_level = level;
+    state.edges.push(StepEdge { cycle: now, rising: level, dir: state.dir_level, isr_cycles: isr });
+    if level {
+        state.rising_edges += 1;
+        state.position += if state.dir_level == positive_high { 1 } else { -1 };
+        state.last_rise = now;
+        shared.update_endstops(false);
+    } else {
+        let high = now - state.last_rise;
+        state.min_high_cycles = Some(state.min_high_cycles.map_or(high, |m| m.min(high)));
+    }
+}
+
+/// simavr lets every PORTx write set the pin's IRQ, even while a timer's
+/// compare unit owns the pin (on the chip COMnx ≠ 0 overrides PORTx). The
+/// firmware rewrites PORTH/PORTB in its main loop, so the level is taken
+/// from the timer's edges (flagged AVR_IOPORT_OUTPUT) while the compare
+/// unit is connected, and from port writes while it is not.
+unsafe extern "C" fn on_meter_pin(irq: *mut ffi::avr_irq_t, value: u32, param: *mut c_void) {
+    const AVR_IOPORT_OUTPUT: u32 = 0x100;
+    let shared = &mut *(param as *mut Shared);
+    let now = (*shared.avr).cycle;
+    let from_timer = value & AVR_IOPORT_OUTPUT != 0;
+    for (i, (_, pin_irq, meter)) in shared.meters.iter_mut().enumerate() {
+        if *pin_irq == irq {
+            let (tccr, shift) = shared.meter_compare[i];
+            let connected = (*(*shared.avr).data.add(usize::from(tccr)) >> shift) & 0b11 != 0;
+            if connected == from_timer {
+                meter.edge(now, value & 1 != 0);
+            }
+        }
+    }
+}
+
+unsafe extern "C" fn on_plant_tick(_avr: *mut ffi::avr_t, when: ffi::avr_cycle_count_t, param: *mut c_void) -> ffi::avr_cycle_count_t {
+    let shared = &mut *(param as *mut Shared);
+    shared.plant_tick(when);
+    when + shared.plant_period_cycles
+}

@@ -1,0 +1,278 @@
+//! The quick bench: the real Mega 2560 release ELF on simavr with the
+//! virtual RAMPS, once, on short G-code, with exact checks of replies and
+//! counts, so the bench behind `cargo benchmark` cannot rot.
+//!
+//! The ELF comes from `$FERROSTEP_ELF`, or is built with
+//! `cargo +nightly avr` once per test process when missing or stale.
+
+use avr_bench::bench::{self, exchange, stack_budget, STATIC_RAM_BUDGET_BYTES};
+use avr_bench::board::{Board, Endstop, RampsConfig, CPU_HZ, X, Y, Z};
+use avr_bench::build::mega2560_elf;
+use avr_bench::elf::ElfInfo;
+use avr_bench::host::{with_checksum, Flow, HostConfig};
+use avr_bench::thermal::SensorInput;
+
+const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+fn boot_raw() -> Board {
+    let mut config = RampsConfig::stock(115_200);
+    config.host = HostConfig::raw(115_200);
+    bench::boot(&mega2560_elf(), config).expect("the firmware boots")
+}
+
+fn replies(board: &mut Board, lines: &[&str]) -> Vec<String> {
+    exchange(board, lines, 5.0).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// `ok T:25.03 /0.00 B:25.03 /0.00 @:0 B@:0` → (T, B).
+fn temperatures(m105: &str) -> (f64, f64) {
+    let words: Vec<&str> = m105.split_whitespace().collect();
+    assert!(
+        words.len() == 7
+            && words[0] == "ok"
+            && words[1].starts_with("T:")
+            && words[2].starts_with('/')
+            && words[3].starts_with("B:")
+            && words[4].starts_with('/')
+            && words[5].starts_with("@:")
+            && words[6].starts_with("B@:"),
+        "M105 reply has Marlin's shape: {m105:?}"
+    );
+    let number = |w: &str| w.split(':').nth(1).unwrap().parse::<f64>().unwrap_or_else(|_| panic!("a number in {m105:?}"));
+    (number(words[1]), number(words[3]))
+}
+
+#[test]
+fn boots_answers_and_stays_within_its_budgets() {
+    let mut board = boot_raw();
+    let transcript = board.host().transcript();
+    assert!(
+        transcript.starts_with(&format!("start\necho:Ferrostep {VERSION} ready\n")),
+        "banner first: {transcript:?}"
+    );
+    // U2X0 with UBRR0 = 16: 8·17 cycles a bit, 10 bits a byte (simavr's
+    // own count would be 16·17·11: the bench's frame fix is in place).
+    assert_eq!(board.avr_frame_cycles(), 1360);
+
+    let m115 = replies(&mut board, &["M115"]);
+    assert!(
+        m115[0].starts_with(&format!("FIRMWARE_NAME:Ferrostep {VERSION} (Rust) ")) && m115[0].contains(" PROTOCOL_VERSION:1.0 "),
+        "{:?}",
+        m115[0]
+    );
+    assert!(m115[1..m115.len() - 1].iter().all(|l| {
+        let parts: Vec<&str> = l.split(':').collect();
+        parts.len() == 3 && parts[0] == "Cap" && (parts[2] == "0" || parts[2] == "1")
+    }));
+    assert!(m115.contains(&"Cap:EMERGENCY_PARSER:1".to_string()));
+    assert_eq!(m115.last().unwrap(), "ok");
+
+    // The thermistors are read every 100 ms: 200 ms after boot the room
+    // temperature of the plants (25 °C → 977 counts) is what M105 shows,
+    // through the flash table on the real chip.
+    board.run_for_ms(200.0);
+    assert_eq!(board.sensor_counts(13), Some(977));
+    let m105 = replies(&mut board, &["M105"]);
+    assert_eq!(m105.len(), 1, "{m105:?}");
+    let (hotend, bed) = temperatures(&m105[0]);
+    assert!((hotend - 25.0).abs() < 0.5 && (bed - 25.0).abs() < 0.5, "{m105:?}");
+
+    assert_eq!(replies(&mut board, &["M114"]), ["X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0", "ok"]);
+    assert_eq!(replies(&mut board, &["M999"]), ["echo:Unknown command: \"M999\"", "ok"]);
+    assert_eq!(replies(&mut board, &["; a comment alone"]), ["ok"]);
+
+    // Budgets: static RAM, stack (watched SP and paint), no resets.
+    let elf = ElfInfo::read(&mega2560_elf()).unwrap();
+    let ram_static = elf.ram_static_bytes();
+    assert!(ram_static <= STATIC_RAM_BUDGET_BYTES, "static RAM {ram_static} B");
+    let stack = board.stack_peak_sp();
+    assert!(stack > 0 && stack <= stack_budget(ram_static), "stack {stack} B of {}", stack_budget(ram_static));
+    assert!(board.stack_peak_paint() <= stack, "paint {} vs SP {stack}", board.stack_peak_paint());
+    let stats = board.stats();
+    assert_eq!(stats.resets, 0);
+    assert!(board.halted_reason().is_none());
+    // The 1 kHz tick at least: one entry per millisecond.
+    assert!(stats.interrupt_entries as f64 >= board.seconds() * 1000.0 * 0.99, "{stats:?}");
+    assert!(stats.isr_cycles > 0 && stats.isr_cycles <= stats.i_clear_cycles);
+}
+
+#[test]
+fn line_numbers_checksums_and_long_lines_follow_marlin() {
+    let mut board = boot_raw();
+    // Before any numbered line: no resend request.
+    let long = format!("G1 X1 ; {}", "x".repeat(120));
+    assert_eq!(replies(&mut board, &[&long]), ["Error:Line too long", "ok"]);
+    assert_eq!(replies(&mut board, &["M110 N0"]), ["ok"]);
+    let good = with_checksum("N1 M114");
+    assert_eq!(replies(&mut board, &[&good]), ["X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0", "ok"]);
+    assert_eq!(replies(&mut board, &["N2 M114*0"]), ["Error:checksum mismatch, Last Line: 1", "Resend: 2", "ok"]);
+    let skipped = with_checksum("N3 M114");
+    assert_eq!(replies(&mut board, &[&skipped]), ["Error:Line Number is not Last Line Number+1, Last Line: 1", "Resend: 2", "ok"]);
+    assert_eq!(replies(&mut board, &["N2 M114"]), ["Error:No Checksum with line number, Last Line: 1", "Resend: 2", "ok"]);
+    assert_eq!(replies(&mut board, &[&long]), ["Error:Line too long, Last Line: 1", "Resend: 2", "ok"]);
+    let resent = with_checksum("N2 M114");
+    assert_eq!(replies(&mut board, &[&resent]), ["X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0", "ok"]);
+}
+
+#[test]
+fn a_host_with_numbering_and_resends_streams_a_job() {
+    let mut board = bench::boot(&mega2560_elf(), RampsConfig::stock(115_200)).unwrap();
+    let job = ["; a slicer header", "G90", "M83", "G92 X0 Y0 Z0 E0", "M105", "", "M114", "M400"];
+    board.send(job);
+    assert!(board.run_until_host_done(5.0));
+    let host = board.host();
+    // The preamble N-1 M110 and the six lines left after stripping.
+    assert_eq!(host.sent.len(), 7);
+    assert_eq!(host.sent[0].text, with_checksum("N-1 M110"));
+    assert_eq!(host.sent[1].text, with_checksum("N0 G90"));
+    assert_eq!(host.sent[6].text, with_checksum("N5 M400"));
+    assert_eq!(host.lines_acknowledged(), 6);
+    assert!(host.resends.is_empty());
+    assert!(host.sent.iter().all(|s| s.ok_reply.is_some()));
+}
+
+#[test]
+fn a_burst_without_flow_control_reports_lost_input() {
+    // A host that ignores `ok` while the firmware dwells: the four-line
+    // command queue and the 127-byte receive ring fill, bytes are dropped
+    // and the firmware says so. (The UART itself never overruns: its
+    // interrupt keeps up.)
+    let mut config = RampsConfig::stock(115_200);
+    config.host = HostConfig { baud: 115_200, flow: Flow::Burst, numbering: false, resend: false };
+    let mut board = bench::boot(&mega2560_elf(), config).unwrap();
+    let mut lines = vec!["G4 P100".to_string()];
+    lines.extend((0..40).map(|i| format!("M118 E1 line {i:03}")));
+    board.send(lines.iter());
+    board.run_for_ms(400.0);
+    let texts = board.host().reply_texts();
+    assert_eq!(board.rx_overruns(), 0);
+    assert_eq!(&texts[4..=12], [
+        "ok", "echo:line 000", "ok", "echo:line 001", "ok", "echo:line 002", "ok", "echo:line 003", "ok"
+    ]);
+    assert!(texts.contains(&"Error:Serial receive overrun, line lost"), "{texts:?}");
+    // Every line the firmware took got exactly one ok (G4 has no other
+    // reply; every other line one echo or one error); none hangs.
+    let after_banner = &texts[4..];
+    let oks = after_banner.iter().filter(|t| **t == "ok").count();
+    assert_eq!(oks, after_banner.len() - oks + 1, "{texts:?}");
+}
+
+#[test]
+#[ignore = "firmware bug: the receive-ring loss is charged to the next line assembled, not to the line that lost bytes (see tests/avr-bench/README.md)"]
+fn lines_spliced_by_a_receive_overflow_are_never_executed() {
+    let mut config = RampsConfig::stock(115_200);
+    config.host = HostConfig { baud: 115_200, flow: Flow::Burst, numbering: false, resend: false };
+    let mut board = bench::boot(&mega2560_elf(), config).unwrap();
+    let mut lines = vec!["G4 P100".to_string()];
+    lines.extend((0..120).map(|i| format!("M118 E1 line {i:03}")));
+    board.send(lines.iter());
+    board.run_for_ms(600.0);
+    for text in board.host().reply_texts() {
+        if let Some(echo) = text.strip_prefix("echo:") {
+            if echo.starts_with("line ") || echo.contains("line") {
+                assert!(
+                    echo.len() == 8 && echo[5..].chars().all(|c| c.is_ascii_digit()),
+                    "a line made of two lines' pieces was executed: {text:?}"
+                );
+            }
+        }
+        assert!(!text.starts_with("echo:Unknown command"), "a spliced line was executed: {text:?}");
+    }
+}
+
+#[test]
+fn thermistor_inputs_follow_the_plant_and_fixed_values() {
+    let mut board = boot_raw();
+    board.set_plant_celsius(13, 200.0);
+    board.run_for_ms(250.0);
+    let (hotend, bed) = temperatures(&replies(&mut board, &["M105"])[0]);
+    assert!((hotend - 200.0).abs() < 2.0, "hot end at 200 °C reads {hotend}");
+    assert!((bed - 25.0).abs() < 0.5);
+    // An open and a shorted sensor are not temperatures.
+    board.set_sensor_input(13, SensorInput::OPEN);
+    board.set_sensor_input(14, SensorInput::SHORTED);
+    board.run_for_ms(250.0);
+    let (hotend, bed) = temperatures(&replies(&mut board, &["M105"])[0]);
+    assert!(!(20.0..=300.0).contains(&hotend) && !(20.0..=300.0).contains(&bed), "open {hotend}, shorted {bed}");
+    assert_eq!(board.sensor_counts(13), Some(1023));
+    assert_eq!(board.sensor_counts(14), Some(0));
+    board.set_sensor_input(13, SensorInput::Plant);
+    board.set_sensor_input(14, SensorInput::Plant);
+    board.run_for_ms(250.0);
+    let (_, bed) = temperatures(&replies(&mut board, &["M105"])[0]);
+    assert!((bed - 25.0).abs() < 0.5);
+}
+
+#[test]
+fn fan_pwm_duty_is_measured_on_the_pin() {
+    let mut board = boot_raw();
+    assert_eq!(replies(&mut board, &["M106 S128"]), ["ok"]);
+    board.run_for_ms(250.0);
+    // Fast PWM on Timer2: OCR2B = 128 keeps PH6 high 129 counts of 256.
+    let last = board.thermal_history().last().unwrap().clone();
+    assert!((last.fan_duty - 129.0 / 256.0).abs() < 0.01, "{last:?}");
+    // No heater is driven (nothing asked for heat): plants at ambient.
+    assert!(last.duty.iter().all(|d| *d == 0.0) && last.celsius.iter().all(|c| (c - 25.0).abs() < 1e-6));
+    assert_eq!(replies(&mut board, &["M107"]), ["ok"]);
+    board.run_for_ms(150.0);
+    assert_eq!(board.thermal_history().last().unwrap().fan_duty, 0.0);
+}
+
+#[test]
+fn endstop_inputs_follow_the_switch_positions() {
+    let mut config = RampsConfig::stock(115_200);
+    config.host = HostConfig::raw(115_200);
+    config.endstops = bench::far_endstops();
+    // X_MIN: a normally-closed switch pressed at position ≤ 0 (the carriage
+    // sits on it); Z_MIN: pressed-low switch far away (reads high: open…
+    // but the firmware's default trigger level is high, so it reports
+    // TRIGGERED: polarity is configuration).
+    config.endstops[0] = Some(Endstop { axis: X, at_steps: 0, is_min: true, pressed_level: true });
+    config.endstops[4] = Some(Endstop { axis: Z, at_steps: -1000, is_min: true, pressed_level: false });
+    config.endstops[3] = None;
+    let mut board = bench::boot(&mega2560_elf(), config).unwrap();
+    board.run_for_ms(150.0);
+    assert_eq!(board.endstop_levels(), [true, false, false, true, true, false]);
+    assert_eq!(replies(&mut board, &["M119"]), [
+        "Reporting endstop status",
+        "x_min: TRIGGERED",
+        "x_max: open",
+        "y_min: open",
+        "y_max: TRIGGERED",
+        "z_min: TRIGGERED",
+        "z_max: open",
+        "ok"
+    ]);
+    // Move the X_MIN switch away from the carriage.
+    board.set_endstop(0, Some(Endstop { axis: X, at_steps: -10, is_min: true, pressed_level: true }));
+    board.run_for_ms(150.0);
+    assert_eq!(replies(&mut board, &["M119"])[1], "x_min: open");
+}
+
+#[test]
+fn a_g1_either_moves_exactly_or_says_it_cannot() {
+    let mut config = RampsConfig::stock(115_200);
+    config.host = HostConfig::raw(115_200);
+    config.endstops = bench::far_endstops();
+    let mut board = bench::boot(&mega2560_elf(), config).unwrap();
+    let reply = replies(&mut board, &["G92 X0 Y0 Z0 E0", "M92 X100 Y100 Z400 E93", "G1 X10 Y-5 Z0.25 F3000", "M400"]);
+    assert!(reply.iter().all(|r| !r.starts_with("Error")), "{reply:?}");
+    board.run_for_ms(100.0);
+    if reply.iter().any(|r| r.contains("Motion is not available")) {
+        for axis in 0..5 {
+            assert_eq!((board.step_count(axis), board.position(axis)), (0, 0), "axis {axis}");
+        }
+    } else {
+        // X 10 mm, Y 5 mm at 100 steps/mm, Z 0.25 mm at 400 steps/mm.
+        assert_eq!(
+            [X, Y, Z].map(|a| (board.step_count(a), board.position(a).abs())),
+            [(1000, 1000), (500, 500), (100, 100)]
+        );
+        // A4988: STEP high at least 1 µs.
+        for axis in [X, Y, Z] {
+            assert!(board.min_step_pulse_cycles(axis).unwrap() >= 16);
+        }
+        let (peak, _) = board.peak_step_rate(X, 8);
+        assert!(peak > 0.0 && peak < f64::from(CPU_HZ));
+    }
+}
