@@ -43,6 +43,9 @@ fn main() {
     );
     println!("(the main loop's idle polling is part of its own line)");
     for (function, cycles) in board.profile_by_function().iter().take(25) {
-        println!("{cycles:>10} {:5.1} %  {function}", *cycles as f64 * 100.0 / total as f64);
+        println!(
+            "{cycles:>10} {:5.1} %  {function}",
+            *cycles as f64 * 100.0 / total as f64
+        );
     }
 }

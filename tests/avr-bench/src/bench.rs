@@ -53,14 +53,23 @@ impl PhaseLog {
 /// start-up messages after it, as a host does before sending.
 pub fn boot(elf: &Path, config: RampsConfig) -> Result<Board, String> {
     let mut board = Board::load(elf, config)?;
-    let ready = |board: &Board| board.host().replies.iter().any(|r| r.text.starts_with("echo:") && r.text.ends_with("ready"));
+    let ready = |board: &Board| {
+        board
+            .host()
+            .replies
+            .iter()
+            .any(|r| r.text.starts_with("echo:") && r.text.ends_with("ready"))
+    };
     let end = board.cycle() + u64::from(CPU_HZ) / 2;
     while board.cycle() < end && !ready(&board) && board.halted_reason().is_none() {
         let next = board.cycle() + u64::from(CPU_HZ) / 1000;
         board.run_until(next);
     }
     if !ready(&board) {
-        return Err(format!("no banner within 0.5 s: {:?}", board.host().transcript()));
+        return Err(format!(
+            "no banner within 0.5 s: {:?}",
+            board.host().transcript()
+        ));
     }
     // Let the start-up messages (stored settings) finish.
     board.run_for_ms(20.0);
@@ -75,20 +84,49 @@ pub fn exchange(board: &mut Board, lines: &[&str], timeout_s: f64) -> Result<Vec
         return Err(format!(
             "no ok within {timeout_s} s for {:?}; got {:?}",
             lines,
-            board.host().replies[before..].iter().map(|r| r.text.clone()).collect::<Vec<_>>()
+            board.host().replies[before..]
+                .iter()
+                .map(|r| r.text.clone())
+                .collect::<Vec<_>>()
         ));
     }
-    Ok(board.host().replies[before..].iter().map(|r| r.text.clone()).collect())
+    Ok(board.host().replies[before..]
+        .iter()
+        .map(|r| r.text.clone())
+        .collect())
 }
 
 /// A typical session for the stack high-water mark: start-up, capability
 /// and status reports, settings report and save, motion and arc lines,
 /// errors and resends.
 pub const COMMAND_TOUR: &[&str] = &[
-    "M115", "M105", "M114", "M119", "M503", "M92 X100 Y100 Z400 E93", "M203 X300 Y300 Z5 E25", "M201 X3000 Y3000 Z100 E10000",
-    "M204 P1500 R1500 T1500", "M205 J0.013", "M500", "M501", "G28", "G90", "G92 X0 Y0 Z0 E0", "M83", "G1 Z0.3 F720",
-    "G1 X103.474 Y98.612 E.02538 F1800", "G2 X110 Y110 I5 J5 E0.5", "G4 P1", "M106 S128", "M107", "M104 S200", "M140 S60",
-    "M155 S1", "M155 S0", "M118 E1 tour done",
+    "M115",
+    "M105",
+    "M114",
+    "M119",
+    "M503",
+    "M92 X100 Y100 Z400 E93",
+    "M203 X300 Y300 Z5 E25",
+    "M201 X3000 Y3000 Z100 E10000",
+    "M204 P1500 R1500 T1500",
+    "M205 J0.013",
+    "M500",
+    "M501",
+    "G28",
+    "G90",
+    "G92 X0 Y0 Z0 E0",
+    "M83",
+    "G1 Z0.3 F720",
+    "G1 X103.474 Y98.612 E.02538 F1800",
+    "G2 X110 Y110 I5 J5 E0.5",
+    "G4 P1",
+    "M106 S128",
+    "M107",
+    "M104 S200",
+    "M140 S60",
+    "M155 S1",
+    "M155 S0",
+    "M118 E1 tour done",
 ];
 
 /// Stack peak and CPU shares over [`COMMAND_TOUR`] (host with printcore
@@ -98,7 +136,11 @@ pub fn command_tour(elf: &Path) -> Result<PhaseLog, String> {
     exchange(&mut board, COMMAND_TOUR, 20.0)?;
     // Errors and protocol paths too (raw lines).
     board.host_mut().config = HostConfig::raw(115_200);
-    exchange(&mut board, &["N1 G28*0", &"X".repeat(120), "G1 X1e99", "M999"], 5.0)?;
+    exchange(
+        &mut board,
+        &["N1 G28*0", &"X".repeat(120), "G1 X1e99", "M999"],
+        5.0,
+    )?;
     Ok(PhaseLog::of("command tour", &board))
 }
 
@@ -186,14 +228,22 @@ pub fn parse_cycles(elf: &Path, repeats: usize) -> Result<ParseResult, String> {
                 first_g1_reply = reply.text.clone();
             }
             if reply.text.starts_with("Error") {
-                return Err(format!("the firmware refused {:?}: {}", sent.text, reply.text));
+                return Err(format!(
+                    "the firmware refused {:?}: {}",
+                    sent.text, reply.text
+                ));
             }
             g1.push(main);
         } else {
             base.push(main);
         }
     }
-    let g1_bytes = lines.iter().zip(&is_g1).filter(|(_, g)| **g).map(|(l, _)| l.len() as f64 + 1.0).sum::<f64>()
+    let g1_bytes = lines
+        .iter()
+        .zip(&is_g1)
+        .filter(|(_, g)| **g)
+        .map(|(l, _)| l.len() as f64 + 1.0)
+        .sum::<f64>()
         / g1.len().max(1) as f64;
     Ok(ParseResult {
         g1_median: median(&mut g1),
@@ -222,7 +272,11 @@ pub fn far_endstops() -> [Option<Endstop>; 6] {
         let is_min = i % 2 == 0;
         *slot = Some(Endstop {
             axis: i / 2,
-            at_steps: if is_min { -1_000_000_000 } else { 1_000_000_000 },
+            at_steps: if is_min {
+                -1_000_000_000
+            } else {
+                1_000_000_000
+            },
             is_min,
             pressed_level: true,
         });
@@ -241,7 +295,10 @@ pub struct Trial {
 
 impl Trial {
     pub fn failure(&self) -> Option<String> {
-        self.verdicts.iter().zip(["X", "Y", "Z"]).find_map(|(v, a)| v.failure.as_ref().map(|f| format!("{a} {f}")))
+        self.verdicts
+            .iter()
+            .zip(["X", "Y", "Z"])
+            .find_map(|(v, a)| v.failure.as_ref().map(|f| format!("{a} {f}")))
     }
 }
 
@@ -261,7 +318,13 @@ pub fn step_trial(board: &mut Board, axes: usize, rate_hz: f64) -> Result<Trial,
     let path_scale = (axes as f64).sqrt();
     let (path_v, path_a) = (axis_v * path_scale, axis_a * path_scale);
     let letters = &["X", "Y", "Z"][..axes];
-    let each = |value: f64| letters.iter().map(|l| format!("{l}{value:.3}")).collect::<Vec<_>>().join(" ");
+    let each = |value: f64| {
+        letters
+            .iter()
+            .map(|l| format!("{l}{value:.3}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
     let setup = [
         format!("M92 {}", each(s)),
         format!("M203 {}", each(axis_v * 1.5)),
@@ -277,17 +340,31 @@ pub fn step_trial(board: &mut Board, axes: usize, rate_hz: f64) -> Result<Trial,
         return Err(format!("the firmware refused the trial set-up: {error}"));
     }
     board.clear_step_edges();
-    let plan = MovePlan { steps: TRIAL_STEPS, steps_per_mm: s, feed_mm_s: axis_v, accel_mm_s2: axis_a };
+    let plan = MovePlan {
+        steps: TRIAL_STEPS,
+        steps_per_mm: s,
+        feed_mm_s: axis_v,
+        accel_mm_s2: axis_a,
+    };
     let timeout = plan.duration() * 3.0 + 1.0;
     let g1 = format!("G1 {} F{:.1}", each(axis_mm), path_v * 60.0);
     replies.extend(exchange(board, &[g1.as_str(), "M400"], timeout)?);
-    let verdicts = [X, Y, Z][..axes].iter().map(|&a| judge(&plan, board.step_edges(a))).collect();
-    Ok(Trial { rate_hz, verdicts, replies })
+    let verdicts = [X, Y, Z][..axes]
+        .iter()
+        .map(|&a| judge(&plan, board.step_edges(a)))
+        .collect();
+    Ok(Trial {
+        rate_hz,
+        verdicts,
+        replies,
+    })
 }
 
 /// Rates tried in order until one fails; then bisected.
-pub const TRIAL_RATES_HZ: &[f64] =
-    &[2_000.0, 5_000.0, 10_000.0, 15_000.0, 20_000.0, 25_000.0, 30_000.0, 40_000.0, 50_000.0, 60_000.0, 80_000.0, 100_000.0, 120_000.0, 160_000.0, 200_000.0];
+pub const TRIAL_RATES_HZ: &[f64] = &[
+    2_000.0, 5_000.0, 10_000.0, 15_000.0, 20_000.0, 25_000.0, 30_000.0, 40_000.0, 50_000.0,
+    60_000.0, 80_000.0, 100_000.0, 120_000.0, 160_000.0, 200_000.0,
+];
 
 #[derive(Clone, Debug)]
 pub struct StepRateResult {
@@ -318,8 +395,15 @@ pub fn step_rate(elf: &Path, axes: usize) -> Result<StepRateResult, String> {
     for &rate in TRIAL_RATES_HZ {
         let trial = step_trial(&mut board, axes, rate)?;
         if trial.verdicts.iter().all(|v| v.steps == 0) {
-            let said = trial.replies.iter().find(|r| !r.starts_with("ok")).cloned().unwrap_or_else(|| "only ok".into());
-            return Err(format!("no STEP edges: stepping is not built yet (G1 answered: {said})"));
+            let said = trial
+                .replies
+                .iter()
+                .find(|r| !r.starts_with("ok"))
+                .cloned()
+                .unwrap_or_else(|| "only ok".into());
+            return Err(format!(
+                "no STEP edges: stepping is not built yet (G1 answered: {said})"
+            ));
         }
         let failure = trial.failure();
         trials.push((rate, failure.clone()));
@@ -333,7 +417,9 @@ pub fn step_rate(elf: &Path, axes: usize) -> Result<StepRateResult, String> {
     }
     let Some(mut low) = best else {
         let (rate, why) = limit.unwrap_or_default();
-        return Err(format!("steps come late already at {rate:.0} steps/s: {why}"));
+        return Err(format!(
+            "steps come late already at {rate:.0} steps/s: {why}"
+        ));
     };
     if let Some((mut high, _)) = limit.clone() {
         // Three bisections between the last good and the first bad rate.
@@ -354,7 +440,13 @@ pub fn step_rate(elf: &Path, axes: usize) -> Result<StepRateResult, String> {
             }
         }
     }
-    Ok(StepRateResult { per_axis_hz: low, axes, limit, trials, log: PhaseLog::of(&format!("step rate, {axes} axes"), &board) })
+    Ok(StepRateResult {
+        per_axis_hz: low,
+        axes,
+        limit,
+        trials,
+        log: PhaseLog::of(&format!("step rate, {axes} axes"), &board),
+    })
 }
 
 /// Share of cycles in interrupt handlers while X cruises at `rate_hz`.
@@ -365,27 +457,54 @@ pub fn isr_share_at(elf: &Path, rate_hz: f64) -> Result<(f64, PhaseLog), String>
     let trial = step_trial(&mut board, 1, rate_hz)?;
     let verdict = &trial.verdicts[0];
     if verdict.steps == 0 {
-        let said = trial.replies.iter().find(|r| !r.starts_with("ok")).cloned().unwrap_or_else(|| "only ok".into());
-        return Err(format!("no STEP edges: stepping is not built yet (G1 answered: {said})"));
+        let said = trial
+            .replies
+            .iter()
+            .find(|r| !r.starts_with("ok"))
+            .cloned()
+            .unwrap_or_else(|| "only ok".into());
+        return Err(format!(
+            "no STEP edges: stepping is not built yet (G1 answered: {said})"
+        ));
     }
     if let Some(f) = &verdict.failure {
         return Err(format!("X does not hold {rate_hz:.0} steps/s: {f}"));
     }
     let (first, last) = verdict.cruise_span.ok_or("no cruise plateau")?;
     let edges = board.step_edges(X);
-    let at = |cycle: u64| edges.iter().find(|e| e.rising && e.cycle == cycle).map(|e| e.isr_cycles);
-    let (Some(i0), Some(i1)) = (at(first), at(last)) else { return Err("cruise edges not found".into()) };
-    Ok(((i1 - i0) as f64 / (last - first) as f64, PhaseLog::of("ISR share", &board)))
+    let at = |cycle: u64| {
+        edges
+            .iter()
+            .find(|e| e.rising && e.cycle == cycle)
+            .map(|e| e.isr_cycles)
+    };
+    let (Some(i0), Some(i1)) = (at(first), at(last)) else {
+        return Err("cruise edges not found".into());
+    };
+    Ok((
+        (i1 - i0) as f64 / (last - first) as f64,
+        PhaseLog::of("ISR share", &board),
+    ))
 }
 
 /// Short slicer-like segments: a spiral of 0.3–0.6 mm moves with extrusion.
 pub fn short_segments(count: usize) -> Vec<String> {
-    let mut lines = vec!["G90".to_string(), "M83".to_string(), "G92 X100 Y100 E0".to_string(), "G1 F1800".to_string()];
+    let mut lines = vec![
+        "G90".to_string(),
+        "M83".to_string(),
+        "G92 X100 Y100 E0".to_string(),
+        "G1 F1800".to_string(),
+    ];
     let (cx, cy) = (100.0f64, 100.0f64);
     for i in 0..count {
         let angle = i as f64 * 0.05;
         let r = 20.0 + i as f64 * 0.002;
-        lines.push(format!("G1 X{:.3} Y{:.3} E.0{:04}", cx + r * angle.cos(), cy + r * angle.sin(), 1700 + (i * 37) % 500));
+        lines.push(format!(
+            "G1 X{:.3} Y{:.3} E.0{:04}",
+            cx + r * angle.cos(),
+            cy + r * angle.sin(),
+            1700 + (i * 37) % 500
+        ));
     }
     lines
 }
@@ -423,7 +542,11 @@ pub fn stream_rate(elf: &Path, baud: u32, segments: usize) -> Result<StreamResul
         return Err(format!("the stream did not finish within {timeout} s"));
     }
     let host = board.host();
-    let segment_lines: Vec<_> = host.sent.iter().filter(|s| s.job_index.is_some_and(|i| i >= header)).collect();
+    let segment_lines: Vec<_> = host
+        .sent
+        .iter()
+        .filter(|s| s.job_index.is_some_and(|i| i >= header))
+        .collect();
     if let Some(error) = host.replies.iter().find(|r| r.text.starts_with("Error")) {
         return Err(format!("the firmware answered {:?}", error.text));
     }
@@ -437,7 +560,10 @@ pub fn stream_rate(elf: &Path, baud: u32, segments: usize) -> Result<StreamResul
     for sent in &segment_lines {
         line_bytes += sent.text.len() + 1;
         if let (Some(a), Some(b)) = (sent.first_reply, sent.ok_reply) {
-            reply_bytes += host.replies[a..=b].iter().map(|r| r.text.len() + 1).sum::<usize>();
+            reply_bytes += host.replies[a..=b]
+                .iter()
+                .map(|r| r.text.len() + 1)
+                .sum::<usize>();
         }
     }
     let n = segment_lines.len() as f64;

@@ -68,11 +68,31 @@ pub struct AxisPins {
 
 /// RAMPS 1.4 stepper sockets (Marlin's pin map, DESIGN.md).
 pub const AXES: [AxisPins; 5] = [
-    AxisPins { name: "X", step: pin(b'F', 0), dir: pin(b'F', 1) },
-    AxisPins { name: "Y", step: pin(b'F', 6), dir: pin(b'F', 7) },
-    AxisPins { name: "Z", step: pin(b'L', 3), dir: pin(b'L', 1) },
-    AxisPins { name: "E0", step: pin(b'A', 4), dir: pin(b'A', 6) },
-    AxisPins { name: "E1", step: pin(b'C', 1), dir: pin(b'C', 3) },
+    AxisPins {
+        name: "X",
+        step: pin(b'F', 0),
+        dir: pin(b'F', 1),
+    },
+    AxisPins {
+        name: "Y",
+        step: pin(b'F', 6),
+        dir: pin(b'F', 7),
+    },
+    AxisPins {
+        name: "Z",
+        step: pin(b'L', 3),
+        dir: pin(b'L', 1),
+    },
+    AxisPins {
+        name: "E0",
+        step: pin(b'A', 4),
+        dir: pin(b'A', 6),
+    },
+    AxisPins {
+        name: "E1",
+        step: pin(b'C', 1),
+        dir: pin(b'C', 3),
+    },
 ];
 pub const X: usize = 0;
 pub const Y: usize = 1;
@@ -82,7 +102,14 @@ pub const E1: usize = 4;
 
 /// Endstop inputs in the firmware's order: X_MIN, X_MAX, Y_MIN, Y_MAX,
 /// Z_MIN, Z_MAX.
-pub const ENDSTOP_PINS: [Pin; 6] = [pin(b'E', 5), pin(b'E', 4), pin(b'J', 1), pin(b'J', 0), pin(b'D', 3), pin(b'D', 2)];
+pub const ENDSTOP_PINS: [Pin; 6] = [
+    pin(b'E', 5),
+    pin(b'E', 4),
+    pin(b'J', 1),
+    pin(b'J', 0),
+    pin(b'D', 3),
+    pin(b'D', 2),
+];
 pub const ENDSTOP_NAMES: [&str; 6] = ["X_MIN", "X_MAX", "Y_MIN", "Y_MAX", "Z_MIN", "Z_MAX"];
 
 /// Heater and fan MOSFET gates.
@@ -343,11 +370,17 @@ impl Board {
             // simavr logs ELF loading with no instance (so `log` cannot
             // silence it) on stdout; the bench reports for itself.
             ffi::avr_global_logger_set(std::mem::transmute::<
-                unsafe extern "C" fn(*mut ffi::avr_t, std::os::raw::c_int, *const std::os::raw::c_char, *mut c_void),
+                unsafe extern "C" fn(
+                    *mut ffi::avr_t,
+                    std::os::raw::c_int,
+                    *const std::os::raw::c_char,
+                    *mut c_void,
+                ),
                 ffi::avr_logger_p,
             >(quiet_logger));
             let mut firmware: Box<ffi::elf_firmware_t> = Box::new(std::mem::zeroed());
-            let path = CString::new(elf_path.to_string_lossy().as_bytes()).map_err(|e| e.to_string())?;
+            let path =
+                CString::new(elf_path.to_string_lossy().as_bytes()).map_err(|e| e.to_string())?;
             if ffi::elf_read_firmware(path.as_ptr(), &mut *firmware) != 0 {
                 return Err(format!("simavr could not read {}", elf_path.display()));
             }
@@ -360,13 +393,20 @@ impl Board {
             (*avr).sleep = Some(no_sleep);
 
             let mut flags: u32 = 0;
-            ffi::avr_ioctl(avr, ioctl(b'u', b'a', b's', b'0'), &mut flags as *mut u32 as *mut c_void);
+            ffi::avr_ioctl(
+                avr,
+                ioctl(b'u', b'a', b's', b'0'),
+                &mut flags as *mut u32 as *mut c_void,
+            );
 
             let mut host = Host::new(config.host.clone(), CPU_HZ);
             host.next_start = 0.0;
             let mut shared = Box::new(Shared {
                 avr,
-                stats: CpuStats { min_sp: RAM_END, ..CpuStats::default() },
+                stats: CpuStats {
+                    min_sp: RAM_END,
+                    ..CpuStats::default()
+                },
                 axes: AXES
                     .iter()
                     .map(|_| AxisState {
@@ -392,7 +432,11 @@ impl Board {
                 next_sample: 0,
                 samples: Vec::new(),
                 host,
-                uart_input_irq: ffi::avr_io_getirq(avr, ioctl(b'u', b'a', b'r', b'0'), ffi::UART_IRQ_INPUT as i32),
+                uart_input_irq: ffi::avr_io_getirq(
+                    avr,
+                    ioctl(b'u', b'a', b'r', b'0'),
+                    ffi::UART_IRQ_INPUT as i32,
+                ),
                 uart0: find_uart(avr, b'0'),
                 uart_handlers: Vec::new(),
                 avr_frame_cycles: 0,
@@ -412,7 +456,11 @@ impl Board {
             let param = &mut *shared as *mut Shared as *mut c_void;
 
             // Firmware output.
-            let out = ffi::avr_io_getirq(avr, ioctl(b'u', b'a', b'r', b'0'), ffi::UART_IRQ_OUTPUT as i32);
+            let out = ffi::avr_io_getirq(
+                avr,
+                ioctl(b'u', b'a', b'r', b'0'),
+                ffi::UART_IRQ_OUTPUT as i32,
+            );
             ffi::avr_irq_register_notify(out, Some(on_uart_output), param);
             // Frame-time fix: wrap the UART configuration registers.
             for addr in [UBRR0L, UBRR0H, UCSR0A, UCSR0B, UCSR0C] {
@@ -433,7 +481,11 @@ impl Board {
             // Heater and fan pins.
             // OC2A (TCCR2A COM2A, bits 7:6), OC4C (TCCR4A COM4C, 3:2),
             // OC2B (TCCR2A COM2B, 5:4).
-            for (p, compare) in [(HOTEND_PIN, (0xB0, 6)), (BED_PIN, (0xA0, 2)), (FAN_PIN, (0xB0, 4))] {
+            for (p, compare) in [
+                (HOTEND_PIN, (0xB0, 6)),
+                (BED_PIN, (0xA0, 2)),
+                (FAN_PIN, (0xB0, 4)),
+            ] {
                 let irq = port_irq(avr, p);
                 shared.meters.push((p, irq, DutyMeter::default()));
                 shared.meter_compare.push(compare);
@@ -441,9 +493,20 @@ impl Board {
             }
             // Thermistors.
             for sensor in config.sensors {
-                let meter = sensor.heater.and_then(|h| shared.meters.iter().position(|(p, _, _)| *p == h));
-                let irq = ffi::avr_io_getirq(avr, ioctl(b'a', b'd', b'c', b'0'), ffi::ADC_IRQ_ADC0 as i32 + i32::from(sensor.adc_channel));
-                shared.sensors.push(Sensor { config: sensor, meter, irq, counts: 0 });
+                let meter = sensor
+                    .heater
+                    .and_then(|h| shared.meters.iter().position(|(p, _, _)| *p == h));
+                let irq = ffi::avr_io_getirq(
+                    avr,
+                    ioctl(b'a', b'd', b'c', b'0'),
+                    ffi::ADC_IRQ_ADC0 as i32 + i32::from(sensor.adc_channel),
+                );
+                shared.sensors.push(Sensor {
+                    config: sensor,
+                    meter,
+                    irq,
+                    counts: 0,
+                });
             }
             shared.update_adc_inputs();
             // Endstops.
@@ -610,7 +673,11 @@ impl Board {
                 if state == ffi::cpu_Crashed as i32 || state == ffi::cpu_Done as i32 {
                     self.halted_reason = Some(format!(
                         "simavr stopped the CPU ({}) at pc 0x{:05x}",
-                        if state == ffi::cpu_Crashed as i32 { "crashed" } else { "done: sleep with interrupts off" },
+                        if state == ffi::cpu_Crashed as i32 {
+                            "crashed"
+                        } else {
+                            "done: sleep with interrupts off"
+                        },
                         (*avr).pc
                     ));
                     break;
@@ -728,11 +795,19 @@ impl Board {
     }
 
     pub fn sensor_celsius(&self, adc_channel: u8) -> Option<f64> {
-        self.shared.sensors.iter().find(|s| s.config.adc_channel == adc_channel).map(|s| s.config.plant.temperature_c)
+        self.shared
+            .sensors
+            .iter()
+            .find(|s| s.config.adc_channel == adc_channel)
+            .map(|s| s.config.plant.temperature_c)
     }
 
     pub fn sensor_counts(&self, adc_channel: u8) -> Option<u16> {
-        self.shared.sensors.iter().find(|s| s.config.adc_channel == adc_channel).map(|s| s.counts)
+        self.shared
+            .sensors
+            .iter()
+            .find(|s| s.config.adc_channel == adc_channel)
+            .map(|s| s.counts)
     }
 
     pub fn thermal_history(&self) -> &[ThermalSample] {
@@ -782,6 +857,20 @@ impl Board {
             .sum()
     }
 
+    /// Write an I/O register as if the firmware had (through simavr's write
+    /// handler, so pin IRQs and the recorders see it). For self-tests of
+    /// the virtual RAMPS while the firmware itself does not step.
+    pub fn write_io_as_firmware(&mut self, addr: u16, value: u8) {
+        // SAFETY: between instructions; the handler table entry is simavr's.
+        unsafe {
+            let slot = (*self.avr).io[usize::from(addr) - 32].w;
+            match slot.c {
+                Some(write) => write(self.avr, addr, value, slot.param),
+                None => *(*self.avr).data.add(usize::from(addr)) = value,
+            }
+        }
+    }
+
     /// Start (or stop and discard) the per-instruction cycle profile.
     pub fn profile(&mut self, on: bool) {
         self.shared.profile = on.then(|| vec![0; (crate::elf::FLASH_BYTES / 2) as usize]);
@@ -791,16 +880,20 @@ impl Board {
     /// (demangled names; instructions outside any sized symbol are
     /// grouped under "?").
     pub fn profile_by_function(&self) -> Vec<(String, u64)> {
-        let Some(profile) = &self.shared.profile else { return Vec::new() };
+        let Some(profile) = &self.shared.profile else {
+            return Vec::new();
+        };
         let mut totals: std::collections::HashMap<String, u64> = std::collections::HashMap::new();
         for (word, &cycles) in profile.iter().enumerate() {
             if cycles > 0 {
-                let name = self.symbol_at(word as u32 * 2).map_or("?".to_string(), demangle);
+                let name = self
+                    .symbol_at(word as u32 * 2)
+                    .map_or("?".to_string(), demangle);
                 *totals.entry(name).or_default() += cycles;
             }
         }
         let mut list: Vec<_> = totals.into_iter().collect();
-        list.sort_by(|a, b| b.1.cmp(&a.1));
+        list.sort_by_key(|entry| std::cmp::Reverse(entry.1));
         list
     }
 
@@ -809,7 +902,11 @@ impl Board {
         self.elf
             .symbols
             .iter()
-            .filter(|s| s.size > 0 && s.value < crate::elf::DATA_OFFSET && (s.value..s.value + s.size).contains(&pc))
+            .filter(|s| {
+                s.size > 0
+                    && s.value < crate::elf::DATA_OFFSET
+                    && (s.value..s.value + s.size).contains(&pc)
+            })
             .min_by_key(|s| s.size)
             .map(|s| s.name.as_str())
     }
@@ -922,7 +1019,11 @@ impl Shared {
                 None => true,
                 Some(e) => {
                     let pos = self.axes[e.axis].position;
-                    let pressed = if e.is_min { pos <= e.at_steps } else { pos >= e.at_steps };
+                    let pressed = if e.is_min {
+                        pos <= e.at_steps
+                    } else {
+                        pos >= e.at_steps
+                    };
                     if pressed {
                         e.pressed_level
                     } else {
@@ -950,7 +1051,11 @@ impl Shared {
             external.set_name(u64::from(port) as _);
             external.set_mask(u64::from(mask) as _);
             external.set_value(u64::from(value) as _);
-            ffi::avr_ioctl(self.avr, ioctl(b'i', b'o', b'p', port), &mut external as *mut _ as *mut c_void);
+            ffi::avr_ioctl(
+                self.avr,
+                ioctl(b'i', b'o', b'p', port),
+                &mut external as *mut _ as *mut c_void,
+            );
         }
     }
 
@@ -986,15 +1091,27 @@ impl Shared {
         if now >= self.next_sample {
             self.next_sample += self.sample_period_cycles;
             let period = self.sample_period_cycles as f64;
-            let mut sample_duty: Vec<f64> = self.meters.iter().map(|(_, _, m)| m.high_in_sample as f64 / period).collect();
+            let mut sample_duty: Vec<f64> = self
+                .meters
+                .iter()
+                .map(|(_, _, m)| m.high_in_sample as f64 / period)
+                .collect();
             for (_, _, m) in &mut self.meters {
                 m.high_in_sample = 0;
             }
             let fan_duty = sample_duty.pop().unwrap_or(0.0);
             self.samples.push(ThermalSample {
                 time_s: now as f64 / f64::from(CPU_HZ),
-                duty: self.sensors.iter().map(|s| s.meter.map_or(0.0, |m| sample_duty[m])).collect(),
-                celsius: self.sensors.iter().map(|s| s.config.plant.temperature_c).collect(),
+                duty: self
+                    .sensors
+                    .iter()
+                    .map(|s| s.meter.map_or(0.0, |m| sample_duty[m]))
+                    .collect(),
+                celsius: self
+                    .sensors
+                    .iter()
+                    .map(|s| s.config.plant.temperature_c)
+                    .collect(),
                 adc: self.sensors.iter().map(|s| s.counts).collect(),
                 fan_duty,
             });
@@ -1018,13 +1135,24 @@ unsafe extern "C" fn on_uart_output(_irq: *mut ffi::avr_irq_t, value: u32, param
     let shared = &mut *(param as *mut Shared);
     let cycle = (*shared.avr).cycle;
     let frame = shared.avr_frame_cycles;
-    shared.tx_log.push((cycle, value as u8, shared.stats.isr_cycles));
+    shared
+        .tx_log
+        .push((cycle, value as u8, shared.stats.isr_cycles));
     shared.host.on_firmware_byte(cycle, value as u8, frame);
 }
 
-unsafe extern "C" fn on_uart_config_write(avr: *mut ffi::avr_t, addr: ffi::avr_io_addr_t, v: u8, param: *mut c_void) {
+unsafe extern "C" fn on_uart_config_write(
+    avr: *mut ffi::avr_t,
+    addr: ffi::avr_io_addr_t,
+    v: u8,
+    param: *mut c_void,
+) {
     let shared = &mut *(param as *mut Shared);
-    let original = shared.uart_handlers.iter().find(|(a, _, _)| *a == addr).map(|(_, c, p)| (*c, *p));
+    let original = shared
+        .uart_handlers
+        .iter()
+        .find(|(a, _, _)| *a == addr)
+        .map(|(_, c, p)| (*c, *p));
     match original {
         Some((Some(write), p)) => write(avr, addr, v, p),
         _ => ffi::avr_core_watch_write(avr, addr, v),
@@ -1036,7 +1164,9 @@ unsafe extern "C" fn on_axis_pin(irq: *mut ffi::avr_irq_t, value: u32, param: *m
     let shared = &mut *(param as *mut Shared);
     let level = value & 1 != 0;
     let now = (*shared.avr).cycle;
-    let Some(&(_, axis, is_step)) = shared.axis_of_pin.iter().find(|(i, _, _)| *i == irq) else { return };
+    let Some(&(_, axis, is_step)) = shared.axis_of_pin.iter().find(|(i, _, _)| *i == irq) else {
+        return;
+    };
     let positive_high = shared.dir_high_is_positive[axis];
     let isr = shared.stats.isr_cycles;
     let state = &mut shared.axes[axis];
@@ -1048,10 +1178,19 @@ unsafe extern "C" fn on_axis_pin(irq: *mut ffi::avr_irq_t, value: u32, param: *m
         return;
     }
     state.step_level = level;
-    state.edges.push(StepEdge { cycle: now, rising: level, dir: state.dir_level, isr_cycles: isr });
+    state.edges.push(StepEdge {
+        cycle: now,
+        rising: level,
+        dir: state.dir_level,
+        isr_cycles: isr,
+    });
     if level {
         state.rising_edges += 1;
-        state.position += if state.dir_level == positive_high { 1 } else { -1 };
+        state.position += if state.dir_level == positive_high {
+            1
+        } else {
+            -1
+        };
         state.last_rise = now;
         shared.update_endstops(false);
     } else {
@@ -1081,7 +1220,11 @@ unsafe extern "C" fn on_meter_pin(irq: *mut ffi::avr_irq_t, value: u32, param: *
     }
 }
 
-unsafe extern "C" fn on_plant_tick(_avr: *mut ffi::avr_t, when: ffi::avr_cycle_count_t, param: *mut c_void) -> ffi::avr_cycle_count_t {
+unsafe extern "C" fn on_plant_tick(
+    _avr: *mut ffi::avr_t,
+    when: ffi::avr_cycle_count_t,
+    param: *mut c_void,
+) -> ffi::avr_cycle_count_t {
     let shared = &mut *(param as *mut Shared);
     shared.plant_tick(when);
     when + shared.plant_period_cycles

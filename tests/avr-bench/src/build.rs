@@ -14,7 +14,11 @@ use std::time::SystemTime;
 
 /// The workspace root (this crate lives in `tests/avr-bench/`).
 pub fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).ancestors().nth(2).expect("tests/avr-bench has a workspace root").to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .nth(2)
+        .expect("tests/avr-bench has a workspace root")
+        .to_path_buf()
 }
 
 /// The target directory cargo uses: `$CARGO_TARGET_DIR` or `<root>/target`.
@@ -38,7 +42,11 @@ pub fn mega2560_elf() -> PathBuf {
     ELF.get_or_init(|| {
         if let Some(path) = std::env::var_os("FERROSTEP_ELF") {
             let path = PathBuf::from(path);
-            assert!(path.exists(), "FERROSTEP_ELF={} does not exist", path.display());
+            assert!(
+                path.exists(),
+                "FERROSTEP_ELF={} does not exist",
+                path.display()
+            );
             return path;
         }
         build_variant(&target_dir(), &[], false).unwrap_or_else(|e| panic!("{e}"))
@@ -66,7 +74,9 @@ pub fn newest_source_mtime() -> Option<SystemTime> {
 }
 
 fn walk(dir: &Path, visit: &mut dyn FnMut(&Path)) {
-    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
     for entry in entries.flatten() {
         let path = entry.path();
         if path.is_dir() {
@@ -82,7 +92,9 @@ fn walk(dir: &Path, visit: &mut dyn FnMut(&Path)) {
 
 /// Is `elf` missing or older than its sources?
 pub fn is_stale(elf: &Path) -> bool {
-    let Ok(built) = std::fs::metadata(elf).and_then(|m| m.modified()) else { return true };
+    let Ok(built) = std::fs::metadata(elf).and_then(|m| m.modified()) else {
+        return true;
+    };
     newest_source_mtime().is_some_and(|src| src > built)
 }
 
@@ -100,31 +112,51 @@ pub fn build_variant(target: &Path, features: &[&str], force: bool) -> Result<Pa
         return Ok(elf);
     }
     let mut command = Command::new("cargo");
-    command.args(["+nightly", "avr"]).current_dir(workspace_root()).env("CARGO_TARGET_DIR", target);
+    command
+        .args(["+nightly", "avr"])
+        .current_dir(workspace_root())
+        .env("CARGO_TARGET_DIR", target);
     if !features.is_empty() {
         command.arg("--features").arg(features.join(","));
     }
     // Tests run under `cargo test`, which sets variables for the host
     // toolchain; the nested build must pick its own.
-    for var in ["RUSTC", "RUSTDOC", "RUSTC_WRAPPER", "RUSTC_WORKSPACE_WRAPPER", "RUSTUP_TOOLCHAIN", "CARGO"] {
+    for var in [
+        "RUSTC",
+        "RUSTDOC",
+        "RUSTC_WRAPPER",
+        "RUSTC_WORKSPACE_WRAPPER",
+        "RUSTUP_TOOLCHAIN",
+        "CARGO",
+    ] {
         command.env_remove(var);
     }
-    eprintln!("avr-bench: building the Mega 2560 ELF: cargo +nightly avr{} (CARGO_TARGET_DIR={})",
-        if features.is_empty() { String::new() } else { format!(" --features {}", features.join(",")) },
-        target.display());
+    eprintln!(
+        "avr-bench: building the Mega 2560 ELF: cargo +nightly avr{} (CARGO_TARGET_DIR={})",
+        if features.is_empty() {
+            String::new()
+        } else {
+            format!(" --features {}", features.join(","))
+        },
+        target.display()
+    );
     let status = command
         .status()
         .map_err(|e| format!("cannot run `cargo +nightly avr` ({e}); run `bash tests/scripts/test.sh` once to set up the toolchain"))?;
     if !status.success() {
         return Err(format!("`cargo +nightly avr` failed ({status})"));
     }
-    let _ = std::fs::write(target.join("avr-none/release/.avr-bench-features"), features.join(","));
+    let _ = std::fs::write(
+        target.join("avr-none/release/.avr-bench-features"),
+        features.join(","),
+    );
     Ok(elf)
 }
 
 /// The features the ELF in `target` was last built with by this helper
 /// (a plain `cargo +nightly avr` leaves no record: no features).
 fn features_match(target: &Path, features: &[&str]) -> bool {
-    let recorded = std::fs::read_to_string(target.join("avr-none/release/.avr-bench-features")).unwrap_or_default();
+    let recorded = std::fs::read_to_string(target.join("avr-none/release/.avr-bench-features"))
+        .unwrap_or_default();
     recorded == features.join(",")
 }

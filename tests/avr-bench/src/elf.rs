@@ -42,7 +42,8 @@ pub struct ElfInfo {
 
 impl ElfInfo {
     pub fn read(path: &Path) -> Result<Self, String> {
-        let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let bytes =
+            std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         Self::parse(&bytes).map_err(|e| format!("{}: {e}", path.display()))
     }
 
@@ -54,10 +55,14 @@ impl ElfInfo {
             return Err("not a 32-bit little-endian ELF (AVR ELFs are)".into());
         }
         let u16_at = |o: usize| -> Result<u16, String> {
-            b.get(o..o + 2).map(|s| u16::from_le_bytes([s[0], s[1]])).ok_or_else(|| "truncated ELF".to_string())
+            b.get(o..o + 2)
+                .map(|s| u16::from_le_bytes([s[0], s[1]]))
+                .ok_or_else(|| "truncated ELF".to_string())
         };
         let u32_at = |o: usize| -> Result<u32, String> {
-            b.get(o..o + 4).map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]])).ok_or_else(|| "truncated ELF".to_string())
+            b.get(o..o + 4)
+                .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+                .ok_or_else(|| "truncated ELF".to_string())
         };
         let shoff = u32_at(0x20)? as usize;
         let shentsize = u16_at(0x2E)? as usize;
@@ -89,7 +94,10 @@ impl ElfInfo {
         }
         let c_str = |table: &Raw, index: u32| -> String {
             let start = (table.offset + index) as usize;
-            let end = b[start.min(b.len())..].iter().position(|&c| c == 0).map_or(b.len(), |n| start + n);
+            let end = b[start.min(b.len())..]
+                .iter()
+                .position(|&c| c == 0)
+                .map_or(b.len(), |n| start + n);
             String::from_utf8_lossy(&b[start.min(b.len())..end]).into_owned()
         };
         let names = raw.get(shstrndx).ok_or("no section name table")?;
@@ -105,11 +113,21 @@ impl ElfInfo {
             .collect();
         let mut symbols = Vec::new();
         for table in raw.iter().filter(|s| s.kind == 2) {
-            let strings = raw.get(table.link as usize).ok_or("symbol table without strings")?;
-            let entsize = if table.entsize == 0 { 16 } else { table.entsize as usize };
+            let strings = raw
+                .get(table.link as usize)
+                .ok_or("symbol table without strings")?;
+            let entsize = if table.entsize == 0 {
+                16
+            } else {
+                table.entsize as usize
+            };
             for i in 0..table.size as usize / entsize {
                 let o = table.offset as usize + i * entsize;
-                symbols.push(Symbol { name: c_str(strings, u32_at(o)?), value: u32_at(o + 4)?, size: u32_at(o + 8)? });
+                symbols.push(Symbol {
+                    name: c_str(strings, u32_at(o)?),
+                    value: u32_at(o + 4)?,
+                    size: u32_at(o + 8)?,
+                });
             }
         }
         Ok(Self { sections, symbols })
@@ -120,20 +138,36 @@ impl ElfInfo {
     }
 
     pub fn symbol(&self, name: &str) -> Option<u32> {
-        self.symbols.iter().find(|s| s.name == name).map(|s| s.value)
+        self.symbols
+            .iter()
+            .find(|s| s.name == name)
+            .map(|s| s.value)
     }
 
     /// Bytes programmed into flash: every allocated section with contents
     /// (`.text`, and `.data`'s initial values, which the start-up code copies
     /// to RAM), as avr-size counts them.
     pub fn flash_bytes(&self) -> u32 {
-        self.sections.iter().filter(|s| s.alloc && !s.nobits && s.addr < DATA_OFFSET).map(|s| s.size).sum::<u32>()
-            + self.sections.iter().filter(|s| s.alloc && !s.nobits && is_data(s.addr)).map(|s| s.size).sum::<u32>()
+        self.sections
+            .iter()
+            .filter(|s| s.alloc && !s.nobits && s.addr < DATA_OFFSET)
+            .map(|s| s.size)
+            .sum::<u32>()
+            + self
+                .sections
+                .iter()
+                .filter(|s| s.alloc && !s.nobits && is_data(s.addr))
+                .map(|s| s.size)
+                .sum::<u32>()
     }
 
     /// Statically allocated RAM: `.data` + `.bss` (+ `.noinit`).
     pub fn ram_static_bytes(&self) -> u32 {
-        self.sections.iter().filter(|s| s.alloc && is_data(s.addr)).map(|s| s.size).sum()
+        self.sections
+            .iter()
+            .filter(|s| s.alloc && is_data(s.addr))
+            .map(|s| s.size)
+            .sum()
     }
 
     /// First RAM address past the static data (`__bss_end` / `_end`), as a
@@ -148,7 +182,8 @@ impl ElfInfo {
 
     /// The initial stack pointer (`__stack`, RAMEND unless relocated).
     pub fn initial_sp(&self) -> u16 {
-        self.symbol("__stack").map_or(RAM_END, |s| (s & 0xFFFF) as u16)
+        self.symbol("__stack")
+            .map_or(RAM_END, |s| (s & 0xFFFF) as u16)
     }
 }
 

@@ -41,13 +41,23 @@ pub struct HostConfig {
 
 impl HostConfig {
     pub fn printcore(baud: u32) -> Self {
-        Self { baud, flow: Flow::OkPerLine, numbering: true, resend: true }
+        Self {
+            baud,
+            flow: Flow::OkPerLine,
+            numbering: true,
+            resend: true,
+        }
     }
 
     /// Lines verbatim, one at a time after `ok` (for protocol tests that
     /// write their own `N…*…`).
     pub fn raw(baud: u32) -> Self {
-        Self { baud, flow: Flow::OkPerLine, numbering: false, resend: false }
+        Self {
+            baud,
+            flow: Flow::OkPerLine,
+            numbering: false,
+            resend: false,
+        }
     }
 }
 
@@ -162,7 +172,10 @@ impl Host {
     }
 
     pub fn lines_acknowledged(&self) -> usize {
-        self.sent.iter().filter(|s| s.job_index.is_some() && s.ok_reply.is_some()).count()
+        self.sent
+            .iter()
+            .filter(|s| s.job_index.is_some() && s.ok_reply.is_some())
+            .count()
     }
 
     /// The AVR's frame may be longer than the host's (a slower real baud):
@@ -205,7 +218,10 @@ impl Host {
                 let n = self.line_number;
                 self.line_number += 1;
                 self.numbered_job_lines.push((n, index));
-                (with_checksum(&format!("N{n} {}", self.job[index])), Some(index))
+                (
+                    with_checksum(&format!("N{n} {}", self.job[index])),
+                    Some(index),
+                )
             } else {
                 (self.job[index].clone(), Some(index))
             }
@@ -239,16 +255,25 @@ impl Host {
             return;
         }
         let arrived = cycle + avr_frame;
-        let text = String::from_utf8_lossy(&self.rx_line).trim_end_matches('\r').to_string();
+        let text = String::from_utf8_lossy(&self.rx_line)
+            .trim_end_matches('\r')
+            .to_string();
         self.rx_line.clear();
         let index = self.replies.len();
-        self.replies.push(Reply { text: text.clone(), first_byte_cycle: self.rx_line_first_cycle, arrived_cycle: arrived });
+        self.replies.push(Reply {
+            text: text.clone(),
+            first_byte_cycle: self.rx_line_first_cycle,
+            arrived_cycle: arrived,
+        });
         let first_byte = self.rx_line_first_cycle;
         for line in self.sent.iter_mut().rev() {
             if line.first_reply.is_some() {
                 break;
             }
-            if line.last_byte_start_cycle.is_some_and(|end| first_byte >= end) {
+            if line
+                .last_byte_start_cycle
+                .is_some_and(|end| first_byte >= end)
+            {
                 line.first_reply = Some(index);
             }
         }
@@ -287,7 +312,8 @@ impl Host {
 
     /// Everything received so far as one string.
     pub fn transcript(&self) -> String {
-        String::from_utf8_lossy(&self.rx_bytes.iter().map(|(_, b)| *b).collect::<Vec<_>>()).into_owned()
+        String::from_utf8_lossy(&self.rx_bytes.iter().map(|(_, b)| *b).collect::<Vec<_>>())
+            .into_owned()
     }
 
     /// Forget what was sent and received (between bench phases).

@@ -41,7 +41,8 @@ impl MovePlan {
 
     /// The speed actually reached (lower than `feed` for a triangle).
     pub fn peak_mm_s(&self) -> f64 {
-        self.feed_mm_s.min((self.accel_mm_s2 * self.length_mm()).sqrt())
+        self.feed_mm_s
+            .min((self.accel_mm_s2 * self.length_mm()).sqrt())
     }
 
     fn accel_distance(&self) -> f64 {
@@ -108,7 +109,13 @@ pub struct Verdict {
 pub fn judge(plan: &MovePlan, edges: &[StepEdge]) -> Verdict {
     let rises: Vec<&StepEdge> = edges.iter().filter(|e| e.rising).collect();
     let steps = rises.len() as u64;
-    let mut verdict = Verdict { failure: None, worst_late: 0.0, cruise_hz: 0.0, cruise_span: None, steps };
+    let mut verdict = Verdict {
+        failure: None,
+        worst_late: 0.0,
+        cruise_hz: 0.0,
+        cruise_span: None,
+        steps,
+    };
     if steps != plan.steps {
         verdict.failure = Some(format!("departs: {steps} steps instead of {}", plan.steps));
         return verdict;
@@ -123,20 +130,34 @@ pub fn judge(plan: &MovePlan, edges: &[StepEdge]) -> Verdict {
     let hz = f64::from(CPU_HZ);
     if let Some((first, last)) = plan.cruise_steps() {
         let interval = hz / plan.cruise_hz();
-        let plateau: Vec<(f64, f64)> =
-            (first..=last).map(|k| (k as f64, rises[(k - 1) as usize].cycle as f64)).collect();
-        verdict.cruise_span = Some((rises[(first - 1) as usize].cycle, rises[(last - 1) as usize].cycle));
+        let plateau: Vec<(f64, f64)> = (first..=last)
+            .map(|k| (k as f64, rises[(k - 1) as usize].cycle as f64))
+            .collect();
+        verdict.cruise_span = Some((
+            rises[(first - 1) as usize].cycle,
+            rises[(last - 1) as usize].cycle,
+        ));
         // Least-squares slope: cycles per step.
         let n = plateau.len() as f64;
-        let (sk, st) = plateau.iter().fold((0.0, 0.0), |(a, b), (k, t)| (a + k, b + t));
+        let (sk, st) = plateau
+            .iter()
+            .fold((0.0, 0.0), |(a, b), (k, t)| (a + k, b + t));
         let (mk, mt) = (sk / n, st / n);
-        let (num, den) = plateau.iter().fold((0.0, 0.0), |(a, b), (k, t)| (a + (k - mk) * (t - mt), b + (k - mk) * (k - mk)));
+        let (num, den) = plateau.iter().fold((0.0, 0.0), |(a, b), (k, t)| {
+            (a + (k - mk) * (t - mt), b + (k - mk) * (k - mk))
+        });
         verdict.cruise_hz = hz / (num / den);
-        let t0 = plateau.iter().map(|(k, t)| t - k * interval).fold(f64::INFINITY, f64::min);
+        let t0 = plateau
+            .iter()
+            .map(|(k, t)| t - k * interval)
+            .fold(f64::INFINITY, f64::min);
         let (worst_k, worst) = plateau
             .iter()
             .map(|(k, t)| (*k, (t - t0 - k * interval) / interval))
-            .fold((0.0, 0.0f64), |best, cur| if cur.1 > best.1 { cur } else { best });
+            .fold(
+                (0.0, 0.0f64),
+                |best, cur| if cur.1 > best.1 { cur } else { best },
+            );
         verdict.worst_late = worst;
         let rate_error = (verdict.cruise_hz - plan.cruise_hz()) / plan.cruise_hz();
         if rate_error.abs() > 0.01 {
@@ -148,18 +169,27 @@ pub fn judge(plan: &MovePlan, edges: &[StepEdge]) -> Verdict {
             return verdict;
         }
         if worst > 0.10 {
-            verdict.failure =
-                Some(format!("late: step {} came {:.0} % of its interval after its scheduled time", worst_k as u64, worst * 100.0));
+            verdict.failure = Some(format!(
+                "late: step {} came {:.0} % of its interval after its scheduled time",
+                worst_k as u64,
+                worst * 100.0
+            ));
             return verdict;
         }
         let at = |k: u64| plan.time_at(k as f64 / plan.steps_per_mm);
         let edge = |k: u64| rises[(k - 1) as usize].cycle as f64 / hz;
         for (name, planned, measured) in [
             ("acceleration", at(first) - at(1), edge(first) - edge(1)),
-            ("deceleration", at(steps) - at(last), edge(steps) - edge(last)),
+            (
+                "deceleration",
+                at(steps) - at(last),
+                edge(steps) - edge(last),
+            ),
         ] {
             if ((measured - planned) / planned).abs() > 0.10 {
-                verdict.failure = Some(format!("departs: the {name} ramp took {measured:.5} s instead of {planned:.5} s"));
+                verdict.failure = Some(format!(
+                    "departs: the {name} ramp took {measured:.5} s instead of {planned:.5} s"
+                ));
                 return verdict;
             }
         }
@@ -168,7 +198,10 @@ pub fn judge(plan: &MovePlan, edges: &[StepEdge]) -> Verdict {
     let planned = plan.duration() - plan.time_at(1.0 / plan.steps_per_mm);
     let measured = (rises[rises.len() - 1].cycle - rises[0].cycle) as f64 / hz;
     if planned > 0.0 && ((measured - planned) / planned).abs() > 0.05 {
-        verdict.failure = Some(format!("departs: the move took {:.4} s instead of {:.4} s", measured, planned));
+        verdict.failure = Some(format!(
+            "departs: the move took {:.4} s instead of {:.4} s",
+            measured, planned
+        ));
     }
     verdict
 }
@@ -178,21 +211,36 @@ mod tests {
     use super::*;
 
     fn plan() -> MovePlan {
-        MovePlan { steps: 4000, steps_per_mm: 100.0, feed_mm_s: 100.0, accel_mm_s2: 5000.0 }
+        MovePlan {
+            steps: 4000,
+            steps_per_mm: 100.0,
+            feed_mm_s: 100.0,
+            accel_mm_s2: 5000.0,
+        }
     }
 
     /// Edges exactly on the plan (step k at position k/steps_per_mm).
     fn ideal(plan: &MovePlan, jitter: impl Fn(u64) -> f64) -> Vec<StepEdge> {
         (1..=plan.steps)
             .flat_map(|k| {
-                let t = plan.time_at(k as f64 / plan.steps_per_mm) * f64::from(CPU_HZ) + 1000.0 + jitter(k);
+                let t = plan.time_at(k as f64 / plan.steps_per_mm) * f64::from(CPU_HZ)
+                    + 1000.0
+                    + jitter(k);
                 let c = t.round() as u64;
-                [StepEdge { cycle: c, rising: true, dir: true, isr_cycles: 0 }, StepEdge {
-                    cycle: c + 16,
-                    rising: false,
-                    dir: true,
-                    isr_cycles: 0,
-                }]
+                [
+                    StepEdge {
+                        cycle: c,
+                        rising: true,
+                        dir: true,
+                        isr_cycles: 0,
+                    },
+                    StepEdge {
+                        cycle: c + 16,
+                        rising: false,
+                        dir: true,
+                        isr_cycles: 0,
+                    },
+                ]
             })
             .collect()
     }
@@ -203,7 +251,10 @@ mod tests {
         // 40 mm at 100 mm/s with 5000 mm/s²: 1 mm ramps of 20 ms, 38 mm cruise.
         assert!((p.duration() - (0.04 + 0.38)).abs() < 1e-9);
         let (first, last) = p.cruise_steps().unwrap();
-        assert!((176..=177).contains(&first) && last == 3825, "{first} {last}");
+        assert!(
+            (176..=177).contains(&first) && last == 3825,
+            "{first} {last}"
+        );
     }
 
     #[test]
@@ -221,7 +272,10 @@ mod tests {
         let v = judge(&p, &ideal(&p, |k| if k % 7 == 0 { 100.0 } else { 0.0 }));
         assert_eq!(v.failure, None, "{v:?}");
         let v = judge(&p, &ideal(&p, |k| if k == 2000 { 200.0 } else { 0.0 }));
-        assert!(v.failure.as_deref().unwrap().starts_with("late: step 2000"), "{v:?}");
+        assert!(
+            v.failure.as_deref().unwrap().starts_with("late: step 2000"),
+            "{v:?}"
+        );
     }
 
     #[test]
@@ -230,7 +284,10 @@ mod tests {
         let mut edges = ideal(&p, |_| 0.0);
         edges.truncate(edges.len() - 2);
         assert!(judge(&p, &edges).failure.unwrap().contains("3999 steps"));
-        let slow = MovePlan { feed_mm_s: 98.0, ..p };
+        let slow = MovePlan {
+            feed_mm_s: 98.0,
+            ..p
+        };
         let v = judge(&p, &ideal(&slow, |_| 0.0));
         assert!(v.failure.unwrap().contains("cruise at 9800"));
     }
@@ -238,8 +295,14 @@ mod tests {
     #[test]
     fn a_stream_without_ramps_departs() {
         let p = plan();
-        let flat = MovePlan { accel_mm_s2: 1e9, ..p };
+        let flat = MovePlan {
+            accel_mm_s2: 1e9,
+            ..p
+        };
         let v = judge(&p, &ideal(&flat, |_| 0.0));
-        assert!(v.failure.as_deref().unwrap().contains("acceleration ramp"), "{v:?}");
+        assert!(
+            v.failure.as_deref().unwrap().contains("acceleration ramp"),
+            "{v:?}"
+        );
     }
 }

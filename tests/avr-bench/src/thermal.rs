@@ -21,7 +21,14 @@ pub struct ThermalPlant {
 
 impl ThermalPlant {
     pub fn new(ambient_c: f64, gain_c: f64, tau_s: f64, dead_time_s: f64) -> Self {
-        Self { ambient_c, gain_c, tau_s, dead_time_s, temperature_c: ambient_c, delay: VecDeque::new() }
+        Self {
+            ambient_c,
+            gain_c,
+            tau_s,
+            dead_time_s,
+            temperature_c: ambient_c,
+            delay: VecDeque::new(),
+        }
     }
 
     /// A generic 12 V 40 W hot end (≈ 3.7 °C/s from cold at full power).
@@ -49,7 +56,11 @@ impl ThermalPlant {
     pub fn step(&mut self, duty: f64, dt_s: f64) {
         let slots = (self.dead_time_s / dt_s).round() as usize;
         self.delay.push_back(duty.clamp(0.0, 1.0));
-        let applied = if self.delay.len() > slots { self.delay.pop_front().unwrap_or(0.0) } else { 0.0 };
+        let applied = if self.delay.len() > slots {
+            self.delay.pop_front().unwrap_or(0.0)
+        } else {
+            0.0
+        };
         let target = self.ambient_c + self.gain_c * applied;
         // Exact solution over the step (u held constant): stable for any dt.
         self.temperature_c = target + (self.temperature_c - target) * (-dt_s / self.tau_s).exp();
@@ -67,7 +78,11 @@ pub struct Thermistor {
 
 impl Thermistor {
     /// The stock RAMPS sensor: 100 kΩ NTC, β 3950, 4.7 kΩ pull-up.
-    pub const NTC100K_B3950_4K7: Self = Self { r25_ohm: 100_000.0, beta: 3950.0, pullup_ohm: 4_700.0 };
+    pub const NTC100K_B3950_4K7: Self = Self {
+        r25_ohm: 100_000.0,
+        beta: 3950.0,
+        pullup_ohm: 4_700.0,
+    };
 
     pub fn resistance(&self, celsius: f64) -> f64 {
         self.r25_ohm * (self.beta * (1.0 / (celsius + 273.15) - 1.0 / 298.15)).exp()
@@ -77,7 +92,9 @@ impl Thermistor {
     /// `ADC = 1023·R/(R + R_pullup)`, rounded (25 °C → 977).
     pub fn adc_counts(&self, celsius: f64) -> u16 {
         let r = self.resistance(celsius);
-        (1023.0 * r / (r + self.pullup_ohm)).round().clamp(0.0, 1023.0) as u16
+        (1023.0 * r / (r + self.pullup_ohm))
+            .round()
+            .clamp(0.0, 1023.0) as u16
     }
 
     /// The inverse, for reports: the temperature a reading stands for.

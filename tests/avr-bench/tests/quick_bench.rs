@@ -38,7 +38,13 @@ fn temperatures(m105: &str) -> (f64, f64) {
             && words[6].starts_with("B@:"),
         "M105 reply has Marlin's shape: {m105:?}"
     );
-    let number = |w: &str| w.split(':').nth(1).unwrap().parse::<f64>().unwrap_or_else(|_| panic!("a number in {m105:?}"));
+    let number = |w: &str| {
+        w.split(':')
+            .nth(1)
+            .unwrap()
+            .parse::<f64>()
+            .unwrap_or_else(|_| panic!("a number in {m105:?}"))
+    };
     (number(words[1]), number(words[3]))
 }
 
@@ -56,7 +62,8 @@ fn boots_answers_and_stays_within_its_budgets() {
 
     let m115 = replies(&mut board, &["M115"]);
     assert!(
-        m115[0].starts_with(&format!("FIRMWARE_NAME:Ferrostep {VERSION} (Rust) ")) && m115[0].contains(" PROTOCOL_VERSION:1.0 "),
+        m115[0].starts_with(&format!("FIRMWARE_NAME:Ferrostep {VERSION} (Rust) "))
+            && m115[0].contains(" PROTOCOL_VERSION:1.0 "),
         "{:?}",
         m115[0]
     );
@@ -75,25 +82,57 @@ fn boots_answers_and_stays_within_its_budgets() {
     let m105 = replies(&mut board, &["M105"]);
     assert_eq!(m105.len(), 1, "{m105:?}");
     let (hotend, bed) = temperatures(&m105[0]);
-    assert!((hotend - 25.0).abs() < 0.5 && (bed - 25.0).abs() < 0.5, "{m105:?}");
+    assert!(
+        (hotend - 25.0).abs() < 0.5 && (bed - 25.0).abs() < 0.5,
+        "{m105:?}"
+    );
 
-    assert_eq!(replies(&mut board, &["M114"]), ["X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0", "ok"]);
-    assert_eq!(replies(&mut board, &["M999"]), ["echo:Unknown command: \"M999\"", "ok"]);
+    assert_eq!(
+        replies(&mut board, &["M114"]),
+        ["X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0", "ok"]
+    );
+    assert_eq!(
+        replies(&mut board, &["M999"]),
+        ["echo:Unknown command: \"M999\"", "ok"]
+    );
     assert_eq!(replies(&mut board, &["; a comment alone"]), ["ok"]);
 
     // Budgets: static RAM, stack (watched SP and paint), no resets.
     let elf = ElfInfo::read(&mega2560_elf()).unwrap();
     let ram_static = elf.ram_static_bytes();
-    assert!(ram_static <= STATIC_RAM_BUDGET_BYTES, "static RAM {ram_static} B");
+    assert!(
+        ram_static <= STATIC_RAM_BUDGET_BYTES,
+        "static RAM {ram_static} B"
+    );
     let stack = board.stack_peak_sp();
-    assert!(stack > 0 && stack <= stack_budget(ram_static), "stack {stack} B of {}", stack_budget(ram_static));
-    assert!(board.stack_peak_paint() <= stack, "paint {} vs SP {stack}", board.stack_peak_paint());
+    assert!(
+        stack > 0 && stack <= stack_budget(ram_static),
+        "stack {stack} B of {}",
+        stack_budget(ram_static)
+    );
+    assert!(
+        board.stack_peak_paint() <= stack,
+        "paint {} vs SP {stack}",
+        board.stack_peak_paint()
+    );
     let stats = board.stats();
     assert_eq!(stats.resets, 0);
     assert!(board.halted_reason().is_none());
     // The 1 kHz tick at least: one entry per millisecond.
-    assert!(stats.interrupt_entries as f64 >= board.seconds() * 1000.0 * 0.99, "{stats:?}");
+    assert!(
+        stats.interrupt_entries as f64 >= board.seconds() * 1000.0 * 0.99,
+        "{stats:?}"
+    );
     assert!(stats.isr_cycles > 0 && stats.isr_cycles <= stats.i_clear_cycles);
+    eprintln!(
+        "simulated {:.3} s in {:.3} s ({:.1}× real time); stack {} B (paint {} B); ISR share {:.2} %",
+        board.seconds(),
+        board.wall_time().as_secs_f64(),
+        board.speed(),
+        stack,
+        board.stack_peak_paint(),
+        100.0 * stats.isr_cycles as f64 / board.cycle() as f64
+    );
 }
 
 #[test]
@@ -104,20 +143,55 @@ fn line_numbers_checksums_and_long_lines_follow_marlin() {
     assert_eq!(replies(&mut board, &[&long]), ["Error:Line too long", "ok"]);
     assert_eq!(replies(&mut board, &["M110 N0"]), ["ok"]);
     let good = with_checksum("N1 M114");
-    assert_eq!(replies(&mut board, &[&good]), ["X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0", "ok"]);
-    assert_eq!(replies(&mut board, &["N2 M114*0"]), ["Error:checksum mismatch, Last Line: 1", "Resend: 2", "ok"]);
+    assert_eq!(
+        replies(&mut board, &[&good]),
+        ["X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0", "ok"]
+    );
+    assert_eq!(
+        replies(&mut board, &["N2 M114*0"]),
+        ["Error:checksum mismatch, Last Line: 1", "Resend: 2", "ok"]
+    );
     let skipped = with_checksum("N3 M114");
-    assert_eq!(replies(&mut board, &[&skipped]), ["Error:Line Number is not Last Line Number+1, Last Line: 1", "Resend: 2", "ok"]);
-    assert_eq!(replies(&mut board, &["N2 M114"]), ["Error:No Checksum with line number, Last Line: 1", "Resend: 2", "ok"]);
-    assert_eq!(replies(&mut board, &[&long]), ["Error:Line too long, Last Line: 1", "Resend: 2", "ok"]);
+    assert_eq!(
+        replies(&mut board, &[&skipped]),
+        [
+            "Error:Line Number is not Last Line Number+1, Last Line: 1",
+            "Resend: 2",
+            "ok"
+        ]
+    );
+    assert_eq!(
+        replies(&mut board, &["N2 M114"]),
+        [
+            "Error:No Checksum with line number, Last Line: 1",
+            "Resend: 2",
+            "ok"
+        ]
+    );
+    assert_eq!(
+        replies(&mut board, &[&long]),
+        ["Error:Line too long, Last Line: 1", "Resend: 2", "ok"]
+    );
     let resent = with_checksum("N2 M114");
-    assert_eq!(replies(&mut board, &[&resent]), ["X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0", "ok"]);
+    assert_eq!(
+        replies(&mut board, &[&resent]),
+        ["X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0", "ok"]
+    );
 }
 
 #[test]
 fn a_host_with_numbering_and_resends_streams_a_job() {
     let mut board = bench::boot(&mega2560_elf(), RampsConfig::stock(115_200)).unwrap();
-    let job = ["; a slicer header", "G90", "M83", "G92 X0 Y0 Z0 E0", "M105", "", "M114", "M400"];
+    let job = [
+        "; a slicer header",
+        "G90",
+        "M83",
+        "G92 X0 Y0 Z0 E0",
+        "M105",
+        "",
+        "M114",
+        "M400",
+    ];
     board.send(job);
     assert!(board.run_until_host_done(5.0));
     let host = board.host();
@@ -138,7 +212,12 @@ fn a_burst_without_flow_control_reports_lost_input() {
     // and the firmware says so. (The UART itself never overruns: its
     // interrupt keeps up.)
     let mut config = RampsConfig::stock(115_200);
-    config.host = HostConfig { baud: 115_200, flow: Flow::Burst, numbering: false, resend: false };
+    config.host = HostConfig {
+        baud: 115_200,
+        flow: Flow::Burst,
+        numbering: false,
+        resend: false,
+    };
     let mut board = bench::boot(&mega2560_elf(), config).unwrap();
     let mut lines = vec!["G4 P100".to_string()];
     lines.extend((0..40).map(|i| format!("M118 E1 line {i:03}")));
@@ -146,10 +225,24 @@ fn a_burst_without_flow_control_reports_lost_input() {
     board.run_for_ms(400.0);
     let texts = board.host().reply_texts();
     assert_eq!(board.rx_overruns(), 0);
-    assert_eq!(&texts[4..=12], [
-        "ok", "echo:line 000", "ok", "echo:line 001", "ok", "echo:line 002", "ok", "echo:line 003", "ok"
-    ]);
-    assert!(texts.contains(&"Error:Serial receive overrun, line lost"), "{texts:?}");
+    assert_eq!(
+        &texts[4..=12],
+        [
+            "ok",
+            "echo:line 000",
+            "ok",
+            "echo:line 001",
+            "ok",
+            "echo:line 002",
+            "ok",
+            "echo:line 003",
+            "ok"
+        ]
+    );
+    assert!(
+        texts.contains(&"Error:Serial receive overrun, line lost"),
+        "{texts:?}"
+    );
     // Every line the firmware took got exactly one ok (G4 has no other
     // reply; every other line one echo or one error); none hangs.
     let after_banner = &texts[4..];
@@ -161,7 +254,12 @@ fn a_burst_without_flow_control_reports_lost_input() {
 #[ignore = "firmware bug: the receive-ring loss is charged to the next line assembled, not to the line that lost bytes (see tests/avr-bench/README.md)"]
 fn lines_spliced_by_a_receive_overflow_are_never_executed() {
     let mut config = RampsConfig::stock(115_200);
-    config.host = HostConfig { baud: 115_200, flow: Flow::Burst, numbering: false, resend: false };
+    config.host = HostConfig {
+        baud: 115_200,
+        flow: Flow::Burst,
+        numbering: false,
+        resend: false,
+    };
     let mut board = bench::boot(&mega2560_elf(), config).unwrap();
     let mut lines = vec!["G4 P100".to_string()];
     lines.extend((0..120).map(|i| format!("M118 E1 line {i:03}")));
@@ -176,7 +274,10 @@ fn lines_spliced_by_a_receive_overflow_are_never_executed() {
                 );
             }
         }
-        assert!(!text.starts_with("echo:Unknown command"), "a spliced line was executed: {text:?}");
+        assert!(
+            !text.starts_with("echo:Unknown command"),
+            "a spliced line was executed: {text:?}"
+        );
     }
 }
 
@@ -186,14 +287,20 @@ fn thermistor_inputs_follow_the_plant_and_fixed_values() {
     board.set_plant_celsius(13, 200.0);
     board.run_for_ms(250.0);
     let (hotend, bed) = temperatures(&replies(&mut board, &["M105"])[0]);
-    assert!((hotend - 200.0).abs() < 2.0, "hot end at 200 °C reads {hotend}");
+    assert!(
+        (hotend - 200.0).abs() < 2.0,
+        "hot end at 200 °C reads {hotend}"
+    );
     assert!((bed - 25.0).abs() < 0.5);
     // An open and a shorted sensor are not temperatures.
     board.set_sensor_input(13, SensorInput::OPEN);
     board.set_sensor_input(14, SensorInput::SHORTED);
     board.run_for_ms(250.0);
     let (hotend, bed) = temperatures(&replies(&mut board, &["M105"])[0]);
-    assert!(!(20.0..=300.0).contains(&hotend) && !(20.0..=300.0).contains(&bed), "open {hotend}, shorted {bed}");
+    assert!(
+        !(20.0..=300.0).contains(&hotend) && !(20.0..=300.0).contains(&bed),
+        "open {hotend}, shorted {bed}"
+    );
     assert_eq!(board.sensor_counts(13), Some(1023));
     assert_eq!(board.sensor_counts(14), Some(0));
     board.set_sensor_input(13, SensorInput::Plant);
@@ -212,7 +319,9 @@ fn fan_pwm_duty_is_measured_on_the_pin() {
     let last = board.thermal_history().last().unwrap().clone();
     assert!((last.fan_duty - 129.0 / 256.0).abs() < 0.01, "{last:?}");
     // No heater is driven (nothing asked for heat): plants at ambient.
-    assert!(last.duty.iter().all(|d| *d == 0.0) && last.celsius.iter().all(|c| (c - 25.0).abs() < 1e-6));
+    assert!(
+        last.duty.iter().all(|d| *d == 0.0) && last.celsius.iter().all(|c| (c - 25.0).abs() < 1e-6)
+    );
     assert_eq!(replies(&mut board, &["M107"]), ["ok"]);
     board.run_for_ms(150.0);
     assert_eq!(board.thermal_history().last().unwrap().fan_duty, 0.0);
@@ -227,24 +336,48 @@ fn endstop_inputs_follow_the_switch_positions() {
     // sits on it); Z_MIN: pressed-low switch far away (reads high: open…
     // but the firmware's default trigger level is high, so it reports
     // TRIGGERED: polarity is configuration).
-    config.endstops[0] = Some(Endstop { axis: X, at_steps: 0, is_min: true, pressed_level: true });
-    config.endstops[4] = Some(Endstop { axis: Z, at_steps: -1000, is_min: true, pressed_level: false });
+    config.endstops[0] = Some(Endstop {
+        axis: X,
+        at_steps: 0,
+        is_min: true,
+        pressed_level: true,
+    });
+    config.endstops[4] = Some(Endstop {
+        axis: Z,
+        at_steps: -1000,
+        is_min: true,
+        pressed_level: false,
+    });
     config.endstops[3] = None;
     let mut board = bench::boot(&mega2560_elf(), config).unwrap();
     board.run_for_ms(150.0);
-    assert_eq!(board.endstop_levels(), [true, false, false, true, true, false]);
-    assert_eq!(replies(&mut board, &["M119"]), [
-        "Reporting endstop status",
-        "x_min: TRIGGERED",
-        "x_max: open",
-        "y_min: open",
-        "y_max: TRIGGERED",
-        "z_min: TRIGGERED",
-        "z_max: open",
-        "ok"
-    ]);
+    assert_eq!(
+        board.endstop_levels(),
+        [true, false, false, true, true, false]
+    );
+    assert_eq!(
+        replies(&mut board, &["M119"]),
+        [
+            "Reporting endstop status",
+            "x_min: TRIGGERED",
+            "x_max: open",
+            "y_min: open",
+            "y_max: TRIGGERED",
+            "z_min: TRIGGERED",
+            "z_max: open",
+            "ok"
+        ]
+    );
     // Move the X_MIN switch away from the carriage.
-    board.set_endstop(0, Some(Endstop { axis: X, at_steps: -10, is_min: true, pressed_level: true }));
+    board.set_endstop(
+        0,
+        Some(Endstop {
+            axis: X,
+            at_steps: -10,
+            is_min: true,
+            pressed_level: true,
+        }),
+    );
     board.run_for_ms(150.0);
     assert_eq!(replies(&mut board, &["M119"])[1], "x_min: open");
 }
@@ -255,12 +388,24 @@ fn a_g1_either_moves_exactly_or_says_it_cannot() {
     config.host = HostConfig::raw(115_200);
     config.endstops = bench::far_endstops();
     let mut board = bench::boot(&mega2560_elf(), config).unwrap();
-    let reply = replies(&mut board, &["G92 X0 Y0 Z0 E0", "M92 X100 Y100 Z400 E93", "G1 X10 Y-5 Z0.25 F3000", "M400"]);
+    let reply = replies(
+        &mut board,
+        &[
+            "G92 X0 Y0 Z0 E0",
+            "M92 X100 Y100 Z400 E93",
+            "G1 X10 Y-5 Z0.25 F3000",
+            "M400",
+        ],
+    );
     assert!(reply.iter().all(|r| !r.starts_with("Error")), "{reply:?}");
     board.run_for_ms(100.0);
     if reply.iter().any(|r| r.contains("Motion is not available")) {
         for axis in 0..5 {
-            assert_eq!((board.step_count(axis), board.position(axis)), (0, 0), "axis {axis}");
+            assert_eq!(
+                (board.step_count(axis), board.position(axis)),
+                (0, 0),
+                "axis {axis}"
+            );
         }
     } else {
         // X 10 mm, Y 5 mm at 100 steps/mm, Z 0.25 mm at 400 steps/mm.
@@ -275,4 +420,66 @@ fn a_g1_either_moves_exactly_or_says_it_cannot() {
         let (peak, _) = board.peak_step_rate(X, 8);
         assert!(peak > 0.0 && peak < f64::from(CPU_HZ));
     }
+}
+
+/// The recorders and the position-driven switches, exercised by writing
+/// PORTF the way a stepping firmware would (the firmware does not step yet).
+#[test]
+fn step_edges_positions_and_switches_are_recorded() {
+    const DDRF: u16 = 0x30;
+    const PORTF: u16 = 0x31;
+    let mut config = RampsConfig::stock(115_200);
+    config.host = HostConfig::raw(115_200);
+    config.endstops = bench::far_endstops();
+    // X_MAX pressed from +5 steps on (normally closed: pressed reads high).
+    config.endstops[1] = Some(Endstop {
+        axis: X,
+        at_steps: 5,
+        is_min: false,
+        pressed_level: true,
+    });
+    let mut board = bench::boot(&mega2560_elf(), config).unwrap();
+    assert!(!board.endstop_levels()[1]);
+    let port = |board: &Board| board.read_ram(PORTF);
+    let ddr = board.read_ram(DDRF);
+    board.write_io_as_firmware(DDRF, ddr | 0b11);
+    let pulse = |board: &mut Board, dir: bool, high_cycles: u64, low_cycles: u64| {
+        let base = port(board) & !0b11 | u8::from(dir) << 1;
+        board.write_io_as_firmware(PORTF, base);
+        board.write_io_as_firmware(PORTF, base | 1);
+        let t = board.cycle();
+        board.run_until(t + high_cycles);
+        board.write_io_as_firmware(PORTF, base);
+        let t = board.cycle();
+        board.run_until(t + low_cycles);
+    };
+    // Five steps forward at ≈ 10 kHz (1600 cycles a step), 2 µs pulses.
+    for _ in 0..5 {
+        pulse(&mut board, true, 32, 1568);
+    }
+    assert_eq!((board.step_count(X), board.position(X)), (5, 5));
+    assert!(board.endstop_levels()[1], "X_MAX pressed at +5");
+    board.run_for_ms(150.0);
+    assert_eq!(replies(&mut board, &["M119"])[2], "x_max: TRIGGERED");
+    // One step back: released.
+    pulse(&mut board, false, 32, 1568);
+    assert_eq!((board.step_count(X), board.position(X)), (6, 4));
+    assert!(!board.endstop_levels()[1]);
+    board.run_for_ms(150.0);
+    assert_eq!(replies(&mut board, &["M119"])[2], "x_max: open");
+    let edges = board.step_edges(X);
+    assert_eq!(edges.iter().filter(|e| e.rising).count(), 6);
+    assert_eq!(
+        edges
+            .iter()
+            .filter(|e| e.rising)
+            .map(|e| e.dir)
+            .collect::<Vec<_>>(),
+        [true, true, true, true, true, false]
+    );
+    let pulse_width = board.min_step_pulse_cycles(X).unwrap();
+    assert!((32..40).contains(&pulse_width), "{pulse_width}");
+    let (peak, _) = board.peak_step_rate(X, 2);
+    assert!((peak - 10_000.0).abs() < 100.0, "{peak}");
+    assert_eq!([Y, Z].map(|a| board.step_count(a)), [0, 0]);
 }

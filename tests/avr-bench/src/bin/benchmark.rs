@@ -50,7 +50,11 @@ fn main() {
     let elf_250k: Result<PathBuf, String> = match (elf_250k, prebuilt) {
         (Some(e), _) => Ok(e),
         (None, true) => Err("no --elf-250000 given with --elf".into()),
-        (None, false) => build_variant(&target_dir().join("avr-bench-baud250000"), &["baud-250000"], true),
+        (None, false) => build_variant(
+            &target_dir().join("avr-bench-baud250000"),
+            &["baud-250000"],
+            true,
+        ),
     };
     eprintln!("benchmark: ELF {}", elf.display());
 
@@ -62,7 +66,11 @@ fn main() {
     rows.push(Row {
         key: "flash_bytes",
         value: Ok(f64::from(flash)),
-        shown: format!("{} B ({:.1} % of 256 KiB)", group(f64::from(flash)), 100.0 * f64::from(flash) / f64::from(FLASH_BYTES)),
+        shown: format!(
+            "{} B ({:.1} % of 256 KiB)",
+            group(f64::from(flash)),
+            100.0 * f64::from(flash) / f64::from(FLASH_BYTES)
+        ),
         anchor: "Marlin 66–177 KiB on a Mega2560 depending on options; Grbl-Mega ≈ 31 KiB".into(),
     });
     rows.push(Row {
@@ -94,10 +102,8 @@ fn main() {
     let rate3 = bench::step_rate(&elf, 3);
     eprintln!("benchmark: ISR share at 10 k steps/s …");
     let isr = bench::isr_share_at(&elf, 10_000.0);
-    for r in [&rate1, &rate3] {
-        if let Ok(r) = r {
-            phases.push(r.log.clone());
-        }
+    for r in [&rate1, &rate3].into_iter().flatten() {
+        phases.push(r.log.clone());
     }
     if let Ok((_, log)) = &isr {
         phases.push(log.clone());
@@ -109,21 +115,33 @@ fn main() {
         phases.push(s.log.clone());
     }
 
+    eprintln!("benchmark: heaters and fan for 6 s …");
+    let heat = bench::heat_run(&elf, 200, 6.0);
+    if let Ok((board, _)) = &heat {
+        phases.push(PhaseLog::of("heat run", board));
+    }
+
     // Stack: the deepest of every phase (SP watched after each instruction).
     let budget = bench::stack_budget(ram_static);
     let deepest = phases.iter().max_by_key(|p| p.stack_peak_sp);
     rows.push(Row {
         key: "stack_peak_bytes",
-        value: deepest.map(|p| f64::from(p.stack_peak_sp)).ok_or_else(|| format!("no phase ran: {:?}", tour.as_ref().err())),
+        value: deepest
+            .map(|p| f64::from(p.stack_peak_sp))
+            .ok_or_else(|| format!("no phase ran: {:?}", tour.as_ref().err())),
         shown: deepest.map_or(String::new(), |p| {
             format!(
-                "{} B (in {}; {} B touched by paint)",
+                "{} B (deepest SP in {}; {} B written, by paint)",
                 group(f64::from(p.stack_peak_sp)),
-                p.name,
+                p.deepest_function.as_deref().unwrap_or("?"),
                 group(f64::from(p.stack_peak_paint))
             )
         }),
-        anchor: format!("budget {} B = 8 KiB − static − {} B margin", group(f64::from(budget)), bench::STACK_MARGIN_BYTES),
+        anchor: format!(
+            "budget {} B = 8 KiB − static − {} B margin",
+            group(f64::from(budget)),
+            bench::STACK_MARGIN_BYTES
+        ),
     });
 
     let wire_250k = |bytes: f64| bytes * 640.0;
@@ -163,7 +181,12 @@ fn main() {
         Ok(r) => Row {
             key: "step_rate_3_steppers_total_hz",
             value: Ok(r.total_hz()),
-            shown: format!("{} steps/s ({} per axis){}", group(r.total_hz()), group(r.per_axis_hz), limit_note(&r.limit)),
+            shown: format!(
+                "{} steps/s ({} per axis){}",
+                group(r.total_hz()),
+                group(r.per_axis_hz),
+                limit_note(&r.limit)
+            ),
             anchor: step_anchor_3.into(),
         },
         Err(e) => missing("step_rate_3_steppers_total_hz", e, step_anchor_3.into()),
@@ -182,13 +205,23 @@ fn main() {
         Ok(s) => Row {
             key: "g1_lines_per_s_at_250000_baud",
             value: Ok(s.lines_per_s),
-            shown: format!("{:.0} lines/s ({} segments, {:.1} reply bytes a line)", s.lines_per_s, s.lines, s.mean_reply_bytes),
-            anchor: format!("wire limit of this stream with ok flow control: {:.0} lines/s", s.wire_bound_lines_per_s),
+            shown: format!(
+                "{:.0} lines/s ({} segments, {:.1} reply bytes a line)",
+                s.lines_per_s, s.lines, s.mean_reply_bytes
+            ),
+            anchor: format!(
+                "wire limit of this stream with ok flow control: {:.0} lines/s",
+                s.wire_bound_lines_per_s
+            ),
         },
         Err(e) => missing("g1_lines_per_s_at_250000_baud", e, String::new()),
     });
 
     print_table(&rows);
+    match &heat {
+        Ok((board, replies)) => print_heat(board, replies),
+        Err(e) => println!("heat run failed: {e}"),
+    }
     print_runner(&phases, started);
     if let Err(e) = &tour {
         println!("command tour failed: {e}");
@@ -197,7 +230,12 @@ fn main() {
 }
 
 fn missing(key: &'static str, reason: &str, anchor: String) -> Row {
-    Row { key, value: Err(reason.to_string()), shown: format!("missing: {reason}"), anchor }
+    Row {
+        key,
+        value: Err(reason.to_string()),
+        shown: format!("missing: {reason}"),
+        anchor,
+    }
 }
 
 fn limit_note(limit: &Option<(f64, String)>) -> String {
@@ -221,11 +259,42 @@ fn print_table(rows: &[Row]) {
     println!();
 }
 
+/// The thermal history of the heat run, one line a second.
+fn print_heat(board: &avr_bench::board::Board, replies: &[String]) {
+    println!("heat run: M104 S200, M106 S128, then 6 s (plant: hot end 450 °C at 100 %, τ 120 s, θ 1.5 s; bed 120 °C, τ 450 s, θ 5 s)");
+    for reply in replies.iter().filter(|r| *r != "ok") {
+        println!("  < {reply}");
+    }
+    println!(
+        "  {:>5}  {:>9} {:>9}  {:>9} {:>9}  {:>8}",
+        "t s", "hot end %", "°C", "bed %", "°C", "fan %"
+    );
+    for sample in board
+        .thermal_history()
+        .iter()
+        .filter(|s| ((s.time_s * 10.0).round() as u64).is_multiple_of(10))
+    {
+        println!(
+            "  {:>5.1}  {:>9.1} {:>9.2}  {:>9.1} {:>9.2}  {:>8.1}",
+            sample.time_s,
+            sample.duty[0] * 100.0,
+            sample.celsius[0],
+            sample.duty[1] * 100.0,
+            sample.celsius[1],
+            sample.fan_duty * 100.0
+        );
+    }
+    println!();
+}
+
 fn print_runner(phases: &[PhaseLog], started: Instant) {
     let simulated: f64 = phases.iter().map(|p| p.simulated_s).sum();
     let wall: f64 = phases.iter().map(|p| p.wall.as_secs_f64()).sum();
     println!("runner: {:.2} simulated s in {:.2} s of simulation ({:.1}× real time); {:.1} s in all with builds", simulated, wall, simulated / wall.max(1e-9), started.elapsed().as_secs_f64());
-    println!("{:<22} {:>8} {:>9} {:>10} {:>10} {:>9} {:>9}  deepest stack in", "phase", "sim s", "stack SP", "ISR share", "I clear", "overruns", "resets");
+    println!(
+        "{:<22} {:>8} {:>9} {:>10} {:>10} {:>9} {:>9}  deepest stack in",
+        "phase", "sim s", "stack SP", "ISR share", "I clear", "overruns", "resets"
+    );
     for p in phases {
         println!(
             "{:<22} {:>8.2} {:>8} B {:>9.2} % {:>9.2} % {:>9} {:>9}  {}",
@@ -248,7 +317,12 @@ fn print_runner(phases: &[PhaseLog], started: Instant) {
 fn write_json(path: &PathBuf, rows: &[Row]) {
     let body = rows
         .iter()
-        .filter_map(|r| r.value.as_ref().ok().map(|v| format!("  \"{}\": {}", r.key, json_number(*v))))
+        .filter_map(|r| {
+            r.value
+                .as_ref()
+                .ok()
+                .map(|v| format!("  \"{}\": {}", r.key, json_number(*v)))
+        })
         .collect::<Vec<_>>()
         .join(",\n");
     let text = format!("{{\n{body}\n}}\n");
