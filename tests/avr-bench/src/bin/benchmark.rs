@@ -6,7 +6,7 @@
 //! A figure whose subsystem is not built yet is printed as
 //! `missing: <reason>` and left out of the JSON (never written as zero).
 //!
-//! Options: `--elf <path>` uses a prebuilt ELF (no build; the 250000-baud
+//! Options (`cargo benchmark --elf …`): `--elf <path>` uses a prebuilt ELF (no build; the 250000-baud
 //! figure then needs `--elf-250000 <path>` too), `--json <path>` writes
 //! elsewhere.
 
@@ -29,6 +29,8 @@ fn main() {
     let (mut elf, mut elf_250k, mut json) = (None, None, target_dir().join("benchmark.json"));
     while let Some(arg) = args.next() {
         match arg.as_str() {
+            // `cargo benchmark -- …` passes a second `--` through the alias.
+            "--" => {}
             "--elf" => elf = args.next().map(PathBuf::from),
             "--elf-250000" => elf_250k = args.next().map(PathBuf::from),
             "--json" => json = args.next().map(PathBuf::from).unwrap_or(json),
@@ -222,6 +224,19 @@ fn main() {
         Ok((board, replies)) => print_heat(board, replies),
         Err(e) => println!("heat run failed: {e}"),
     }
+    for result in [&rate1, &rate3].into_iter().flatten() {
+        println!(
+            "step trials, {} axis(es) (steps/s per axis: verdict):",
+            result.axes
+        );
+        for (rate, failure) in &result.trials {
+            println!(
+                "  {:>9}: {}",
+                group(*rate),
+                failure.as_deref().unwrap_or("on time")
+            );
+        }
+    }
     print_runner(&phases, started);
     if let Err(e) = &tour {
         println!("command tour failed: {e}");
@@ -292,17 +307,18 @@ fn print_runner(phases: &[PhaseLog], started: Instant) {
     let wall: f64 = phases.iter().map(|p| p.wall.as_secs_f64()).sum();
     println!("runner: {:.2} simulated s in {:.2} s of simulation ({:.1}× real time); {:.1} s in all with builds", simulated, wall, simulated / wall.max(1e-9), started.elapsed().as_secs_f64());
     println!(
-        "{:<22} {:>8} {:>9} {:>10} {:>10} {:>9} {:>9}  deepest stack in",
-        "phase", "sim s", "stack SP", "ISR share", "I clear", "overruns", "resets"
+        "{:<22} {:>8} {:>10} {:>11} {:>11} {:>8} {:>9} {:>7}  deepest stack in",
+        "phase", "sim s", "stack SP", "ISR share", "I clear", "asleep", "overruns", "resets"
     );
     for p in phases {
         println!(
-            "{:<22} {:>8.2} {:>8} B {:>9.2} % {:>9.2} % {:>9} {:>9}  {}",
+            "{:<22} {:>8.2} {:>8} B {:>9.2} % {:>9.2} % {:>6.2} % {:>9} {:>7}  {}",
             p.name,
             p.simulated_s,
             p.stack_peak_sp,
             p.isr_share * 100.0,
             p.i_clear_share * 100.0,
+            p.sleep_share * 100.0,
             p.rx_overruns,
             p.resets,
             p.deepest_function.as_deref().unwrap_or("?")
