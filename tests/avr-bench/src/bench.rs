@@ -292,6 +292,8 @@ pub struct Trial {
     pub rate_hz: f64,
     /// Per moving axis.
     pub verdicts: Vec<Verdict>,
+    /// Per moving axis: STEP edges less than 200 ns after a DIR change.
+    pub dir_setup_violations: Vec<u64>,
     pub replies: Vec<String>,
 }
 
@@ -342,6 +344,10 @@ pub fn step_trial(board: &mut Board, axes: usize, rate_hz: f64) -> Result<Trial,
         return Err(format!("the firmware refused the trial set-up: {error}"));
     }
     board.clear_step_edges();
+    let violations_before: Vec<u64> = [X, Y, Z][..axes]
+        .iter()
+        .map(|&a| board.dir_setup_violations(a))
+        .collect();
     let plan = MovePlan {
         steps: TRIAL_STEPS,
         steps_per_mm: s,
@@ -355,9 +361,15 @@ pub fn step_trial(board: &mut Board, axes: usize, rate_hz: f64) -> Result<Trial,
         .iter()
         .map(|&a| judge(&plan, board.step_edges(a)))
         .collect();
+    let dir_setup_violations = [X, Y, Z][..axes]
+        .iter()
+        .zip(violations_before)
+        .map(|(&a, before)| board.dir_setup_violations(a) - before)
+        .collect();
     Ok(Trial {
         rate_hz,
         verdicts,
+        dir_setup_violations,
         replies,
     })
 }

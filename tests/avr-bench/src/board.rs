@@ -280,6 +280,10 @@ pub struct ThermalSample {
 struct AxisState {
     step_level: bool,
     dir_level: bool,
+    /// PORTx data address and bit of the DIR pin.
+    dir_port: (u16, u8),
+    dir_changed_at: Option<u64>,
+    dir_setup_violations: u64,
     position: i64,
     rising_edges: u64,
     edges: Vec<StepEdge>,
@@ -409,9 +413,12 @@ impl Board {
                 },
                 axes: AXES
                     .iter()
-                    .map(|_| AxisState {
+                    .map(|pins| AxisState {
                         step_level: false,
                         dir_level: false,
+                        dir_port: (port_register(pins.dir.port), pins.dir.bit),
+                        dir_changed_at: None,
+                        dir_setup_violations: 0,
                         position: 0,
                         rising_edges: 0,
                         edges: Vec::new(),
@@ -742,6 +749,12 @@ impl Board {
         &self.shared.axes[axis].edges
     }
 
+    /// STEP rising edges that came less than 200 ns (4 cycles) after a DIR
+    /// change, including DIR and STEP changed by one port write.
+    pub fn dir_setup_violations(&self, axis: usize) -> u64 {
+        self.shared.axes[axis].dir_setup_violations
+    }
+
     /// Shortest STEP high time seen, cycles.
     pub fn min_step_pulse_cycles(&self, axis: usize) -> Option<u64> {
         self.shared.axes[axis].min_high_cycles
@@ -857,6 +870,22 @@ impl Board {
             .sum()
     }
 
+    /// The program counter (flash byte address).
+    pub fn pc(&self) -> u32 {
+        // SAFETY: `avr` is valid for the board's lifetime.
+        unsafe { (*self.avr).pc }
+    }
+
+    /// The flash byte range of the first function whose symbol contains
+    /// `name` (e.g. `"make_output"`).
+    pub fn function_range(&self, name: &str) -> Option<std::ops::Range<u32>> {
+        self.elf
+            .symbols
+            .iter()
+            .find(|s| s.size > 0 && s.value < crate::elf::DATA_OFFSET && s.name.contains(name))
+            .map(|s| s.value..s.value + s.size)
+    }
+
     /// Write an I/O register as if the firmware had (through simavr's write
     /// handler, so pin IRQs and the recorders see it). For self-tests of
     /// the virtual RAMPS while the firmware itself does not step.
@@ -944,6 +973,24 @@ pub fn peak_rates(edges: &[StepEdge], window: usize) -> (f64, f64) {
         }
     }
     (best, best_mean)
+}
+
+/// Data-space address of PORTx.
+fn port_register(port: u8) -> u16 {
+    match port {
+        b'A' => 0x22,
+        b'B' => 0x25,
+        b'C' => 0x28,
+        b'D' => 0x2B,
+        b'E' => 0x2E,
+        b'F' => 0x31,
+        b'G' => 0x34,
+        b'H' => 0x102,
+        b'J' => 0x105,
+        b'K' => 0x108,
+        b'L' => 0x10B,
+        _ => panic!("the ATmega2560 has no port {}", port as char),
+    }
 }
 
 unsafe fn port_irq(avr: *mut ffi::avr_t, p: Pin) -> *mut ffi::avr_irq_t {
@@ -1169,15 +1216,35 @@ unsafe extern "C" fn on_axis_pin(irq: *mut ffi::avr_irq_t, value: u32, param: *m
     };
     let positive_high = shared.dir_high_is_positive[axis];
     let isr = shared.stats.isr_cycles;
+    let data = (*shared.avr).data;
     let state = &mut shared.axes[axis];
     if !is_step {
-        state.dir_level = level;
+        if level != state.dir_level {
+            state.dir_level = level;
+            state.dir_changed_at = Some(now);
+        }
         return;
     }
     if level == state.step_level {
         return;
     }
     state.step_level = level;
+    if level {
+        // simavr notifies the bits of one PORT write in bit order, so a DIR
+        // written together with STEP may not have been seen yet: DIR is
+        // taken from the port register. A STEP less than 200 ns (4 cycles)
+        // after a DIR change violates the drivers' set-up time (A4988,
+        // DRV8825) and is counted.
+        let (port, bit) = state.dir_port;
+        let dir_now = *data.add(usize::from(port)) >> bit & 1 != 0;
+        if dir_now != state.dir_level {
+            state.dir_level = dir_now;
+            state.dir_changed_at = Some(now);
+        }
+        if state.dir_changed_at.is_some_and(|t| now - t < 4) {
+            state.dir_setup_violations += 1;
+        }
+    }
     state.edges.push(StepEdge {
         cycle: now,
         rising: level,

@@ -20,6 +20,21 @@ fn boot_raw() -> Board {
     bench::boot(&mega2560_elf(), config).expect("the firmware boots")
 }
 
+/// Write PORTx from the test as an interrupt handler of the firmware
+/// would, but never while the main loop is inside `pins::make_output`:
+/// its non-atomic read-modify-write of PORTF (Y enable) would write the
+/// old STEP level back (see README.md, findings).
+fn write_port(board: &mut Board, addr: u16, value: u8) {
+    let rmw = board
+        .function_range("make_output")
+        .expect("pins::make_output in the ELF");
+    while rmw.contains(&board.pc()) {
+        let next = board.cycle() + 1;
+        board.run_until(next);
+    }
+    board.write_io_as_firmware(addr, value);
+}
+
 fn replies(board: &mut Board, lines: &[&str]) -> Vec<String> {
     exchange(board, lines, 5.0).unwrap_or_else(|e| panic!("{e}"))
 }
@@ -445,11 +460,11 @@ fn step_edges_positions_and_switches_are_recorded() {
     board.write_io_as_firmware(DDRF, ddr | 0b11);
     let pulse = |board: &mut Board, dir: bool, high_cycles: u64, low_cycles: u64| {
         let base = port(board) & !0b11 | u8::from(dir) << 1;
-        board.write_io_as_firmware(PORTF, base);
-        board.write_io_as_firmware(PORTF, base | 1);
+        // DIR and STEP in one write: a set-up time violation when DIR changes.
+        write_port(board, PORTF, base | 1);
         let t = board.cycle();
         board.run_until(t + high_cycles);
-        board.write_io_as_firmware(PORTF, base);
+        write_port(board, PORTF, base);
         let t = board.cycle();
         board.run_until(t + low_cycles);
     };
@@ -465,6 +480,8 @@ fn step_edges_positions_and_switches_are_recorded() {
     pulse(&mut board, false, 32, 1568);
     assert_eq!((board.step_count(X), board.position(X)), (6, 4));
     assert!(!board.endstop_levels()[1]);
+    // DIR changed with STEP in one write twice (first step, reversal).
+    assert_eq!(board.dir_setup_violations(X), 2);
     board.run_for_ms(150.0);
     assert_eq!(replies(&mut board, &["M119"])[2], "x_max: open");
     let edges = board.step_edges(X);
@@ -482,4 +499,57 @@ fn step_edges_positions_and_switches_are_recorded() {
     let (peak, _) = board.peak_step_rate(X, 2);
     assert!((peak - 10_000.0).abs() < 100.0, "{peak}");
     assert_eq!([Y, Z].map(|a| board.step_count(a)), [0, 0]);
+}
+
+/// The step-rate judgement on recorded edges: a trapezoid played on PF0
+/// at the planned cycles is on time; the same with one step 20 % of its
+/// interval late is not.
+#[test]
+fn a_trapezoid_played_on_the_step_pin_is_judged_on_time() {
+    use avr_bench::steps::{judge, MovePlan};
+    const DDRF: u16 = 0x30;
+    const PORTF: u16 = 0x31;
+    let plan = MovePlan {
+        steps: 400,
+        steps_per_mm: 100.0,
+        feed_mm_s: 100.0,
+        accel_mm_s2: 100.0 * 100.0 / (2.0 * 0.2 * 4.0),
+    };
+    for late_step in [None, Some(200u64)] {
+        let mut board = boot_raw();
+        let ddr = board.read_ram(DDRF);
+        board.write_io_as_firmware(DDRF, ddr | 0b11);
+        // DIR first (set-up time), then the steps.
+        let port = board.read_ram(PORTF);
+        write_port(&mut board, PORTF, port | 0b10);
+        let start = board.cycle() + 1000;
+        let interval = f64::from(CPU_HZ) / plan.cruise_hz();
+        for k in 1..=plan.steps {
+            let mut at =
+                start as f64 + plan.time_at(k as f64 / plan.steps_per_mm) * f64::from(CPU_HZ);
+            if Some(k) == late_step {
+                at += 0.2 * interval;
+            }
+            board.run_until(at as u64);
+            let base = board.read_ram(PORTF) & !0b11 | 0b10;
+            write_port(&mut board, PORTF, base | 1);
+            let t = board.cycle();
+            board.run_until(t + 32);
+            write_port(&mut board, PORTF, base);
+        }
+        let verdict = judge(&plan, board.step_edges(X));
+        assert_eq!(verdict.steps, 400);
+        assert_eq!(board.dir_setup_violations(X), 0);
+        match late_step {
+            None => assert_eq!(verdict.failure, None, "{verdict:?}"),
+            Some(k) => assert!(
+                verdict
+                    .failure
+                    .as_deref()
+                    .unwrap()
+                    .starts_with(&format!("late: step {k} ")),
+                "{verdict:?}"
+            ),
+        }
+    }
 }
