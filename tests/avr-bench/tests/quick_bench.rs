@@ -35,6 +35,16 @@ fn write_port(board: &mut Board, addr: u16, value: u8) {
     board.write_io_as_firmware(addr, value);
 }
 
+/// The `ok T:…` line of an M105 (other lines may come before it).
+fn m105(board: &mut Board) -> String {
+    let texts = replies(board, &["M105"]);
+    texts
+        .iter()
+        .find(|t| t.starts_with("ok T:"))
+        .cloned()
+        .unwrap_or_else(|| panic!("no report in {texts:?}"))
+}
+
 fn replies(board: &mut Board, lines: &[&str]) -> Vec<String> {
     exchange(board, lines, 5.0).unwrap_or_else(|e| panic!("{e}"))
 }
@@ -94,12 +104,11 @@ fn boots_answers_and_stays_within_its_budgets() {
     // through the flash table on the real chip.
     board.run_for_ms(200.0);
     assert_eq!(board.sensor_counts(13), Some(977));
-    let m105 = replies(&mut board, &["M105"]);
-    assert_eq!(m105.len(), 1, "{m105:?}");
-    let (hotend, bed) = temperatures(&m105[0]);
+    let report = m105(&mut board);
+    let (hotend, bed) = temperatures(&report);
     assert!(
         (hotend - 25.0).abs() < 0.5 && (bed - 25.0).abs() < 0.5,
-        "{m105:?}"
+        "{report:?}"
     );
 
     assert_eq!(
@@ -240,8 +249,14 @@ fn a_burst_without_flow_control_reports_lost_input() {
     board.run_for_ms(400.0);
     let texts = board.host().reply_texts();
     assert_eq!(board.rx_overruns(), 0);
+    // After the start-up lines: G4's ok, then the four queued lines.
+    let first = texts
+        .iter()
+        .position(|t| *t == "echo:line 000")
+        .expect("the first queued line ran")
+        - 1;
     assert_eq!(
-        &texts[4..=12],
+        &texts[first..first + 9],
         [
             "ok",
             "echo:line 000",
@@ -260,7 +275,7 @@ fn a_burst_without_flow_control_reports_lost_input() {
     );
     // Every line the firmware took got exactly one ok (G4 has no other
     // reply; every other line one echo or one error); none hangs.
-    let after_banner = &texts[4..];
+    let after_banner = &texts[first..];
     let oks = after_banner.iter().filter(|t| **t == "ok").count();
     assert_eq!(oks, after_banner.len() - oks + 1, "{texts:?}");
 }
@@ -301,28 +316,43 @@ fn thermistor_inputs_follow_the_plant_and_fixed_values() {
     let mut board = boot_raw();
     board.set_plant_celsius(13, 200.0);
     board.run_for_ms(250.0);
-    let (hotend, bed) = temperatures(&replies(&mut board, &["M105"])[0]);
+    let (hotend, bed) = temperatures(&m105(&mut board));
     assert!(
         (hotend - 200.0).abs() < 2.0,
         "hot end at 200 °C reads {hotend}"
     );
     assert!((bed - 25.0).abs() < 0.5);
-    // An open and a shorted sensor are not temperatures.
+    // Back to the plant: room temperature again.
+    board.set_plant_celsius(13, 25.0);
+    board.run_for_ms(250.0);
+    let (hotend, _) = temperatures(&m105(&mut board));
+    assert!((hotend - 25.0).abs() < 0.5);
+    // An open and a shorted sensor are not temperatures: the firmware
+    // either reports something outside any plausible range or says it
+    // has a sensor fault (and may halt, as Marlin does).
     board.set_sensor_input(13, SensorInput::OPEN);
     board.set_sensor_input(14, SensorInput::SHORTED);
-    board.run_for_ms(250.0);
-    let (hotend, bed) = temperatures(&replies(&mut board, &["M105"])[0]);
-    assert!(
-        !(20.0..=300.0).contains(&hotend) && !(20.0..=300.0).contains(&bed),
-        "open {hotend}, shorted {bed}"
-    );
     assert_eq!(board.sensor_counts(13), Some(1023));
     assert_eq!(board.sensor_counts(14), Some(0));
-    board.set_sensor_input(13, SensorInput::Plant);
-    board.set_sensor_input(14, SensorInput::Plant);
     board.run_for_ms(250.0);
-    let (_, bed) = temperatures(&replies(&mut board, &["M105"])[0]);
-    assert!((bed - 25.0).abs() < 0.5);
+    let texts = exchange(&mut board, &["M105"], 5.0).unwrap_or_else(|e| panic!("{e}"));
+    match texts.iter().find(|t| t.starts_with("ok T:")) {
+        Some(report) => {
+            let (hotend, bed) = temperatures(report);
+            assert!(
+                !(20.0..=300.0).contains(&hotend) && !(20.0..=300.0).contains(&bed),
+                "open reads {hotend}, shorted reads {bed}"
+            );
+        }
+        None => assert!(
+            board
+                .host()
+                .reply_texts()
+                .iter()
+                .any(|t| t.starts_with("Error:")),
+            "{texts:?}"
+        ),
+    }
 }
 
 #[test]
