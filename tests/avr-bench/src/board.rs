@@ -579,6 +579,16 @@ impl Board {
         host.queue(lines);
     }
 
+    /// Queue the lines of a G-code file for the host to send.
+    pub fn send_file(&mut self, path: &Path) -> Result<usize, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let lines: Vec<&str> = text.lines().collect();
+        let count = lines.len();
+        self.send(lines);
+        Ok(count)
+    }
+
     /// Why the run stopped early (CPU crashed or stopped), if it did.
     pub fn halted_reason(&self) -> Option<&str> {
         self.halted_reason.as_deref()

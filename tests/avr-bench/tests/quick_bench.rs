@@ -204,29 +204,39 @@ fn line_numbers_checksums_and_long_lines_follow_marlin() {
 }
 
 #[test]
-fn a_host_with_numbering_and_resends_streams_a_job() {
+fn a_host_with_numbering_streams_a_slicer_file() {
     let mut board = bench::boot(&mega2560_elf(), RampsConfig::stock(115_200)).unwrap();
-    let job = [
-        "; a slicer header",
-        "G90",
-        "M83",
-        "G92 X0 Y0 Z0 E0",
-        "M105",
-        "",
-        "M114",
-        "M400",
-    ];
-    board.send(job);
-    assert!(board.run_until_host_done(5.0));
+    let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("gcode/quick.gcode");
+    assert_eq!(board.send_file(&file), Ok(23));
+    assert!(
+        board.run_until_host_done(10.0),
+        "{:?}",
+        board.host().transcript()
+    );
     let host = board.host();
-    // The preamble N-1 M110 and the six lines left after stripping.
-    assert_eq!(host.sent.len(), 7);
+    // Comments and blank lines stripped: 18 lines, after printcore's
+    // N-1 M110 preamble, each numbered and acknowledged once, no resend.
+    assert_eq!(host.sent.len(), 19);
     assert_eq!(host.sent[0].text, with_checksum("N-1 M110"));
-    assert_eq!(host.sent[1].text, with_checksum("N0 G90"));
-    assert_eq!(host.sent[6].text, with_checksum("N5 M400"));
-    assert_eq!(host.lines_acknowledged(), 6);
-    assert!(host.resends.is_empty());
-    assert!(host.sent.iter().all(|s| s.ok_reply.is_some()));
+    assert_eq!(host.sent[1].text, with_checksum("N0 M115"));
+    assert_eq!(host.sent[18].text, with_checksum("N17 M400"));
+    assert_eq!(host.lines_acknowledged(), 18);
+    assert_eq!(host.oks, 19);
+    assert!(host.resends.is_empty(), "{:?}", host.transcript());
+    assert!(
+        !host.replies.iter().any(|r| r.text.starts_with("Error")),
+        "{:?}",
+        host.transcript()
+    );
+    let texts = host.reply_texts();
+    assert!(texts.iter().any(|t| t.starts_with("ok T:")));
+    assert!(texts
+        .iter()
+        .any(|t| t.starts_with("X:") && t.contains(" Count X:")));
+    // M106 S128 reached the fan pin.
+    board.run_for_ms(150.0);
+    let fan = board.thermal_history().last().unwrap().fan_duty;
+    assert!((fan - 129.0 / 256.0).abs() < 0.01, "{fan}");
 }
 
 #[test]
