@@ -1,6 +1,112 @@
-//! Temperatures and heaters.
+//! Temperatures and heaters: thermistors, PID/bang-bang control, SSR
+//! time-proportioning, relay auto-tune, and the protections.
+//!
+//! Integer only (no float anywhere in this module), no allocation, nothing
+//! that runs in an interrupt except [`SampleAverager::push`].
+//!
+//! | module | what |
+//! |---|---|
+//! | [`thermistor`] | build-time β tables (54 non-uniform rows, ≤ 0.1 °C from 0 to 300 °C), [`SampleAverager`], open/short thresholds |
+//! | [`pid`] | [`Gains`] in Marlin's units (× 10⁴), the fixed-point PID (conditional integration, derivative on the measurement), bang-bang |
+//! | [`output`] | [`OutputMode`]: hardware PWM duty, or [`SlowPwm`] time-proportioning for SSRs (200 ms, slots ≥ 10 ms) |
+//! | [`autotune`] | `M303` relay auto-tune (Åström–Hägglund, Ziegler–Nichols), [`relay_gains`] |
+//! | [`guard`] | [`HeaterGuard`]: sensor open/short, MAXTEMP/MINTEMP, thermal runaway, heating failed; [`ColdExtrusionGuard`] (`M302`) |
+//! | [`channel`] | [`HeaterChannel`]: one heater, reading → guard → law → duty |
+//! | [`report`] | `M105` line, [`AutoReport`] (`M155`), [`TemperatureWait`] (`M109`/`M190`) |
+//!
+//! # Integration note (for the executor and the boards)
+//!
+//! **Ownership.** The executor (`Machine`) owns one [`HeaterChannel`] per
+//! heater — `HeaterChannel::new(HeaterConfig::hotend(0), Gains::MARLIN_HOTEND)`,
+//! `HeaterChannel::new(HeaterConfig::bed(), Gains::MARLIN_BED)`, for the
+//! extrusion line `HeaterConfig::barrel()` with `Gains::THESIS_BARREL` —
+//! plus a [`ColdExtrusionGuard`] (`HOTEND`, or `EXTRUSION_LINE` at 175 °C).
+//! It replaces `Machine::{hotend, bed}: Heater` (use
+//! [`HeaterChannel::heater`] where a [`Heater`] snapshot is wanted).
+//!
+//! **ADC interrupt (board).** One [`SampleAverager`] per thermistor
+//! (`SampleAverager::new(16)`; 10 for SPEC §4): on each conversion,
+//! `averager.push(adc_10_bit)`, then start the next channel. Nothing else.
+//!
+//! **Main loop (board → core), every `config().sample_period_ms`** (100 ms
+//! for hot end and bed, 1000 ms for the barrel):
+//! ```text
+//! let reading = critical_section(|| averager.take());        // Option<Oversampled>
+//! if let Some(reading) = reading {
+//!     if let Some(fault) = channel.on_sample(reading) {       // once, when it latches
+//!         fault.write(channel.id(), out)?;                    // "Error:Thermal Runaway, system stopped! Heater_ID: 0"
+//!         machine.kill(out)?;                                 // "Error:Printer halted. kill() called!", stop motion,
+//!     }                                                       //  every heater .turn_off()
+//! }
+//! ```
+//! A missing reading (no `take()` for several periods) is the board's
+//! problem to treat as a fault; the watchdog covers a hung loop.
+//!
+//! **Outputs (board), every loop pass:** `HardwarePwm` →
+//! `pwm::set(pin, channel.duty())` (0 while faulted or off).
+//! `TimeProportioning(t)` → `pin.set(slow.level(&t, now_ms, channel.duty()))`
+//! with one [`SlowPwm`] per SSR heater, called at least every millisecond
+//! (or from the 1 kHz tick); on halt `slow.stop()` and the pin low. When
+//! the machine is halted the board forces every heater pin low anyway.
+//!
+//! **G-code (executor):**
+//! - `M104 S<°C>` / `M140 S<°C>`: `channel.set_target(Celsius)` → `Ok(applied)`
+//!   (clamped to `max_c − margin`, Marlin's behaviour) or `Err(fault)` when
+//!   latched (refuse with the fault's line).
+//! - `M109 S|R<°C>` / `M190 S|R`: set the target, then
+//!   `TemperatureWait::new(WaitConfig::HOTEND|BED, target, r_given, now)`
+//!   and `poll(now, channel.measured())` every loop: `Waiting(w)` → once a
+//!   second print the `M105` line without `\n` plus ` W:<w>` / ` W:?`
+//!   (Marlin), `Reached`/`CoolingStalled` → `ok`, `TimedOut` → an
+//!   `Error:` line and `ok`. `M108` ends the wait.
+//! - `M105`: `ok ` then [`write_temperatures`]`(&hotend, Some(&bed), out)`.
+//! - `M155 S<n>`: [`AutoReport::set_interval`]; every loop
+//!   `if auto.due(now) { write_temperatures(..) }`.
+//! - `M301 P I D` (E0): `Gains::new(p.to_scaled(4), i.to_scaled(4), d.to_scaled(4))`
+//!   (missing letters keep `channel.gains()`'s values) → `set_gains`;
+//!   bare `M301` / `M503`: `echo:` + [`Gains::write_m301`]. Gains are
+//!   Marlin's units (Ki per second, Kd in seconds) whatever the sample
+//!   period: the law converts with it. Save them in the settings as the
+//!   three `u32` of [`Gains`].
+//! - `M303 E<n> S<°C> C<cycles> U<0|1>`: `let mut tune = Autotune::new(
+//!   TuneConfig { cycles, ..TuneConfig::new(target, config.sample_period_ms) })`
+//!   (bed: `E-1`), print `PID Autotune start`, `channel.start_tuning(&tune)`,
+//!   then each sample `channel.on_tuning_sample(reading, &mut tune)` in place
+//!   of `on_sample`: `Cycle(report)` → `report.write(out)`;
+//!   `Done(result)` → `result.write_finished(channel.id(), out)`, and on
+//!   `U1` `channel.set_gains(result.gains)`; `Failed(e)` → `e.write(out)`;
+//!   `Fault(f)` → as for `on_sample`. The executor keeps answering
+//!   `busy: processing` meanwhile (Marlin blocks on M303 too).
+//! - `M302 [S<°C>] [P<0|1>]`: `cold.m302(s, p)`; `true` → `cold.write_state(out)`.
+//!   Before an extruding move: `cold.check(hotend.measured())`; `Err` →
+//!   `ColdExtrusionGuard::write_prevented(out)` and drop the E part of the
+//!   move (Marlin). The extrusion line takes a [`ColdExtrusionReading`]
+//!   (it implements `machines::extrusion_line::ColdExtrusionCheck`).
+//! - `M112`/`kill()`: `channel.turn_off()` on every heater; `M999` (reset):
+//!   `channel.clear_fault()`.
+//!
+//! **Sizes (AVR, packed).** `HeaterChannel` 44 bytes including its 22-byte
+//! configuration (a compile-time assertion keeps it ≤ 60); `SampleAverager`
+//! 7; `SlowPwm` 7; `AutoReport` 5; `Autotune` ≈ 45 and `TemperatureWait`
+//! 22, only while `M303`/`M109` run; `ColdExtrusionGuard` 5. Tables: 324
+//! bytes of flash each, only the ones a `Thermistor` names are linked.
 
+pub mod autotune;
+pub mod channel;
+pub mod guard;
+mod math;
+pub mod output;
+pub mod pid;
+pub mod report;
 pub mod thermistor;
+
+pub use autotune::{relay_gains, Autotune, TuneConfig, TuneError, TuneResult};
+pub use channel::{HeaterChannel, HeaterConfig, TuneProgress};
+pub use guard::{ColdExtrusionGuard, ColdExtrusionReading, GuardConfig, HeaterGuard, ThermalFault};
+pub use output::{OutputMode, SlowPwm, TimeProportioning};
+pub use pid::{Control, Gains};
+pub use report::{write_temperatures, AutoReport, TemperatureWait, WaitConfig, WaitStatus};
+pub use thermistor::{Oversampled, SampleAverager, Thermistor};
 
 /// A temperature in hundredths of a degree Celsius (`21050` is 210.50 °C):
 /// exact decimal printing, and integer arithmetic on every board.
@@ -16,6 +122,26 @@ impl Celsius {
 impl ufmt::uDisplay for Celsius {
     fn fmt<W: ufmt::uWrite + ?Sized>(&self, f: &mut ufmt::Formatter<'_, W>) -> Result<(), W::Error> {
         crate::reply::write_fixed(f, self.0, 2)
+    }
+}
+
+/// Which heater, as Marlin names it in messages (`Heater_ID: 0`,
+/// `Heater_ID: bed`) and in `M303 E` (`E-1` is the bed, `E-2` the chamber).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HeaterId {
+    /// Hot end (or the extrusion line's barrel) number n.
+    Hotend(u8),
+    Bed,
+    Chamber,
+}
+
+impl ufmt::uDisplay for HeaterId {
+    fn fmt<W: ufmt::uWrite + ?Sized>(&self, f: &mut ufmt::Formatter<'_, W>) -> Result<(), W::Error> {
+        match self {
+            Self::Hotend(n) => ufmt::uwrite!(f, "{}", n),
+            Self::Bed => f.write_str("bed"),
+            Self::Chamber => f.write_str("chamber"),
+        }
     }
 }
 

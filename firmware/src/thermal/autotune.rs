@@ -1,0 +1,457 @@
+//! Relay auto-tune (`M303`): Åström–Hägglund with the Ziegler–Nichols
+//! rules of SPEC §5, integer only.
+//!
+//! The heater is driven like a relay around the target: `bias + d` while
+//! below `target − band`, `bias − d` once above `target + band` (the noise
+//! band keeps sensor noise from chattering the relay). A heater heats
+//! faster than it cools, so, like Marlin, every cycle moves the bias by
+//! `d·(t_high − t_low)/(t_high + t_low)` (kept within 20..max−20) and sets
+//! `d` to the distance from the bias to the nearer end of the range: the
+//! oscillation becomes symmetric.
+//!
+//! Each cycle (from one switch to heating to the next) measures
+//! `a = (max − min)/2` of the temperature — the peak after switching off
+//! and the trough after switching on, as Marlin does — and `Pu`. From the
+//! third cycle on, the result is computed; the experiment ends when two
+//! successive cycles agree within 5 % in both `a` and `Pu`, or after
+//! `cycles` cycles (Marlin's `C`, default 5) with the last cycle's result
+//! (`converged: false`). It fails if the temperature overshoots the target
+//! by more than 30 °C (Marlin's `MAX_OVERSHOOT_PID_AUTOTUNE`) or a half-cycle
+//! takes longer than the timeout (Marlin's 20 min).
+//!
+//! Gains (SPEC §5): Ku = 4d/(πa), Kp = 0.6·Ku, Ki = 1.2·Ku/Pu,
+//! Kd = 0.075·Ku·Pu, with d in duty counts, a in °C and Pu in s, so they
+//! come out in Marlin's units ([`Gains`]). [`relay_gains`] computes them
+//! with 64-bit integers and π ≈ 104348/33215 (3·10⁻¹⁰).
+
+use super::math::{div_round, mul_u64, saturating_mul, wide_mul};
+use super::pid::{Gain, Gains};
+use super::{Celsius, HeaterId};
+
+/// Ku and the gains from one relay experiment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RelayGains {
+    /// Ku × 10⁴.
+    pub ku: u32,
+    pub gains: Gains,
+}
+
+/// SPEC §5's rules for relay amplitude `d` (duty counts), oscillation
+/// amplitude `a` (hundredths of °C) and period `Pu` (ms). `None` when `a`
+/// or `Pu` is zero or a gain does not fit [`Gains::MAX`].
+pub fn relay_gains(relay_amplitude: u16, oscillation: Celsius, period_ms: u32) -> Option<RelayGains> {
+    let d = u32::from(relay_amplitude);
+    let a = u32::try_from(oscillation.0).ok().filter(|a| *a > 0)?;
+    if period_ms == 0 {
+        return None;
+    }
+    // Ku·10⁴ = 4d·10⁴·100/(π·a_centi) = 10⁶·d·33215/(26087·a_centi), with
+    // π = 4·26087/33215.
+    let pi_a = wide_mul(26_087, a);
+    let ku_numerator = wide_mul(1_000_000 * d.min(4000), 33_215);
+    let fit = |value: u64| u32::try_from(value).ok().filter(|v| *v <= Gains::MAX);
+    let ku = fit(div_round(ku_numerator, pi_a))?;
+    let kp = fit(div_round(wide_mul(600_000 * d.min(4000), 33_215), pi_a))?;
+    // Ki·10⁴ = 1.2·Ku·1000/Pu_ms.
+    let ki = fit(div_round(mul_u64(wide_mul(1_200_000 * d.min(3000), 33_215), 1000), mul_u64(pi_a, period_ms)))?;
+    // Kd·10⁴ = 0.075·Ku·Pu_ms/1000 = 75·d·33215·Pu_ms/(26087·a_centi).
+    let kd = fit(div_round(mul_u64(wide_mul(75 * d, 33_215), period_ms), pi_a))?;
+    Some(RelayGains { ku, gains: Gains { kp, ki, kd } })
+}
+
+/// Settings of one `M303` run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TuneConfig {
+    /// `S`: the temperature to oscillate around.
+    pub target: Celsius,
+    /// `C`: most cycles (at least 3).
+    pub cycles: u8,
+    /// The heater's maximum duty (255, or Marlin's `MAX_BED_POWER`).
+    pub max_power: u8,
+    /// Relay noise band, hundredths of °C either side of the target.
+    pub noise_band: i16,
+    /// The heater's sample period.
+    pub sample_period_ms: u16,
+    /// Longest half-cycle (and the initial heat-up), seconds.
+    pub timeout_s: u16,
+}
+
+impl TuneConfig {
+    /// Marlin-like defaults: 5 cycles, a 0.3 °C band, 20 min timeout.
+    pub const fn new(target: Celsius, sample_period_ms: u16) -> Self {
+        Self { target, cycles: 5, max_power: 255, noise_band: 30, sample_period_ms, timeout_s: 1200 }
+    }
+}
+
+/// Why a tune stopped without a result.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TuneError {
+    /// More than 30 °C above the target.
+    TemperatureTooHigh,
+    /// No relay switch within the timeout.
+    Timeout,
+}
+
+impl TuneError {
+    /// `PID Autotune failed! Temperature too high` / `... timeout` (Marlin).
+    pub fn write<W: ufmt::uWrite + ?Sized>(self, out: &mut W) -> Result<(), W::Error> {
+        out.write_str(match self {
+            Self::TemperatureTooHigh => "PID Autotune failed! Temperature too high\n",
+            Self::Timeout => "PID Autotune failed! timeout\n",
+        })
+    }
+}
+
+/// The measurement of one completed cycle (Marlin prints it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CycleReport {
+    pub bias: u8,
+    pub d: u8,
+    pub min: Celsius,
+    pub max: Celsius,
+    /// From the third cycle on.
+    pub result: Option<TuneResult>,
+}
+
+impl CycleReport {
+    /// Marlin's lines: ` bias: 92 d: 92 min: 196.56 max: 203.75` and, with
+    /// a result, ` Ku: 33.18 Tu: 21.34` / ` Classic PID ` /
+    /// ` Kp: 19.91 Ki: 1.87 Kd: 53.00`.
+    pub fn write<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        ufmt::uwrite!(out, " bias: {} d: {} min: {} max: {}", self.bias, self.d, self.min, self.max)?;
+        match &self.result {
+            Some(result) => {
+                let tu = crate::reply::Fixed { mantissa: (result.period_ms / 10) as i32, digits: 2 };
+                ufmt::uwrite!(out, " Ku: {} Tu: {}\n Classic PID \n", Gain(result.ku), tu)?;
+                ufmt::uwrite!(out, " Kp: {} Ki: {} Kd: {}\n", Gain(result.gains.kp), Gain(result.gains.ki), Gain(result.gains.kd))
+            }
+            None => out.write_str("\n"),
+        }
+    }
+}
+
+/// The outcome of a tune.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TuneResult {
+    /// d, duty counts.
+    pub relay_amplitude: u8,
+    /// a, hundredths of °C.
+    pub oscillation: Celsius,
+    /// Pu, ms.
+    pub period_ms: u32,
+    /// Ku × 10⁴.
+    pub ku: u32,
+    pub gains: Gains,
+    /// Two successive cycles agreed within 5 %.
+    pub converged: bool,
+}
+
+impl TuneResult {
+    /// Marlin's closing block:
+    /// ```text
+    /// PID Autotune finished! Put the last Kp, Ki and Kd constants from below into Configuration.h
+    /// #define DEFAULT_Kp 19.91
+    /// #define DEFAULT_Ki 1.87
+    /// #define DEFAULT_Kd 53.00
+    /// ```
+    /// (`DEFAULT_bedKp`… for the bed, `DEFAULT_chamberKp`… for a chamber).
+    pub fn write_finished<W: ufmt::uWrite + ?Sized>(&self, heater: HeaterId, out: &mut W) -> Result<(), W::Error> {
+        out.write_str("PID Autotune finished! Put the last Kp, Ki and Kd constants from below into Configuration.h\n")?;
+        let prefix = match heater {
+            HeaterId::Hotend(_) => "",
+            HeaterId::Bed => "bed",
+            HeaterId::Chamber => "chamber",
+        };
+        let g = &self.gains;
+        ufmt::uwrite!(out, "#define DEFAULT_{}Kp {}\n#define DEFAULT_{}Ki {}\n", prefix, Gain(g.kp), prefix, Gain(g.ki))?;
+        ufmt::uwrite!(out, "#define DEFAULT_{}Kd {}\n", prefix, Gain(g.kd))
+    }
+}
+
+/// What to do after one sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TuneStep {
+    /// Drive the heater with this duty.
+    Heat(u8),
+    /// A cycle completed (print it); drive the heater with this duty.
+    Cycle(CycleReport, u8),
+    /// Finished: heater off; apply the gains on `U1`.
+    Done(TuneResult),
+    /// Failed: heater off.
+    Failed(TuneError),
+}
+
+/// The relay experiment: ≈40 bytes, alive only during `M303`.
+#[derive(Clone, Copy, Debug)]
+pub struct Autotune {
+    config: TuneConfig,
+    heating: bool,
+    cycles: u8,
+    bias: i16,
+    d: i16,
+    /// Samples since the start.
+    now: u32,
+    /// Sample of the last switch to heating / to cooling.
+    heat_started: u32,
+    cool_started: u32,
+    t_high: u32,
+    max: Celsius,
+    min: Celsius,
+    previous: Option<(i32, u32)>,
+}
+
+impl Autotune {
+    pub fn new(config: TuneConfig) -> Self {
+        let half = i16::from(config.max_power / 2);
+        Self {
+            config,
+            heating: true,
+            cycles: 0,
+            bias: half,
+            d: half,
+            now: 0,
+            heat_started: 0,
+            cool_started: 0,
+            t_high: 0,
+            max: config.target,
+            min: config.target,
+            previous: None,
+        }
+    }
+
+    pub fn config(&self) -> &TuneConfig {
+        &self.config
+    }
+
+    fn power(&self) -> u8 {
+        let power = if self.heating { self.bias + self.d } else { self.bias - self.d };
+        power.clamp(0, i16::from(self.config.max_power)) as u8
+    }
+
+    fn samples_to_ms(&self, samples: u32) -> u32 {
+        u32::try_from(wide_mul(samples, u32::from(self.config.sample_period_ms))).unwrap_or(u32::MAX)
+    }
+
+    /// One sample with the measured temperature.
+    pub fn on_sample(&mut self, measured: Celsius) -> TuneStep {
+        self.now = self.now.wrapping_add(1);
+        let target = self.config.target.0;
+        if measured.0 > target.saturating_add(3000) {
+            return TuneStep::Failed(TuneError::TemperatureTooHigh);
+        }
+        let last_switch = if self.heating { self.heat_started } else { self.cool_started };
+        let timeout = u32::from(self.config.timeout_s) * 1000 / u32::from(self.config.sample_period_ms.max(1));
+        if self.now.wrapping_sub(last_switch) > timeout {
+            return TuneStep::Failed(TuneError::Timeout);
+        }
+        self.max = self.max.max(measured);
+        self.min = self.min.min(measured);
+        let band = i32::from(self.config.noise_band.max(0));
+
+        if self.heating && measured.0 > target.saturating_add(band) {
+            self.heating = false;
+            self.cool_started = self.now;
+            self.t_high = self.now.wrapping_sub(self.heat_started);
+            self.max = measured;
+        } else if !self.heating && measured.0 < target.saturating_sub(band) {
+            self.heating = true;
+            let t_low = self.now.wrapping_sub(self.cool_started);
+            self.heat_started = self.now;
+            let step = if self.cycles > 0 { Some(self.cycle_completed(t_low)) } else { None };
+            self.cycles = self.cycles.saturating_add(1);
+            self.min = measured;
+            match step {
+                Some(Ok(report)) => return TuneStep::Cycle(report, self.power()),
+                Some(Err(done)) => return done,
+                None => {}
+            }
+        }
+        TuneStep::Heat(self.power())
+    }
+
+    /// End of a cycle: adapt the bias, measure, maybe finish.
+    fn cycle_completed(&mut self, t_low: u32) -> Result<CycleReport, TuneStep> {
+        let (t_high, d) = (self.t_high, i32::from(self.d));
+        let max_power = i32::from(self.config.max_power);
+        let samples = |t: u32| t.min(i32::MAX as u32 / 2) as i32;
+        let total = (samples(t_high) + samples(t_low)).max(1);
+        let shift = saturating_mul(d, samples(t_high) - samples(t_low)) / total;
+        let bias = (i32::from(self.bias) + shift).clamp(20.min(max_power / 2), (max_power - 20).max(max_power / 2));
+        let new_d = if bias > max_power / 2 { max_power - 1 - bias } else { bias };
+        let mut report = CycleReport { bias: bias as u8, d: new_d as u8, min: self.min, max: self.max, result: None };
+        // The result of the cycle just measured uses the d it ran with.
+        let measured_d = self.d as u16;
+        self.bias = bias as i16;
+        self.d = new_d as i16;
+        if self.cycles <= 2 {
+            return Ok(report);
+        }
+        let amplitude = self.max.0.saturating_sub(self.min.0) / 2;
+        let period_ms = self.samples_to_ms(t_high + t_low);
+        let Some(gains) = relay_gains(measured_d, Celsius(amplitude), period_ms) else {
+            return Ok(report);
+        };
+        let converged = match self.previous {
+            Some((a, p)) => within_5_percent(amplitude as u32, a as u32) && within_5_percent(period_ms, p),
+            None => false,
+        };
+        self.previous = Some((amplitude, period_ms));
+        let result = TuneResult {
+            relay_amplitude: measured_d as u8,
+            oscillation: Celsius(amplitude),
+            period_ms,
+            ku: gains.ku,
+            gains: gains.gains,
+            converged,
+        };
+        report.result = Some(result);
+        if converged || self.cycles >= self.config.cycles.max(3) {
+            return Err(TuneStep::Done(result));
+        }
+        Ok(report)
+    }
+}
+
+/// |a − b| ≤ 5 % of the larger, without division.
+fn within_5_percent(a: u32, b: u32) -> bool {
+    let difference = a.abs_diff(b);
+    let larger = a.max(b);
+    // 20·difference ≤ larger, compared without overflowing.
+    difference <= larger / 20
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reply::test_support::Text;
+
+    #[test]
+    fn spec_section_5_vector_d127_a10_pu0_2() {
+        let g = relay_gains(127, Celsius(1000), 200).unwrap();
+        assert_eq!(g.ku, 161_701); // Ku 16.1701
+        assert_eq!(g.gains, Gains { kp: 97_021, ki: 970_209, kd: 2_426 }); // 9.7021, 97.0209, 0.2426
+    }
+
+    #[test]
+    fn spec_section_5_vector_d100_a50_pu1() {
+        let g = relay_gains(100, Celsius(5000), 1000).unwrap();
+        assert_eq!(g.ku, 25_465); // Ku 2.5465
+        assert_eq!(g.gains, Gains { kp: 15_279, ki: 30_558, kd: 1_910 }); // 1.5279, 3.0558, 0.1910
+    }
+
+    #[test]
+    fn relay_gains_refuse_a_zero_amplitude_or_period() {
+        assert_eq!(relay_gains(127, Celsius(0), 200), None);
+        assert_eq!(relay_gains(127, Celsius(-5), 200), None);
+        assert_eq!(relay_gains(127, Celsius(1000), 0), None);
+    }
+
+    #[test]
+    fn typical_hot_end_relay_gives_marlin_like_gains() {
+        // d 127, a 3.6 °C, Pu 21.34 s: Ku 44.9171, Kp 26.9502, Ki 2.5258,
+        // Kd 71.8898 (f64: 44.917062, 26.950237, 2.525795, 71.889757).
+        let g = relay_gains(127, Celsius(360), 21_340).unwrap();
+        assert_eq!(g.ku, 449_171);
+        assert_eq!(g.gains, Gains { kp: 269_502, ki: 25_258, kd: 718_898 });
+    }
+
+    /// A first-order plant with dead time, sampled every second:
+    /// heats `gain` °C per count at steady state.
+    fn relay_on_plant(config: TuneConfig) -> (TuneStep, std::vec::Vec<CycleReport>) {
+        let (gain, tau, dead) = (1.8f64, 120.0f64, 4usize);
+        let mut temperature = 25.0f64;
+        let mut pipeline = std::collections::VecDeque::from(std::vec![0u8; dead]);
+        let mut tune = Autotune::new(config);
+        let mut cycles = std::vec::Vec::new();
+        for _ in 0..100_000 {
+            let step = tune.on_sample(Celsius((temperature * 100.0).round() as i32));
+            let duty = match step {
+                TuneStep::Heat(duty) => duty,
+                TuneStep::Cycle(report, duty) => {
+                    cycles.push(report);
+                    duty
+                }
+                other => return (other, cycles),
+            };
+            pipeline.push_back(duty);
+            let applied = f64::from(pipeline.pop_front().unwrap());
+            temperature += (25.0 + gain * applied - temperature) / tau;
+        }
+        panic!("no result");
+    }
+
+    #[test]
+    fn relay_on_a_plant_converges_with_a_symmetric_oscillation() {
+        let (step, cycles) = relay_on_plant(TuneConfig { sample_period_ms: 1000, ..TuneConfig::new(Celsius(20_000), 1000) });
+        let TuneStep::Done(result) = step else { panic!("{step:?}") };
+        assert!(result.converged, "{result:?}");
+        // Steady duty for 200 °C is (200 − 25)/1.8 = 97: the bias moves there.
+        let last = cycles.last().unwrap();
+        assert!((90..=105).contains(&last.bias), "{cycles:?}");
+        assert!(result.gains.kp > 0 && result.gains.ki > 0 && result.gains.kd > 0);
+        // The oscillation straddles the target.
+        assert!(last.min < Celsius(20_000) && last.max > Celsius(20_000));
+    }
+
+    #[test]
+    fn relay_stops_after_c_cycles_without_agreement() {
+        // With C = 3, the third cycle is the last whatever it measured.
+        let (step, cycles) = relay_on_plant(TuneConfig { cycles: 3, ..TuneConfig::new(Celsius(20_000), 1000) });
+        assert!(matches!(step, TuneStep::Done(_)), "{step:?}");
+        assert_eq!(cycles.len(), 2); // cycles 1 and 2 printed; the third finished
+    }
+
+    #[test]
+    fn relay_fails_when_30_degrees_above_target() {
+        let mut tune = Autotune::new(TuneConfig::new(Celsius(20_000), 100));
+        assert_eq!(tune.on_sample(Celsius(23_000)), TuneStep::Heat(0));
+        assert_eq!(tune.on_sample(Celsius(23_001)), TuneStep::Failed(TuneError::TemperatureTooHigh));
+    }
+
+    #[test]
+    fn relay_fails_when_the_heat_up_exceeds_the_timeout() {
+        let mut tune = Autotune::new(TuneConfig { timeout_s: 10, ..TuneConfig::new(Celsius(20_000), 100) });
+        for _ in 0..100 {
+            assert_eq!(tune.on_sample(Celsius(5_000)), TuneStep::Heat(254));
+        }
+        assert_eq!(tune.on_sample(Celsius(5_000)), TuneStep::Failed(TuneError::Timeout));
+    }
+
+    #[test]
+    fn relay_switches_outside_the_noise_band_only() {
+        let mut tune = Autotune::new(TuneConfig::new(Celsius(20_000), 100)); // band 0.3 °C
+        assert_eq!(tune.on_sample(Celsius(20_030)), TuneStep::Heat(254));
+        assert_eq!(tune.on_sample(Celsius(20_031)), TuneStep::Heat(0));
+        assert_eq!(tune.on_sample(Celsius(19_970)), TuneStep::Heat(0));
+        assert_eq!(tune.on_sample(Celsius(19_969)), TuneStep::Heat(254));
+    }
+
+    #[test]
+    fn reports_print_like_marlin() {
+        let result = TuneResult {
+            relay_amplitude: 127,
+            oscillation: Celsius(360),
+            period_ms: 21_340,
+            ku: 449_171,
+            gains: Gains { kp: 269_502, ki: 25_258, kd: 718_898 },
+            converged: true,
+        };
+        let report = CycleReport { bias: 92, d: 92, min: Celsius(19_656), max: Celsius(20_375), result: Some(result) };
+        let mut out = Text::default();
+        report.write(&mut out).unwrap();
+        CycleReport { result: None, ..report }.write(&mut out).unwrap();
+        result.write_finished(HeaterId::Hotend(0), &mut out).unwrap();
+        result.write_finished(HeaterId::Bed, &mut out).unwrap();
+        TuneError::Timeout.write(&mut out).unwrap();
+        assert_eq!(
+            out.0,
+            " bias: 92 d: 92 min: 196.56 max: 203.75 Ku: 44.9171 Tu: 21.34\n Classic PID \n Kp: 26.9502 Ki: 2.5258 Kd: 71.8898\n\
+             \x20bias: 92 d: 92 min: 196.56 max: 203.75\n\
+             PID Autotune finished! Put the last Kp, Ki and Kd constants from below into Configuration.h\n\
+             #define DEFAULT_Kp 26.9502\n#define DEFAULT_Ki 2.5258\n#define DEFAULT_Kd 71.8898\n\
+             PID Autotune finished! Put the last Kp, Ki and Kd constants from below into Configuration.h\n\
+             #define DEFAULT_bedKp 26.9502\n#define DEFAULT_bedKi 2.5258\n#define DEFAULT_bedKd 71.8898\n\
+             PID Autotune failed! timeout\n"
+        );
+    }
+}
