@@ -7,3 +7,4 @@ pub mod encoder_trace;
 pub mod steps;
 pub mod extrusion_plant;
 pub mod powder_bed_plant;
+pub mod thermal_plant;

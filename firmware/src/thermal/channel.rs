@@ -24,8 +24,12 @@ use crate::progmem::Flash;
 pub struct HeaterConfig {
     pub id: HeaterId,
     pub sensor: Thermistor,
-    /// The control law runs once per this period.
+    /// A reading is judged (and the derivative sampled) once per this
+    /// period: 100 ms keeps sensor faults well within 1 s.
     pub sample_period_ms: u16,
+    /// The control law runs every this many samples (1: every sample; the
+    /// thesis barrel PI runs at T = 1 s on 100 ms samples: 10).
+    pub control_every: u8,
     /// Largest duty (Marlin's `PID_MAX` / `MAX_BED_POWER`).
     pub max_power: u8,
     pub control: Control,
@@ -41,6 +45,7 @@ impl HeaterConfig {
             id: HeaterId::Hotend(index),
             sensor: Thermistor::Ntc100kB3950Pullup4k7,
             sample_period_ms: 100,
+            control_every: 1,
             max_power: 255,
             control: Control::PID,
             output: OutputMode::HardwarePwm,
@@ -55,6 +60,7 @@ impl HeaterConfig {
             id: HeaterId::Bed,
             sensor: Thermistor::Ntc100kB3950Pullup4k7,
             sample_period_ms: 100,
+            control_every: 1,
             max_power: 255,
             control: Control::PID,
             output: OutputMode::HardwarePwm,
@@ -62,18 +68,25 @@ impl HeaterConfig {
         }
     }
 
-    /// SPEC §4's barrel: 4.8 kΩ thermistor, the thesis PI at T = 1 s
-    /// (no functional range), SSR time-proportioning (200 ms / 10 ms).
+    /// SPEC §4's barrel: 4.8 kΩ thermistor read every 100 ms, the thesis
+    /// PI at T = 1 s (every 10th sample, no functional range), SSR
+    /// time-proportioning (200 ms / 10 ms).
     pub const fn barrel() -> Self {
         Self {
             id: HeaterId::Hotend(0),
             sensor: Thermistor::Ntc100kB3950Pullup4k8,
-            sample_period_ms: 1000,
+            sample_period_ms: 100,
+            control_every: 10,
             max_power: 255,
             control: Control::PLAIN_PID,
             output: OutputMode::TimeProportioning(TimeProportioning::SSR),
             guard: GuardConfig::BARREL,
         }
+    }
+
+    /// The control law's period T, ms.
+    pub fn control_period_ms(&self) -> u16 {
+        self.sample_period_ms.saturating_mul(u16::from(self.control_every.max(1)))
     }
 
     /// The highest target [`HeaterChannel::set_target`] accepts.
@@ -115,7 +128,7 @@ pub enum TuneProgress {
     Fault(ThermalFault),
 }
 
-/// One heater's state: 43 bytes of RAM on the AVR (checked at compile
+/// One heater's state: 44 bytes of RAM on the AVR (checked at compile
 /// time), its configuration in flash.
 #[derive(Clone, Copy)]
 pub struct HeaterChannel {
@@ -128,6 +141,8 @@ pub struct HeaterChannel {
     duty: u8,
     /// `measured` holds a real reading (the derivative needs a previous one).
     has_reading: bool,
+    /// Samples until the law runs again.
+    countdown: u8,
 }
 
 #[cfg(target_arch = "avr")]
@@ -156,6 +171,7 @@ impl HeaterChannel {
             target: Celsius(0),
             duty: 0,
             has_reading: false,
+            countdown: 0,
         }
     }
 
@@ -219,7 +235,8 @@ impl HeaterChannel {
         let target = Celsius(target.0.clamp(0, config.max_target().0.max(0)));
         if target != self.target {
             self.target = target;
-            self.guard.on_target(&config.guard, config.sample_period_ms, target, self.measured);
+            let measured = if self.has_reading { Some(self.measured) } else { None };
+            self.guard.on_target(&config.guard, config.sample_period_ms, target, measured);
         }
         if target.0 == 0 {
             self.duty = 0;
@@ -283,23 +300,25 @@ impl HeaterChannel {
             }
         };
         let previous = self.accept(measured);
-        self.duty = if self.target.0 <= 0 {
+        if self.target.0 <= 0 {
             self.pid.reset();
-            0
-        } else {
-            match c.control {
-                Control::Pid { functional_range_c, derivative_filter_shift } => self.pid.update(
-                    &self.gains,
-                    functional_range_c,
-                    derivative_filter_shift,
-                    c.sample_period_ms,
-                    c.max_power,
-                    self.target,
-                    measured,
-                    previous,
-                ),
-                Control::BangBang { hysteresis_tenths } => bang_bang(hysteresis_tenths, c.max_power, self.target, measured, self.duty > 0),
+            self.duty = 0;
+            self.countdown = 0;
+            return None;
+        }
+        if let Control::Pid { derivative_filter_shift, .. } = c.control {
+            self.pid.observe(&self.gains, derivative_filter_shift, c.sample_period_ms, measured, previous);
+        }
+        if self.countdown > 0 {
+            self.countdown -= 1;
+            return None;
+        }
+        self.countdown = c.control_every.max(1) - 1;
+        self.duty = match c.control {
+            Control::Pid { functional_range_c, .. } => {
+                self.pid.control(&self.gains, functional_range_c, c.control_period_ms(), c.max_power, self.target, measured)
             }
+            Control::BangBang { hysteresis_tenths } => bang_bang(hysteresis_tenths, c.max_power, self.target, measured, self.duty > 0),
         };
         None
     }
@@ -484,9 +503,29 @@ mod tests {
     }
 
     #[test]
+    fn the_barrel_law_runs_every_tenth_sample_and_holds_its_duty_between() {
+        fn reading48(degrees: f64) -> Oversampled {
+            let r = 100_000.0 * (3950.0 * (1.0 / (degrees + 273.15) - 1.0 / 298.15)).exp();
+            Oversampled((1023.0 * r / (r + 4800.0) * 16.0).round() as u16)
+        }
+        let mut barrel = HeaterChannel::new(&BARREL, Gains::THESIS_BARREL);
+        barrel.on_sample(reading48(200.0));
+        barrel.set_target(Celsius(21_000)).unwrap();
+        barrel.on_sample(reading48(200.0));
+        // Kp 6.12 × 10 °C = 61.2 (+ Ki 0.0204 × 10 °C × 1 s = 0.2) → 61.
+        assert_eq!(barrel.duty(), 61);
+        for _ in 0..9 {
+            barrel.on_sample(reading48(209.0));
+            assert_eq!(barrel.duty(), 61);
+        }
+        barrel.on_sample(reading48(209.0));
+        assert!((6..=8).contains(&barrel.duty()), "{}", barrel.duty());
+    }
+
+    #[test]
     fn stock_configurations_read_back_from_flash() {
         assert_eq!(HOTEND_0.load(), HeaterConfig::hotend(0));
-        assert_eq!(BARREL.load().sample_period_ms, 1000);
+        assert_eq!(BARREL.load().control_period_ms(), 1000);
         assert_eq!(HeaterChannel::new(&BED, Gains::MARLIN_BED).id(), HeaterId::Bed);
         assert_eq!(HeaterConfig::hotend(0).max_target(), Celsius(26_000));
     }
