@@ -312,7 +312,7 @@ impl ThermalRig {
                 let progress = self.channel.on_tuning_sample(reading, &mut tune);
                 self.record();
                 match progress {
-                    TuneProgress::Running | TuneProgress::Cycle(_) => {}
+                    TuneProgress::Running | TuneProgress::Cycle => {}
                     TuneProgress::Done(result) => return Ok(result),
                     TuneProgress::Failed(error) => return Err(TuneOutcome::Failed(error)),
                     TuneProgress::Fault(fault) => return Err(TuneOutcome::Fault(fault)),

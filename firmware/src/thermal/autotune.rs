@@ -22,11 +22,13 @@
 //! Gains (SPEC §5): Ku = 4d/(πa), Kp = 0.6·Ku, Ki = 1.2·Ku/Pu,
 //! Kd = 0.075·Ku·Pu, with d in duty counts, a in °C and Pu in s, so they
 //! come out in Marlin's units ([`Gains`]). [`relay_gains`] computes them
-//! with 64-bit integers and π ≈ 104348/33215 (3·10⁻¹⁰).
+//! with 32-bit operations on 64-bit products (`math::mul_div_round`) and
+//! π ≈ 104348/33215 (3·10⁻¹⁰): Ku in 1/256 of 10⁻⁴ first, the rest from it.
 
-use super::math::{div_round, mul_u64, saturating_mul, wide_mul};
+use super::math::{mul_div_round, saturating_mul};
 use super::pid::{Gain, Gains};
 use super::{Celsius, HeaterId};
+use crate::flash_str;
 
 /// Ku and the gains from one relay experiment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -38,25 +40,26 @@ pub struct RelayGains {
 
 /// SPEC §5's rules for relay amplitude `d` (duty counts), oscillation
 /// amplitude `a` (hundredths of °C) and period `Pu` (ms). `None` when `a`
-/// or `Pu` is zero or a gain does not fit [`Gains::MAX`].
-pub fn relay_gains(relay_amplitude: u16, oscillation: Celsius, period_ms: u32) -> Option<RelayGains> {
-    let d = u32::from(relay_amplitude);
-    let a = u32::try_from(oscillation.0).ok().filter(|a| *a > 0)?;
-    if period_ms == 0 {
+/// or `Pu` is zero, Ku exceeds 1677 or a gain does not fit [`Gains::MAX`].
+#[inline(never)]
+pub fn relay_gains(relay_amplitude: u8, oscillation: Celsius, period_ms: u32) -> Option<RelayGains> {
+    let a = u32::try_from(oscillation.0).ok().filter(|a| *a > 0 && *a <= u32::MAX / 104_348)?;
+    if period_ms == 0 || period_ms > u32::MAX / 256 {
         return None;
     }
-    // Ku·10⁴ = 4d·10⁴·100/(π·a_centi) = 10⁶·d·33215/(26087·a_centi), with
-    // π = 4·26087/33215.
-    let pi_a = wide_mul(26_087, a);
-    let ku_numerator = wide_mul(1_000_000 * d.min(4000), 33_215);
-    let fit = |value: u64| u32::try_from(value).ok().filter(|v| *v <= Gains::MAX);
-    let ku = fit(div_round(ku_numerator, pi_a))?;
-    let kp = fit(div_round(wide_mul(600_000 * d.min(4000), 33_215), pi_a))?;
-    // Ki·10⁴ = 1.2·Ku·1000/Pu_ms.
-    let ki = fit(div_round(mul_u64(wide_mul(1_200_000 * d.min(3000), 33_215), 1000), mul_u64(pi_a, period_ms)))?;
-    // Kd·10⁴ = 0.075·Ku·Pu_ms/1000 = 75·d·33215·Pu_ms/(26087·a_centi).
-    let kd = fit(div_round(mul_u64(wide_mul(75 * d, 33_215), period_ms), pi_a))?;
-    Some(RelayGains { ku, gains: Gains { kp, ki, kd } })
+    // (Bounds are compared, never `checked_mul`: see `math`.)
+    // Ku·10⁴·256 = 4d·10⁴·100·256/(π·a_centi), π = 104348/33215.
+    let ku256 = mul_div_round(4_000_000 * u32::from(relay_amplitude), 33_215 * 256, a * 104_348)?;
+    let gain = |m: u32, n: u32| mul_div_round(ku256, m, n).filter(|g| *g <= Gains::MAX);
+    Some(RelayGains {
+        ku: gain(1, 256)?,
+        gains: Gains {
+            // 0.6·Ku; 1.2·Ku·1000/Pu_ms; 0.075·Ku·Pu_ms/1000.
+            kp: gain(3, 5 * 256)?,
+            ki: gain(1200, period_ms * 256)?,
+            kd: gain(3 * period_ms, 40_000 * 256)?,
+        },
+    })
 }
 
 /// Settings of one `M303` run.
@@ -95,10 +98,12 @@ pub enum TuneError {
 impl TuneError {
     /// `PID Autotune failed! Temperature too high` / `... timeout` (Marlin).
     pub fn write<W: ufmt::uWrite + ?Sized>(self, out: &mut W) -> Result<(), W::Error> {
-        out.write_str(match self {
-            Self::TemperatureTooHigh => "PID Autotune failed! Temperature too high\n",
-            Self::Timeout => "PID Autotune failed! timeout\n",
-        })
+        flash_str!("PID Autotune failed! ").write_to(out)?;
+        match self {
+            Self::TemperatureTooHigh => flash_str!("Temperature too high\n"),
+            Self::Timeout => flash_str!("timeout\n"),
+        }
+        .write_to(out)
     }
 }
 
@@ -117,12 +122,14 @@ impl CycleReport {
     /// Marlin's lines: ` bias: 92 d: 92 min: 196.56 max: 203.75` and, with
     /// a result, ` Ku: 33.18 Tu: 21.34` / ` Classic PID ` /
     /// ` Kp: 19.91 Ki: 1.87 Kd: 53.00`.
+    #[inline(never)]
     pub fn write<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         ufmt::uwrite!(out, " bias: {} d: {} min: {} max: {}", self.bias, self.d, self.min, self.max)?;
         match &self.result {
             Some(result) => {
                 let tu = crate::reply::Fixed { mantissa: (result.period_ms / 10) as i32, digits: 2 };
-                ufmt::uwrite!(out, " Ku: {} Tu: {}\n Classic PID \n", Gain(result.ku), tu)?;
+                ufmt::uwrite!(out, " Ku: {} Tu: {}", Gain(result.ku), tu)?;
+                flash_str!("\n Classic PID \n").write_to(out)?;
                 ufmt::uwrite!(out, " Kp: {} Ki: {} Kd: {}\n", Gain(result.gains.kp), Gain(result.gains.ki), Gain(result.gains.kd))
             }
             None => out.write_str("\n"),
@@ -155,16 +162,19 @@ impl TuneResult {
     /// #define DEFAULT_Kd 53.00
     /// ```
     /// (`DEFAULT_bedKp`… for the bed, `DEFAULT_chamberKp`… for a chamber).
+    #[inline(never)]
     pub fn write_finished<W: ufmt::uWrite + ?Sized>(&self, heater: HeaterId, out: &mut W) -> Result<(), W::Error> {
-        out.write_str("PID Autotune finished! Put the last Kp, Ki and Kd constants from below into Configuration.h\n")?;
+        flash_str!("PID Autotune finished! Put the last Kp, Ki and Kd constants from below into Configuration.h\n").write_to(out)?;
         let prefix = match heater {
             HeaterId::Hotend(_) => "",
             HeaterId::Bed => "bed",
             HeaterId::Chamber => "chamber",
         };
-        let g = &self.gains;
-        ufmt::uwrite!(out, "#define DEFAULT_{}Kp {}\n#define DEFAULT_{}Ki {}\n", prefix, Gain(g.kp), prefix, Gain(g.ki))?;
-        ufmt::uwrite!(out, "#define DEFAULT_{}Kd {}\n", prefix, Gain(g.kd))
+        for (name, value) in [("Kp ", self.gains.kp), ("Ki ", self.gains.ki), ("Kd ", self.gains.kd)] {
+            flash_str!("#define DEFAULT_").write_to(out)?;
+            ufmt::uwrite!(out, "{}{}{}\n", prefix, name, Gain(value))?;
+        }
+        Ok(())
     }
 }
 
@@ -173,22 +183,23 @@ impl TuneResult {
 pub enum TuneStep {
     /// Drive the heater with this duty.
     Heat(u8),
-    /// A cycle completed (print it); drive the heater with this duty.
-    Cycle(CycleReport, u8),
+    /// A cycle completed (print [`Autotune::last_cycle`]); drive the
+    /// heater with this duty.
+    Cycle(u8),
     /// Finished: heater off; apply the gains on `U1`.
     Done(TuneResult),
     /// Failed: heater off.
     Failed(TuneError),
 }
 
-/// The relay experiment: ≈40 bytes, alive only during `M303`.
+/// The relay experiment: 76 bytes on the AVR, alive only during `M303`.
 #[derive(Clone, Copy, Debug)]
 pub struct Autotune {
     config: TuneConfig,
     heating: bool,
     cycles: u8,
-    bias: i16,
-    d: i16,
+    bias: u8,
+    d: u8,
     /// Samples since the start.
     now: u32,
     /// Sample of the last switch to heating / to cooling.
@@ -197,12 +208,13 @@ pub struct Autotune {
     t_high: u32,
     max: Celsius,
     min: Celsius,
-    previous: Option<(i32, u32)>,
+    /// The last completed cycle (and its result from the third on).
+    last: CycleReport,
 }
 
 impl Autotune {
     pub fn new(config: TuneConfig) -> Self {
-        let half = i16::from(config.max_power / 2);
+        let half = config.max_power / 2;
         Self {
             config,
             heating: true,
@@ -215,7 +227,7 @@ impl Autotune {
             t_high: 0,
             max: config.target,
             min: config.target,
-            previous: None,
+            last: CycleReport { bias: half, d: half, min: config.target, max: config.target, result: None },
         }
     }
 
@@ -223,16 +235,19 @@ impl Autotune {
         &self.config
     }
 
-    fn power(&self) -> u8 {
-        let power = if self.heating { self.bias + self.d } else { self.bias - self.d };
-        power.clamp(0, i16::from(self.config.max_power)) as u8
+    /// The last completed cycle, for Marlin's per-cycle lines.
+    pub fn last_cycle(&self) -> &CycleReport {
+        &self.last
     }
 
-    fn samples_to_ms(&self, samples: u32) -> u32 {
-        u32::try_from(wide_mul(samples, u32::from(self.config.sample_period_ms))).unwrap_or(u32::MAX)
+    fn power(&self) -> u8 {
+        let (bias, d) = (u16::from(self.bias), u16::from(self.d));
+        let power = if self.heating { bias + d } else { bias.saturating_sub(d) };
+        power.min(u16::from(self.config.max_power)) as u8
     }
 
     /// One sample with the measured temperature.
+    #[inline(never)]
     pub fn on_sample(&mut self, measured: Celsius) -> TuneStep {
         self.now = self.now.wrapping_add(1);
         let target = self.config.target.0;
@@ -257,58 +272,50 @@ impl Autotune {
             self.heating = true;
             let t_low = self.now.wrapping_sub(self.cool_started);
             self.heat_started = self.now;
-            let step = if self.cycles > 0 { Some(self.cycle_completed(t_low)) } else { None };
+            let first = self.cycles == 0;
             self.cycles = self.cycles.saturating_add(1);
-            self.min = measured;
-            match step {
-                Some(Ok(report)) => return TuneStep::Cycle(report, self.power()),
-                Some(Err(done)) => return done,
-                None => {}
+            if !first {
+                let done = self.cycle_completed(t_low);
+                self.min = measured;
+                if done {
+                    if let Some(result) = self.last.result {
+                        return TuneStep::Done(result);
+                    }
+                }
+                return TuneStep::Cycle(self.power());
             }
+            self.min = measured;
         }
         TuneStep::Heat(self.power())
     }
 
-    /// End of a cycle: adapt the bias, measure, maybe finish.
-    fn cycle_completed(&mut self, t_low: u32) -> Result<CycleReport, TuneStep> {
-        let (t_high, d) = (self.t_high, i32::from(self.d));
+    /// End of a cycle (`cycles` counts it): adapt the bias, measure, and
+    /// say whether the experiment is over.
+    #[inline(never)]
+    fn cycle_completed(&mut self, t_low: u32) -> bool {
         let max_power = i32::from(self.config.max_power);
-        let samples = |t: u32| t.min(i32::MAX as u32 / 2) as i32;
-        let total = (samples(t_high) + samples(t_low)).max(1);
-        let shift = saturating_mul(d, samples(t_high) - samples(t_low)) / total;
-        let bias = (i32::from(self.bias) + shift).clamp(20.min(max_power / 2), (max_power - 20).max(max_power / 2));
-        let new_d = if bias > max_power / 2 { max_power - 1 - bias } else { bias };
-        let mut report = CycleReport { bias: bias as u8, d: new_d as u8, min: self.min, max: self.max, result: None };
+        let samples = |t: u32| t.min(1 << 24) as i32;
+        let (t_high, t_low) = (samples(self.t_high), samples(t_low));
         // The result of the cycle just measured uses the d it ran with.
-        let measured_d = self.d as u16;
-        self.bias = bias as i16;
-        self.d = new_d as i16;
-        if self.cycles <= 2 {
-            return Ok(report);
+        let measured_d = self.d;
+        let shift = saturating_mul(i32::from(measured_d), t_high - t_low) / (t_high + t_low).max(1);
+        let bias = (i32::from(self.bias) + shift).clamp(20.min(max_power / 2), (max_power - 20).max(max_power / 2));
+        self.bias = bias as u8;
+        self.d = (if bias > max_power / 2 { max_power - 1 - bias } else { bias }) as u8;
+        let previous = self.last.result;
+        self.last = CycleReport { bias: self.bias, d: self.d, min: self.min, max: self.max, result: None };
+        if self.cycles <= 3 {
+            return false;
         }
         let amplitude = self.max.0.saturating_sub(self.min.0) / 2;
-        let period_ms = self.samples_to_ms(t_high + t_low);
+        let (total, period) = ((t_high + t_low) as u32, u32::from(self.config.sample_period_ms.max(1)));
+        let period_ms = if total > u32::MAX / period { u32::MAX } else { total * period };
         let Some(gains) = relay_gains(measured_d, Celsius(amplitude), period_ms) else {
-            return Ok(report);
+            return false;
         };
-        let converged = match self.previous {
-            Some((a, p)) => within_5_percent(amplitude as u32, a as u32) && within_5_percent(period_ms, p),
-            None => false,
-        };
-        self.previous = Some((amplitude, period_ms));
-        let result = TuneResult {
-            relay_amplitude: measured_d as u8,
-            oscillation: Celsius(amplitude),
-            period_ms,
-            ku: gains.ku,
-            gains: gains.gains,
-            converged,
-        };
-        report.result = Some(result);
-        if converged || self.cycles >= self.config.cycles.max(3) {
-            return Err(TuneStep::Done(result));
-        }
-        Ok(report)
+        let converged = previous.is_some_and(|p| within_5_percent(amplitude as u32, p.oscillation.0 as u32) && within_5_percent(period_ms, p.period_ms));
+        self.last.result = Some(TuneResult { relay_amplitude: measured_d, oscillation: Celsius(amplitude), period_ms, ku: gains.ku, gains: gains.gains, converged });
+        converged || self.cycles > self.config.cycles.max(3)
     }
 }
 
@@ -367,8 +374,8 @@ mod tests {
             let step = tune.on_sample(Celsius((temperature * 100.0).round() as i32));
             let duty = match step {
                 TuneStep::Heat(duty) => duty,
-                TuneStep::Cycle(report, duty) => {
-                    cycles.push(report);
+                TuneStep::Cycle(duty) => {
+                    cycles.push(*tune.last_cycle());
                     duty
                 }
                 other => return (other, cycles),

@@ -14,7 +14,7 @@ use super::thermistor::{Oversampled, Thermistor};
 use super::{Celsius, Heater, HeaterId};
 use crate::progmem::Flash;
 
-/// Everything fixed about one heater: 26 bytes, pointer-free, kept in
+/// Everything fixed about one heater: 27 bytes, pointer-free, kept in
 /// flash ([`Flash`]) and copied out when a sample needs it, so it costs no
 /// RAM on the AVR. The stock ones are [`HOTEND_0`], [`BED`] and [`BARREL`];
 /// a board with others declares its own
@@ -116,8 +116,9 @@ pub static BARREL: Flash<HeaterConfig> = Flash::new(HeaterConfig::barrel());
 pub enum TuneProgress {
     /// Still oscillating.
     Running,
-    /// A cycle completed: print [`CycleReport::write`](super::autotune::CycleReport::write).
-    Cycle(super::autotune::CycleReport),
+    /// A cycle completed: print `tune.last_cycle().write(out)`
+    /// ([`CycleReport::write`](super::autotune::CycleReport::write)).
+    Cycle,
     /// Finished (heater off, target 0): print
     /// [`TuneResult::write_finished`]; on `U1`, [`HeaterChannel::set_gains`].
     Done(TuneResult),
@@ -356,9 +357,9 @@ impl HeaterChannel {
                 self.duty = limit(duty);
                 TuneProgress::Running
             }
-            TuneStep::Cycle(report, duty) => {
+            TuneStep::Cycle(duty) => {
                 self.duty = limit(duty);
-                TuneProgress::Cycle(report)
+                TuneProgress::Cycle
             }
             TuneStep::Done(result) => {
                 self.turn_off();

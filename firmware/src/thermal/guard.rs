@@ -27,6 +27,8 @@
 //! reaches the target and is reset whenever the target changes.
 
 use super::{Celsius, HeaterId};
+use crate::flash_str;
+use crate::progmem::FlashStr;
 use crate::machines::extrusion_line::{ColdExtrusion, ColdExtrusionCheck};
 
 /// Why a heater was shut down.
@@ -47,15 +49,16 @@ pub enum ThermalFault {
 }
 
 impl ThermalFault {
-    /// Marlin's wording (`STR_T_*`), with the sensor faults named.
-    pub fn message(self) -> &'static str {
+    /// Marlin's wording (`STR_T_*`), with the sensor faults named; in
+    /// flash on the AVR, like every message of this module.
+    pub fn message(self) -> FlashStr {
         match self {
-            Self::SensorOpen => "MINTEMP triggered (thermistor open)",
-            Self::SensorShorted => "MAXTEMP triggered (thermistor shorted)",
-            Self::MaxTemp => "MAXTEMP triggered",
-            Self::MinTemp => "MINTEMP triggered",
-            Self::ThermalRunaway => "Thermal Runaway",
-            Self::HeatingFailed => "Heating failed",
+            Self::SensorOpen => flash_str!("MINTEMP triggered (thermistor open)"),
+            Self::SensorShorted => flash_str!("MAXTEMP triggered (thermistor shorted)"),
+            Self::MaxTemp => flash_str!("MAXTEMP triggered"),
+            Self::MinTemp => flash_str!("MINTEMP triggered"),
+            Self::ThermalRunaway => flash_str!("Thermal Runaway"),
+            Self::HeatingFailed => flash_str!("Heating failed"),
         }
     }
 
@@ -63,7 +66,11 @@ impl ThermalFault {
     /// newline). The executor then halts (`Error:Printer halted. kill()
     /// called!`) and stops motion.
     pub fn write<W: ufmt::uWrite + ?Sized>(self, heater: HeaterId, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "Error:{}, system stopped! Heater_ID: {}\n", self.message(), heater)
+        flash_str!("Error:").write_to(out)?;
+        self.message().write_to(out)?;
+        flash_str!(", system stopped! Heater_ID: ").write_to(out)?;
+        ufmt::uwrite!(out, "{}", heater)?;
+        out.write_char('\n')
     }
 }
 
@@ -192,6 +199,7 @@ impl Default for HeaterGuard {
 }
 
 /// Samples in `seconds`, at least 1, saturating at `u16::MAX`.
+#[inline(never)]
 fn samples(seconds: u16, period_ms: u16) -> u16 {
     let samples = u32::from(seconds) * 1000 / u32::from(period_ms.max(1));
     samples.clamp(1, u32::from(u16::MAX)) as u16
@@ -216,6 +224,7 @@ impl HeaterGuard {
     /// A new target: re-arm the runaway check and the heating watch.
     /// `measured` is the latest good temperature, `None` before the first
     /// (the watch then arms at the first reading).
+    #[inline(never)]
     pub fn on_target(&mut self, config: &GuardConfig, period_ms: u16, target: Celsius, measured: Option<Celsius>) {
         self.runaway_samples = 0;
         self.watch_samples = 0;
@@ -244,6 +253,7 @@ impl HeaterGuard {
     /// One sample. `reading` is the converted temperature or the sensor
     /// fault; `tuning` suspends the runaway check (the auto-tune relay
     /// swings around the target on purpose and has its own limits).
+    #[inline(never)]
     pub fn check(
         &mut self,
         config: &GuardConfig,
@@ -371,13 +381,16 @@ impl ColdExtrusionGuard {
 
     /// `echo:Cold extrudes are disabled (min temp 170C)` (Marlin's `M302`).
     pub fn write_state<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        let state = if self.allowed { "en" } else { "dis" };
-        ufmt::uwrite!(out, "echo:Cold extrudes are {}abled (min temp {}C)\n", state, self.min_temp.0 / 100)
+        flash_str!("echo:Cold extrudes are ").write_to(out)?;
+        out.write_str(if self.allowed { "en" } else { "dis" })?;
+        flash_str!("abled (min temp ").write_to(out)?;
+        ufmt::uwrite!(out, "{}", self.min_temp.0 / 100)?;
+        out.write_str("C)\n")
     }
 
     /// Marlin's refusal of an extruding move: `echo: cold extrusion prevented`.
     pub fn write_prevented<W: ufmt::uWrite + ?Sized>(out: &mut W) -> Result<(), W::Error> {
-        out.write_str("echo: cold extrusion prevented\n")
+        flash_str!("echo: cold extrusion prevented\n").write_to(out)
     }
 }
 

@@ -7,6 +7,7 @@
 //! quotients (auto-tune gains) use a shift-and-subtract loop.
 
 /// `a · b`, saturating at `i32::MIN`/`i32::MAX`.
+#[inline(never)]
 pub fn saturating_mul(a: i32, b: i32) -> i32 {
     if a == 0 || b == 0 {
         return 0;
@@ -28,6 +29,7 @@ pub fn saturating_mul(a: i32, b: i32) -> i32 {
 /// `x · numerator / denominator` for a positive `denominator`, without
 /// forming the full product (`x / d · n + x % d · n / d`), saturating.
 /// Exact (truncated toward zero) while `denominator · numerator < 2³¹`.
+#[inline(never)]
 pub fn scale(x: i32, numerator: i32, denominator: i32) -> i32 {
     if denominator <= 0 {
         return 0;
@@ -37,44 +39,39 @@ pub fn scale(x: i32, numerator: i32, denominator: i32) -> i32 {
     whole.saturating_add(part)
 }
 
-/// `a · b` as a 64-bit product from four 16-bit products (no `__muldi3`).
-pub fn wide_mul(a: u32, b: u32) -> u64 {
-    let (a_high, a_low) = (a >> 16, a & 0xFFFF);
-    let (b_high, b_low) = (b >> 16, b & 0xFFFF);
-    let low = u64::from(a_low * b_low);
-    let middle = u64::from(a_high * b_low) + u64::from(a_low * b_high);
-    let high = u64::from(a_high * b_high);
-    (high << 32) + (middle << 16) + low
-}
-
-/// `a · b` for a 64-bit `a`, saturating at `u64::MAX`.
-pub fn mul_u64(a: u64, b: u32) -> u64 {
-    let high = wide_mul((a >> 32) as u32, b);
-    if high >> 32 != 0 {
-        return u64::MAX;
+/// `round(x · m / n)` (halves up) with the full 64-bit product, from
+/// 32-bit operations only (16-bit partial products, then 32 steps of
+/// shift-and-subtract); `None` when `n` is 0 or the quotient does not fit.
+#[inline(never)]
+pub fn mul_div_round(x: u32, m: u32, n: u32) -> Option<u32> {
+    if n == 0 {
+        return None;
     }
-    (high << 32).saturating_add(wide_mul(a as u32, b))
-}
-
-/// `numerator / denominator` rounded to nearest (halves up), by shift and
-/// subtract; `u64::MAX` for a zero denominator.
-pub fn div_round(numerator: u64, denominator: u64) -> u64 {
-    if denominator == 0 {
-        return u64::MAX;
+    let (x_high, x_low, m_high, m_low) = (x >> 16, x & 0xFFFF, m >> 16, m & 0xFFFF);
+    let (low_low, low_high, high_low) = (x_low * m_low, x_low * m_high, x_high * m_low);
+    let middle = (low_low >> 16) + (low_high & 0xFFFF) + (high_low & 0xFFFF);
+    let mut low = (middle << 16) | (low_low & 0xFFFF);
+    let mut high = x_high * m_high + (low_high >> 16) + (high_low >> 16) + (middle >> 16);
+    // + n/2 for rounding.
+    let (sum, carry) = low.overflowing_add(n / 2);
+    low = sum;
+    high = high.wrapping_add(u32::from(carry));
+    if high >= n {
+        return None;
     }
-    let mut rest = numerator.saturating_add(denominator >> 1);
-    let mut remainder = 0u64;
-    let mut quotient = 0u64;
-    for _ in 0..64 {
-        remainder = (remainder << 1) | (rest >> 63);
-        rest <<= 1;
+    let mut remainder = high;
+    let mut quotient = 0u32;
+    for _ in 0..32 {
+        let overflow = remainder >> 31;
+        remainder = (remainder << 1) | (low >> 31);
+        low <<= 1;
         quotient <<= 1;
-        if remainder >= denominator {
-            remainder -= denominator;
+        if overflow != 0 || remainder >= n {
+            remainder = remainder.wrapping_sub(n);
             quotient |= 1;
         }
     }
-    quotient
+    Some(quotient)
 }
 
 #[cfg(test)]
@@ -103,22 +100,18 @@ mod tests {
     }
 
     #[test]
-    fn wide_mul_and_div_round_match_u128() {
-        let values = [0u32, 1, 2, 3, 355, 0xFFFF, 0x1_0000, 0xDEAD_BEEF, u32::MAX];
-        for a in values {
-            for b in values {
-                assert_eq!(wide_mul(a, b), u64::from(a) * u64::from(b), "{a} × {b}");
-                let product = u64::from(a) * u64::from(b);
-                if b != 0 {
-                    let expected = ((u128::from(product) + u128::from(b) / 2) / u128::from(b)) as u64;
-                    assert_eq!(div_round(product, u64::from(b)), expected, "{product} / {b}");
+    fn mul_div_round_matches_u128_and_refuses_what_does_not_fit() {
+        let values = [0u32, 1, 2, 3, 355, 0xFFFF, 0x1_0000, 104_348, 0xDEAD_BEEF, u32::MAX];
+        for x in values {
+            for m in values {
+                for n in values {
+                    let exact = (u128::from(x) * u128::from(m) + u128::from(n / 2)).checked_div(u128::from(n));
+                    let expected = exact.and_then(|q| u32::try_from(q).ok());
+                    assert_eq!(mul_div_round(x, m, n), expected, "{x} × {m} / {n}");
                 }
             }
         }
-        assert_eq!(div_round(7, 2), 4);
-        assert_eq!(div_round(5, 0), u64::MAX);
-        assert_eq!(mul_u64(1 << 50, 1 << 20), u64::MAX);
-        assert_eq!(mul_u64(1 << 40, 1 << 20), 1 << 60);
-        assert_eq!(mul_u64(1 << 40, 1000), 1000 << 40);
+        assert_eq!(mul_div_round(7, 1, 2), Some(4));
+        assert_eq!(mul_div_round(5, 1, 0), None);
     }
 }

@@ -17,19 +17,24 @@
 //! # Integration note (for the executor and the boards)
 //!
 //! **Ownership.** The executor (`Machine`) owns one [`HeaterChannel`] per
-//! heater — `HeaterChannel::new(HeaterConfig::hotend(0), Gains::MARLIN_HOTEND)`,
-//! `HeaterChannel::new(HeaterConfig::bed(), Gains::MARLIN_BED)`, for the
-//! extrusion line `HeaterConfig::barrel()` with `Gains::THESIS_BARREL` —
-//! plus a [`ColdExtrusionGuard`] (`HOTEND`, or `EXTRUSION_LINE` at 175 °C).
-//! It replaces `Machine::{hotend, bed}: Heater` (use
-//! [`HeaterChannel::heater`] where a [`Heater`] snapshot is wanted).
+//! heater — `HeaterChannel::new(&channel::HOTEND_0, Gains::MARLIN_HOTEND)`,
+//! `HeaterChannel::new(&channel::BED, Gains::MARLIN_BED)` (or `BED_BANG_BANG`;
+//! SPEC §2's slow bed wants `GuardConfig::SLOW_BED` in its own flash
+//! config), for the extrusion line `&channel::BARREL` with
+//! `Gains::THESIS_BARREL` — plus a [`ColdExtrusionGuard`] (`HOTEND`, or
+//! `EXTRUSION_LINE` at 175 °C). A config is a `static Flash<HeaterConfig>`
+//! (see [`HeaterConfig`]). The channels replace `Machine::{hotend, bed}:
+//! Heater` (use [`HeaterChannel::heater`] where a [`Heater`] snapshot is
+//! wanted; `Celsius`, `Heater`, `thermistor::celsius_from_adc` and the
+//! `NTC100K_B3950_4K7`/`_4K8` tables keep their names).
 //!
 //! **ADC interrupt (board).** One [`SampleAverager`] per thermistor
 //! (`SampleAverager::new(16)`; 10 for SPEC §4): on each conversion,
 //! `averager.push(adc_10_bit)`, then start the next channel. Nothing else.
 //!
 //! **Main loop (board → core), every `config().sample_period_ms`** (100 ms
-//! for hot end and bed, 1000 ms for the barrel):
+//! for all stock configs; the barrel's PI runs every 10th sample, T = 1 s,
+//! inside the channel):
 //! ```text
 //! let reading = critical_section(|| averager.take());        // Option<Oversampled>
 //! if let Some(reading) = reading {
@@ -69,14 +74,15 @@
 //!   period: the law converts with it. Save them in the settings as the
 //!   three `u32` of [`Gains`].
 //! - `M303 E<n> S<°C> C<cycles> U<0|1>`: `let mut tune = Autotune::new(
-//!   TuneConfig { cycles, ..TuneConfig::new(target, config.sample_period_ms) })`
+//!   TuneConfig { cycles, ..TuneConfig::new(target, channel.config().sample_period_ms) })`
 //!   (bed: `E-1`), print `PID Autotune start`, `channel.start_tuning(&tune)`,
 //!   then each sample `channel.on_tuning_sample(reading, &mut tune)` in place
-//!   of `on_sample`: `Cycle(report)` → `report.write(out)`;
+//!   of `on_sample`: `Cycle` → `tune.last_cycle().write(out)`;
 //!   `Done(result)` → `result.write_finished(channel.id(), out)`, and on
 //!   `U1` `channel.set_gains(result.gains)`; `Failed(e)` → `e.write(out)`;
 //!   `Fault(f)` → as for `on_sample`. The executor keeps answering
-//!   `busy: processing` meanwhile (Marlin blocks on M303 too).
+//!   `busy: processing` meanwhile (Marlin blocks on M303 too). A slow bed
+//!   needs `timeout_s` above its heat-up time (SPEC §2's: 3000).
 //! - `M302 [S<°C>] [P<0|1>]`: `cold.m302(s, p)`; `true` → `cold.write_state(out)`.
 //!   Before an extruding move: `cold.check(hotend.measured())`; `Err` →
 //!   `ColdExtrusionGuard::write_prevented(out)` and drop the E part of the
@@ -85,11 +91,22 @@
 //! - `M112`/`kill()`: `channel.turn_off()` on every heater; `M999` (reset):
 //!   `channel.clear_fault()`.
 //!
-//! **Sizes (AVR, packed).** `HeaterChannel` 44 bytes including its 22-byte
-//! configuration (a compile-time assertion keeps it ≤ 60); `SampleAverager`
-//! 7; `SlowPwm` 7; `AutoReport` 5; `Autotune` ≈ 45 and `TemperatureWait`
-//! 22, only while `M303`/`M109` run; `ColdExtrusionGuard` 5. Tables: 324
-//! bytes of flash each, only the ones a `Thermistor` names are linked.
+//! **RAM (AVR, packed).** `HeaterChannel` 44 bytes (a compile-time
+//! assertion keeps it there); its 27-byte `HeaterConfig` stays in flash
+//! ([`channel::HOTEND_0`], [`channel::BED`], [`channel::BARREL`]…, copied
+//! out per sample). `SampleAverager` 7, `SlowPwm` 7, `AutoReport` 5,
+//! `ColdExtrusionGuard` 5; `Autotune` 76 and `TemperatureWait` 34 only
+//! while `M303`/`M109` run (in the executor's running-command state, which
+//! can share one slot: they never run together). Strings are in flash
+//! ([`flash_str!`](crate::flash_str)).
+//!
+//! **Flash (AVR, measured with a stand-alone harness driving a hot end and
+//! a bed through every call above, `opt-level = "s"`, LTO):** ≈ 8.6 KiB
+//! beyond what the firmware already links (u32 division, `ufmt` integers,
+//! `write_fixed`, `FlashStr`), of which ≈ 2 KiB is the harness's own
+//! executor-like glue; the two 54-row tables 324 bytes each. `M303`
+//! (auto-tune, gains, its messages) adds ≈ 6 KiB and is linked only if the
+//! executor calls it. No float, no 64-bit division, no `checked_mul`.
 
 pub mod autotune;
 pub mod channel;

@@ -27,7 +27,7 @@
 //! `PID_FUNCTIONAL_RANGE`: farther than N °C below the target the output is
 //! full and the integral is reset, farther above it is off.
 //!
-//! Every product goes through [`saturating_mul`], never `checked_mul`.
+//! Every product goes through `math::saturating_mul`, never `checked_mul`.
 
 use super::math::{saturating_mul, scale};
 use super::Celsius;
@@ -174,19 +174,23 @@ impl PidState {
     /// Every sample: the derivative on the measurement (no kick when the
     /// target changes), a rate, so it may be sampled faster than the law
     /// runs.
+    #[inline(never)]
     pub fn observe(&mut self, gains: &Gains, derivative_filter_shift: u8, sample_period_ms: u16, measured: Celsius, previous: Celsius) {
         let period = i32::from(sample_period_ms.max(1));
-        let rise = measured.0.saturating_sub(previous.0);
-        let raw = scale(saturating_mul(gains.kd as i32, rise), 1000, period);
+        // Temperatures are table values (−30..420 °C): no overflow.
+        let rise = measured.0 - previous.0;
+        let raw = bounded(scale(saturating_mul(gains.kd as i32, rise), 1000, period));
         let shift = u32::from(derivative_filter_shift.min(16));
-        self.derivative = self.derivative.saturating_add(raw.saturating_sub(self.derivative) >> shift);
+        // Both within ±2²⁹: the difference and the result fit.
+        self.derivative += (raw - self.derivative) >> shift;
     }
 
     /// The law, every `control_period_ms`: the duty (0..=`max_power`).
+    #[inline(never)]
     pub fn control(&mut self, gains: &Gains, functional_range_c: u8, control_period_ms: u16, max_power: u8, target: Celsius, measured: Celsius) -> u8 {
         let period = i32::from(control_period_ms.max(1));
         let max = i32::from(max_power) * MICRO;
-        let error = target.0.saturating_sub(measured.0);
+        let error = target.0 - measured.0;
         let range = i32::from(functional_range_c) * 100;
         if range > 0 && error > range {
             self.integral = 0;
@@ -197,16 +201,24 @@ impl PidState {
             return 0;
         }
 
-        let proportional = saturating_mul(gains.kp as i32, error);
-        let increment = scale(saturating_mul(gains.ki as i32, error), period, 1000);
-        let unclamped = proportional.saturating_add(self.integral).saturating_sub(self.derivative);
+        // Every term within ±2²⁹ (the integral within 0..2²⁸): sums of
+        // three fit an i32, so plain arithmetic below.
+        let proportional = bounded(saturating_mul(gains.kp as i32, error));
+        let increment = bounded(scale(saturating_mul(gains.ki as i32, error), period, 1000));
+        let unclamped = proportional + self.integral - self.derivative;
         let winding_up = (unclamped >= max && increment > 0) || (unclamped <= 0 && increment < 0);
         if !winding_up {
-            self.integral = self.integral.saturating_add(increment).clamp(0, max);
+            self.integral = (self.integral + increment).clamp(0, max);
         }
-        let output = proportional.saturating_add(self.integral).saturating_sub(self.derivative).clamp(0, max);
+        let output = (proportional + self.integral - self.derivative).clamp(0, max);
         ((output + MICRO / 2) / MICRO) as u8
     }
+}
+
+/// Terms of the law are kept within ±2²⁹ micro-counts (±536 counts, twice
+/// any output), so that sums of three of them cannot overflow.
+fn bounded(value: i32) -> i32 {
+    value.clamp(-(1 << 29), 1 << 29)
 }
 
 /// Bang-bang with hysteresis: `on` is the heater's state before this sample.

@@ -106,7 +106,7 @@ pub enum WaitStatus {
 
 /// An `M109`/`M190` in progress: a pure state machine the executor polls
 /// (every loop) while it prints `busy:`/temperature lines once a second.
-/// 22 bytes, only while waiting.
+/// 34 bytes on the AVR, only while waiting.
 #[derive(Clone, Copy, Debug)]
 pub struct TemperatureWait {
     config: WaitConfig,

@@ -81,8 +81,9 @@ pub fn celsius_from_adc<const N: usize>(table: Table<N>, adc: u16) -> Result<Cel
 
 /// Convert a reading in 1/16 counts with `table` (binary search for the
 /// row pair, then linear interpolation rounded half away from zero).
+#[inline(never)]
 pub fn celsius_from_oversampled<const N: usize>(table: Table<N>, reading: Oversampled) -> Result<Celsius, SensorFault> {
-    let row = |index: usize| table.get(index).unwrap_or((0, 0));
+    let row = |index: usize| row(table, index);
     let x16 = i32::from(reading.0);
     let sixteenths = |(adc, _): (u16, i32)| i32::from(adc) * 16;
     if N < 2 || x16 < sixteenths(row(0)) {
@@ -102,6 +103,12 @@ pub fn celsius_from_oversampled<const N: usize>(table: Table<N>, reading: Oversa
         }
     }
     Ok(Celsius(interpolate(x16, row(low), row(high))))
+}
+
+/// One row out of flash (one copy of the copying loop, not one per use).
+#[inline(never)]
+fn row<const N: usize>(table: Table<N>, index: usize) -> (u16, i32) {
+    table.get(index).unwrap_or((0, 0))
 }
 
 /// Hundredths of °C at `x16` between two rows. `build.rs` evaluates the
