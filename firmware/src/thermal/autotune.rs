@@ -130,7 +130,7 @@ impl CycleReport {
                 let tu = crate::reply::Fixed { mantissa: (result.period_ms / 10) as i32, digits: 2 };
                 ufmt::uwrite!(out, " Ku: {} Tu: {}", Gain(result.ku), tu)?;
                 flash_str!("\n Classic PID \n").write_to(out)?;
-                ufmt::uwrite!(out, " Kp: {} Ki: {} Kd: {}\n", Gain(result.gains.kp), Gain(result.gains.ki), Gain(result.gains.kd))
+                ufmt::uwrite!(out, "{}\n", result.gains)
             }
             None => out.write_str("\n"),
         }

@@ -71,6 +71,14 @@ impl Gains {
     }
 }
 
+/// ` Kp: 22.20 Ki: 1.08 Kd: 114.00`, Marlin's line after `M303` cycles
+/// (the leading space is Marlin's).
+impl ufmt::uDisplay for Gains {
+    fn fmt<W: ufmt::uWrite + ?Sized>(&self, f: &mut ufmt::Formatter<'_, W>) -> Result<(), W::Error> {
+        ufmt::uwrite!(f, " Kp: {} Ki: {} Kd: {}", Gain(self.kp), Gain(self.ki), Gain(self.kd))
+    }
+}
+
 /// A gain × 10⁴ printed with two decimals, or up to four when needed
 /// (`22.20`, `1.08`, `0.0204`, `9.7021`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -395,6 +403,7 @@ mod tests {
         let mut out = Text::default();
         Gains::MARLIN_HOTEND.write_m301(&mut out).unwrap();
         assert_eq!(out.0, "M301 P22.20 I1.08 D114.00");
+        assert_eq!(shown(Gains::THESIS_BARREL), " Kp: 6.12 Ki: 0.0204 Kd: 0.00");
     }
 
     #[test]
