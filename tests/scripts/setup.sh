@@ -22,13 +22,22 @@ if ! rustup component list --toolchain nightly --installed 2>/dev/null | grep -q
   rustup component add rust-src --toolchain nightly || die "could not add rust-src to nightly"
 fi
 
+if ! rustup target list --installed | grep -qx thumbv7em-none-eabihf; then
+  say "adding the thumbv7em-none-eabihf target (the SKR Pro build)"
+  rustup target add thumbv7em-none-eabihf || die "could not add the thumbv7em-none-eabihf target"
+fi
+if ! rustup component list --installed | grep -q '^llvm-tools'; then
+  say "adding llvm-tools (llvm-size / llvm-objcopy for the ARM build)"
+  rustup component add llvm-tools || die "could not add llvm-tools"
+fi
+
 # --- Debian packages -------------------------------------------------------
 # avr-gcc links the AVR firmware and avr-size measures it; QEMU runs it;
 # the simavr-based bench builds simavr from source (libelf, clang for bindgen);
 # avrdude flashes a real board; python3-venv hosts Printrun's printcore.
 packages=(gcc-avr avr-libc binutils-avr qemu-system-misc)
 if [ "$profile" = test ]; then
-  packages+=(libelf-dev libclang-dev pkg-config libzstd-dev zlib1g-dev python3-venv)
+  packages+=(qemu-system-arm libelf-dev libclang-dev pkg-config libzstd-dev zlib1g-dev python3-venv)
 fi
 if [ "${SETUP_FLASH:-0}" = 1 ]; then
   packages+=(avrdude)
@@ -48,18 +57,19 @@ if [ ${#missing[@]} -gt 0 ]; then
   # QEMU packages and the AVR ones are installed in separate calls: together
   # they can fail on machines that ship a newer qemu-utils (DESIGN.md).
   install() { DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y --no-install-recommends "$@"; }
-  for group in "qemu" "other"; do
-    if [ $group = qemu ]; then
-      set -- $(printf '%s\n' "${missing[@]}" | grep '^qemu' || true)
-    else
-      set -- $(printf '%s\n' "${missing[@]}" | grep -v '^qemu' || true)
-    fi
-    [ $# -gt 0 ] || continue
-    if ! install "$@" >/tmp/ferrostep-apt.log 2>&1; then
-      say "apt-get install failed; refreshing the package lists and retrying"
+  # Each QEMU package in its own call (DESIGN.md: together they can fail).
+  for p in $(printf '%s\n' "${missing[@]}" | grep '^qemu' || true); do
+    if ! install "$p" >/tmp/ferrostep-apt.log 2>&1; then
+      say "apt-get install $p failed; refreshing the package lists and retrying"
       $sudo apt-get update >/tmp/ferrostep-apt-update.log 2>&1 || die "apt-get update failed (see /tmp/ferrostep-apt-update.log)"
-      install "$@" >/tmp/ferrostep-apt.log 2>&1 || die "could not install $* (see /tmp/ferrostep-apt.log)"
+      install "$p" >/tmp/ferrostep-apt.log 2>&1 || die "could not install $p (see /tmp/ferrostep-apt.log)"
     fi
   done
+  set -- $(printf '%s\n' "${missing[@]}" | grep -v '^qemu' || true)
+  if [ $# -gt 0 ] && ! install "$@" >/tmp/ferrostep-apt.log 2>&1; then
+    say "apt-get install failed; refreshing the package lists and retrying"
+    $sudo apt-get update >/tmp/ferrostep-apt-update.log 2>&1 || die "apt-get update failed (see /tmp/ferrostep-apt-update.log)"
+    install "$@" >/tmp/ferrostep-apt.log 2>&1 || die "could not install $* (see /tmp/ferrostep-apt.log)"
+  fi
 fi
 say "toolchains and packages are in place"

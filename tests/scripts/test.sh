@@ -14,6 +14,11 @@ cargo +nightly avr
 say "checking the firmware against its budgets"
 bash tests/scripts/size-check.sh "$elf"
 
+arm_dir=$target/thumbv7em-none-eabihf/release
+say "building the SKR Pro release firmware once: cargo arm"
+cargo arm
+"$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/llvm-size" "$arm_dir/skr-pro"
+
 say "running every test: cargo test (host crates, the emulated Mega 2560, the simavr bench)"
-FERROSTEP_ELF="$PWD/$elf" cargo test
+FERROSTEP_ELF="$PWD/$elf" FERROSTEP_ARM_DIR="$PWD/$arm_dir" cargo test
 say "all tests passed"
