@@ -22,20 +22,17 @@ pub trait SerialLink {
 }
 
 /// The executor and the line being received.
-pub struct HostLink {
-    pub machine: Machine,
+pub struct HostLink<'q> {
+    pub machine: Machine<'q>,
     assembler: LineAssembler,
 }
 
-impl Default for HostLink {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl HostLink {
-    pub const fn new() -> Self {
-        Self { machine: Machine::new(), assembler: LineAssembler::new() }
+impl<'q> HostLink<'q> {
+    pub fn new(machine: Machine<'q>) -> Self {
+        Self {
+            machine,
+            assembler: LineAssembler::new(),
+        }
     }
 
     /// One pass: emergencies first, then input, then execution.
@@ -52,6 +49,9 @@ impl HostLink {
         }
         if emergencies.contains(Emergency::CancelWait) {
             self.machine.cancel_wait();
+        }
+        if emergencies.contains(Emergency::QuickStop) {
+            self.machine.quick_stop();
         }
         if link.take_dropped() > 0 {
             self.assembler.mark_damaged();

@@ -5,11 +5,27 @@
 //! (`firmware::host_link`) as on the Mega 2560; only the clock is virtual:
 //! [`SimBoard::advance`] moves it on by whole milliseconds, so a long job
 //! simulates in moments.
+//!
+//! Motion runs as on the board: each millisecond the main loop polls the
+//! planner side, then the step generator runs for that millisecond of
+//! 2 MHz timer ticks, its STEP/DIR actions recorded by a [`StepRecorder`]
+//! (what a logic analyser on the pins would see). Endstops are a function
+//! of the motor positions ([`SimBoard::set_endstops`]).
 
 use firmware::emergency::Pending;
 use firmware::host_link::{HostLink, SerialLink};
+use firmware::machine::Machine;
+use firmware::motion::{
+    stepper, Motion, MotionConfig, StepFault, StepGenerator, StepQueues, StepperRequest,
+};
 use firmware::rx::{self, RxConsumer, RxProducer, RxQueue};
 use firmware::storage::MemoryStorage;
+
+use crate::steps::StepRecorder;
+
+/// Endstops as a function of the motor positions (steps from boot): bit i
+/// motor i's min switch, bit 4 + i its max switch, 1 = triggered.
+pub type Endstops = Box<dyn Fn(&[i64; 4]) -> u8>;
 
 /// The simulated EEPROM: 4 KiB like the ATmega2560's.
 pub type SimEeprom = MemoryStorage<4096>;
@@ -19,7 +35,11 @@ pub const DEFAULT_BAUD: u32 = 115_200;
 
 /// The firmware core on a simulated board.
 pub struct SimBoard {
-    pub link: HostLink,
+    pub link: HostLink<'static>,
+    generator: StepGenerator<'static>,
+    /// Every step the generator made.
+    pub steps: StepRecorder,
+    endstops: Endstops,
     pub eeprom: SimEeprom,
     producer: RxProducer<'static>,
     /// Bytes sent by the host and still on the wire.
@@ -66,22 +86,47 @@ impl SimBoard {
 
     /// A board booting with `eeprom`'s contents (e.g. after a power loss).
     pub fn with_eeprom(eeprom: SimEeprom) -> Self {
+        Self::with_machine(MotionConfig::prusa_i3(), eeprom)
+    }
+
+    /// A board running the machine `config` (Prusa i3, delta, arm).
+    pub fn with_machine(config: MotionConfig, eeprom: SimEeprom) -> Self {
         // One small ring per board for the life of the process (tests).
         let queue: &'static mut RxQueue = Box::leak(Box::new(RxQueue::new()));
         let (producer, consumer) = rx::split(queue);
+        let step_queues: &'static mut StepQueues = Box::leak(Box::new(StepQueues::new()));
+        let (feeder, generator) = step_queues.split(config.stepper());
         let mut board = Self {
-            link: HostLink::new(),
+            link: HostLink::new(Machine::new(Motion::new(config, feeder))),
+            generator,
+            steps: StepRecorder::new(stepper::TIMER_HZ, config.stepper().dir_invert),
+            // Min switches where the motors were at boot.
+            endstops: Box::new(|p: &[i64; 4]| {
+                (0..3)
+                    .filter(|&m| p[m] <= 0)
+                    .fold(0, |bits, m| bits | 1 << m)
+            }),
             eeprom,
             producer,
             wire: std::collections::VecDeque::new(),
             bytes_per_s: DEFAULT_BAUD / 10,
             wire_credit: 0,
-            rx: SimRx { consumer, dropped: 0, emergencies: Pending::NONE },
+            rx: SimRx {
+                consumer,
+                dropped: 0,
+                emergencies: Pending::NONE,
+            },
             now_ms: 0,
             output: String::new(),
         };
-        let _ = board.link.machine.write_banner(&mut Output(&mut board.output));
-        let _ = board.link.machine.load_settings(&mut board.eeprom, &mut Output(&mut board.output));
+        let _ = board
+            .link
+            .machine
+            .write_banner(&mut Output(&mut board.output));
+        let _ = board
+            .link
+            .machine
+            .load_settings(&mut board.eeprom, &mut Output(&mut board.output));
         board
     }
 
@@ -111,9 +156,66 @@ impl SimBoard {
             self.wire_credit %= 1000;
             let bytes: Vec<u8> = self.wire.drain(..arriving.min(self.wire.len())).collect();
             self.inject(&bytes);
-            let _ = self.link.service(&mut self.rx, &mut self.eeprom, self.now_ms, &mut Output(&mut self.output));
+            let status = self.generator.status();
+            let mut out = Output(&mut self.output);
+            match self
+                .link
+                .machine
+                .poll_motion(&status, self.now_ms, &mut out)
+            {
+                Ok(StepperRequest::ClearFault) => self.generator.clear_fault(),
+                Ok(StepperRequest::Halt) => self.generator.halt(StepFault::Stopped),
+                _ => {}
+            }
+            let _ = self
+                .link
+                .service(&mut self.rx, &mut self.eeprom, self.now_ms, &mut out);
+            if self.link.machine.is_halted() {
+                self.generator.halt(StepFault::Stopped);
+            }
             self.now_ms = self.now_ms.wrapping_add(1);
+            self.run_steps_until(u64::from(self.now_ms) * u64::from(stepper::TIMER_HZ / 1000));
         }
+    }
+
+    /// The step interrupt, from the recorder's time up to `tick`.
+    fn run_steps_until(&mut self, tick: u64) {
+        while self.steps.now < tick {
+            if self.generator.endstop_mask() != 0 {
+                let triggered = (self.endstops)(&self.steps.positions());
+                self.generator.on_endstops(triggered);
+            }
+            let action = self.generator.on_timer();
+            self.steps.record(
+                action.step_mask,
+                action.dir_mask,
+                action.next_interval_ticks,
+            );
+        }
+    }
+
+    /// Replace the endstops (see [`Endstops`]).
+    pub fn set_endstops(&mut self, endstops: Endstops) {
+        self.endstops = endstops;
+    }
+
+    /// Send `gcode` and run until every line is answered and the machine
+    /// is idle, or `max_ms` passed; the output so far.
+    pub fn run_gcode(&mut self, gcode: &str, max_ms: u32) -> String {
+        self.receive(gcode.as_bytes());
+        let lines = gcode.lines().filter(|l| !l.trim().is_empty()).count();
+        let mut output = String::new();
+        for _ in 0..max_ms {
+            self.advance(1);
+            output.push_str(&self.take_output());
+            if self.wire.is_empty()
+                && output.matches("ok").count() >= lines
+                && self.link.machine.motion_idle()
+            {
+                break;
+            }
+        }
+        output
     }
 
     /// Virtual time since boot, ms.
@@ -150,7 +252,10 @@ mod tests {
         );
         board.receive(b"M114\n");
         board.advance(1);
-        assert_eq!(board.take_output(), "X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0\nok\n");
+        assert_eq!(
+            board.take_output(),
+            "X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0\nok\n"
+        );
     }
 
     #[test]
@@ -162,7 +267,10 @@ mod tests {
         board.inject(burst.as_bytes());
         board.advance(10);
         let output = board.take_output();
-        assert!(output.contains("Error:Serial receive overrun, line lost\n"), "{output}");
+        assert!(
+            output.contains("Error:Serial receive overrun, line lost\n"),
+            "{output}"
+        );
         // Every line got exactly one ok: lost ones through their error.
         let answered = output.matches("ok\n").count();
         assert!(answered >= 18 && answered <= 28, "{answered} in {output}");
@@ -173,9 +281,17 @@ mod tests {
         let mut board = SimBoard::new();
         board.receive(b"M92 E415\nM500\n");
         board.advance(10);
-        let mut rebooted = SimBoard::with_eeprom(SimEeprom { bytes: board.eeprom.bytes, ..SimEeprom::new() });
-        assert!(rebooted.take_output().contains("echo:V1 stored settings retrieved"));
-        assert_eq!(rebooted.link.machine.settings().steps_per_mm_milli[3], 415_000);
+        let mut rebooted = SimBoard::with_eeprom(SimEeprom {
+            bytes: board.eeprom.bytes,
+            ..SimEeprom::new()
+        });
+        assert!(rebooted
+            .take_output()
+            .contains("echo:V1 stored settings retrieved"));
+        assert_eq!(
+            rebooted.link.machine.settings().steps_per_mm_milli[3],
+            415_000
+        );
     }
 
     #[test]
@@ -183,7 +299,9 @@ mod tests {
         let mut board = SimBoard::new();
         board.receive(b"G4 S100\nM114\nM114\nM114\nM114\nM112\n");
         board.advance(5);
-        assert!(board.take_output().contains("Error:Printer halted. kill() called!\n"));
+        assert!(board
+            .take_output()
+            .contains("Error:Printer halted. kill() called!\n"));
         assert!(board.link.machine.is_halted());
     }
 }

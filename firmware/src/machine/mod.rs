@@ -18,16 +18,18 @@
 
 pub mod error;
 pub mod modal;
+mod motion_commands;
 
 use crate::gcode::{self, Code, Command, ParseError};
 use crate::line::{Line, MAX_LINE};
+use crate::motion::Motion;
 use crate::protocol::HostProtocol;
 use crate::reply::{Fixed, Printable};
 use crate::settings::Settings;
 use crate::storage::{self, LoadError, NonVolatile};
 use crate::thermal::{Celsius, Heater};
 use error::CommandError;
-use modal::{Distance, ModalState, MotionMode, Units, AXES, AXIS_LETTERS};
+use modal::{Distance, ModalState, Units, AXES, AXIS_LETTERS};
 use ufmt::uWrite;
 
 /// Lines the command queue holds (Marlin's BUFSIZE is 4).
@@ -44,8 +46,21 @@ type LineText = heapless::Vec<u8, MAX_LINE>;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Running {
     Idle,
+    /// `G4`: wait for queued motion to finish, then `ms` more.
+    DwellAfterMotion {
+        ms: u32,
+    },
     /// `G4`: wait until `until_ms`.
-    Dwell { until_ms: u32 },
+    Dwell {
+        until_ms: u32,
+    },
+    /// `M400` (and `M18`/`M84`, which then disable the drivers): wait for
+    /// queued motion to finish.
+    WaitForMotion {
+        then_disable: bool,
+    },
+    /// `G28`: homing runs in the main loop.
+    Homing,
 }
 
 /// Raw endstop levels as the board reads them, one bit per switch:
@@ -56,7 +71,7 @@ pub type EndstopLevels = u8;
 const ENDSTOP_NAMES: [&str; 6] = ["x_min", "x_max", "y_min", "y_max", "z_min", "z_max"];
 
 /// Everything the executor remembers between lines.
-pub struct Machine {
+pub struct Machine<'q> {
     protocol: HostProtocol,
     queue: heapless::Deque<LineText, COMMAND_QUEUE_DEPTH>,
     modal: ModalState,
@@ -76,25 +91,27 @@ pub struct Machine {
     /// Levels that mean "triggered" (bit set: high = triggered).
     endstop_trigger_levels: EndstopLevels,
     endstop_levels: EndstopLevels,
-    /// Position in motor steps per axis (X, Y, Z), for `Count` in `M114`.
-    position_steps: [i32; 3],
     hotend: Heater,
     bed: Heater,
+    /// The planner and everything behind it, up to the step queues.
+    motion: Motion<'q>,
+    /// A motion fault (limit switch, lost position) happened: moves are
+    /// refused until `G28`.
+    position_lost: bool,
 }
 
-impl Default for Machine {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl Machine {
-    pub const fn new() -> Self {
+impl<'q> Machine<'q> {
+    /// An executor driving `motion` (the board's machine configuration).
+    /// The settings start as the machine's defaults, which `motion`
+    /// receives.
+    pub fn new(mut motion: Motion<'q>) -> Self {
+        let settings = Settings::prusa_i3();
+        motion.apply_settings(&settings);
         Self {
             protocol: HostProtocol::new(),
             queue: heapless::Deque::new(),
             modal: ModalState::new(),
-            settings: Settings::prusa_i3(),
+            settings,
             running: Running::Idle,
             wait_cancelled: false,
             last_busy_ms: 0,
@@ -107,16 +124,22 @@ impl Machine {
             // (Marlin's *_ENDSTOP_INVERTING false).
             endstop_trigger_levels: 0b11_1111,
             endstop_levels: 0,
-            position_steps: [0; 3],
             hotend: Heater::new(),
             bed: Heater::new(),
+            motion,
+            position_lost: false,
         }
     }
 
     /// The start banner, printed once at boot. `start` is what Printrun and
     /// OctoPrint look for to learn that the firmware (re)started.
     pub fn write_banner<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "start\necho:{} {} ready\n", crate::FIRMWARE_NAME, crate::FIRMWARE_VERSION)
+        ufmt::uwrite!(
+            out,
+            "start\necho:{} {} ready\n",
+            crate::FIRMWARE_NAME,
+            crate::FIRMWARE_VERSION
+        )
     }
 
     // --- what the board reads back -----------------------------------------
@@ -177,19 +200,36 @@ impl Machine {
         self.bed.target = Celsius(0);
         self.running = Running::Idle;
         self.queue.clear();
+        self.motion.request_stop();
         out.write_str("Error:Printer halted. kill() called!\n")
     }
 
-    /// `M108` from the receive interrupt: end the current wait.
+    /// `M108` from the receive interrupt: end the current wait for a
+    /// temperature or a dwell (motion waits and homing are not cut short:
+    /// Marlin's `M108` only breaks heating waits and `M0`/`M1`).
     pub fn cancel_wait(&mut self) {
-        self.wait_cancelled = self.running != Running::Idle;
+        self.wait_cancelled = matches!(
+            self.running,
+            Running::Dwell { .. } | Running::DwellAfterMotion { .. }
+        );
+    }
+
+    /// `M410` from the receive interrupt: stop all motion now. The queued
+    /// moves are dropped and, as the steps already made are not counted
+    /// back, the position is lost until `G28`.
+    pub fn quick_stop(&mut self) {
+        self.motion.request_stop();
     }
 
     // --- the two steps -----------------------------------------------------
 
     /// Step 1: a complete line arrived. Refusals are answered now; accepted
     /// lines are queued (the caller checked [`Machine::can_accept_line`]).
-    pub fn receive_line<W: uWrite + ?Sized>(&mut self, line: Line<'_>, out: &mut W) -> Result<(), W::Error> {
+    pub fn receive_line<W: uWrite + ?Sized>(
+        &mut self,
+        line: Line<'_>,
+        out: &mut W,
+    ) -> Result<(), W::Error> {
         let body = match self.protocol.accept(line) {
             Ok(body) => body,
             Err(rejection) => return self.protocol.write_rejection(rejection, out),
@@ -200,14 +240,30 @@ impl Machine {
         if self.queue.push_back(text).is_err() {
             // Only reachable if the board ignored can_accept_line(): say so
             // rather than drop the line silently.
-            return self.protocol.write_rejection(crate::protocol::LineRejection::Damaged, out);
+            return self
+                .protocol
+                .write_rejection(crate::protocol::LineRejection::Damaged, out);
         }
         Ok(())
     }
 
     /// Load the stored settings (at boot, and for `M501`), reporting the
     /// outcome; on any problem the defaults stay in force.
-    pub fn load_settings<W: uWrite + ?Sized>(&mut self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
+    pub fn load_settings<W: uWrite + ?Sized>(
+        &mut self,
+        storage: &mut dyn NonVolatile,
+        out: &mut W,
+    ) -> Result<(), W::Error> {
+        let reported = self.report_loaded_settings(storage, out);
+        self.motion.apply_settings(&self.settings);
+        reported
+    }
+
+    fn report_loaded_settings<W: uWrite + ?Sized>(
+        &mut self,
+        storage: &mut dyn NonVolatile,
+        out: &mut W,
+    ) -> Result<(), W::Error> {
         match storage::load(storage) {
             Ok((settings, stored)) => {
                 self.settings = settings;
@@ -234,7 +290,9 @@ impl Machine {
                         version,
                         storage::LAYOUT_VERSION
                     )?,
-                    LoadError::TooSmall => out.write_str("echo:EEPROM too small for the settings\n")?,
+                    LoadError::TooSmall => {
+                        out.write_str("echo:EEPROM too small for the settings\n")?
+                    }
                 }
                 self.settings = Settings::default();
                 out.write_str("echo:Hardcoded Default Settings Loaded\n")
@@ -242,9 +300,18 @@ impl Machine {
         }
     }
 
-    fn save_settings<W: uWrite + ?Sized>(&self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
+    fn save_settings<W: uWrite + ?Sized>(
+        &self,
+        storage: &mut dyn NonVolatile,
+        out: &mut W,
+    ) -> Result<(), W::Error> {
         match storage::save(storage, &self.settings) {
-            Ok(stored) => ufmt::uwrite!(out, "echo:Settings Stored ({} bytes; crc {})\n", stored.bytes, stored.crc),
+            Ok(stored) => ufmt::uwrite!(
+                out,
+                "echo:Settings Stored ({} bytes; crc {})\n",
+                stored.bytes,
+                stored.crc
+            ),
             Err(_) => out.write_str("Error:EEPROM too small for the settings\n"),
         }
     }
@@ -260,7 +327,7 @@ impl Machine {
         self.auto_report(now_ms, out)?;
         loop {
             if self.running != Running::Idle {
-                if !self.running_done(now_ms) {
+                if !self.running_done(now_ms, out)? {
                     if now_ms.wrapping_sub(self.last_busy_ms) >= BUSY_INTERVAL_MS {
                         self.last_busy_ms = now_ms;
                         out.write_str("echo:busy: processing\n")?;
@@ -271,7 +338,15 @@ impl Machine {
                 self.wait_cancelled = false;
                 out.write_str("ok\n")?;
             }
-            let Some(text) = self.queue.pop_front() else { return Ok(()) };
+            // A line still being cut into a full planner holds back the
+            // next command (as Marlin blocks in its planner), so commands
+            // take effect in the order they were sent.
+            if !self.motion.ready() {
+                return Ok(());
+            }
+            let Some(text) = self.queue.pop_front() else {
+                return Ok(());
+            };
             self.last_busy_ms = now_ms;
             match self.execute(&text, now_ms, storage, out)? {
                 Outcome::Done => out.write_str("ok\n")?,
@@ -285,17 +360,11 @@ impl Machine {
         }
     }
 
-    fn running_done(&self, now_ms: u32) -> bool {
-        if self.wait_cancelled {
-            return true;
-        }
-        match self.running {
-            Running::Idle => true,
-            Running::Dwell { until_ms } => (now_ms.wrapping_sub(until_ms) as i32) >= 0,
-        }
-    }
-
-    fn auto_report<W: uWrite + ?Sized>(&mut self, now_ms: u32, out: &mut W) -> Result<(), W::Error> {
+    fn auto_report<W: uWrite + ?Sized>(
+        &mut self,
+        now_ms: u32,
+        out: &mut W,
+    ) -> Result<(), W::Error> {
         if self.auto_report_s == 0 {
             return Ok(());
         }
@@ -325,7 +394,8 @@ impl Machine {
         let result = match command.code {
             Code::G(0 | 1) | Code::Modal => self.linear_move(&command, out),
             Code::G(2 | 3) => self.arc_move(&command, out),
-            Code::G(4) => return Ok(self.dwell(&command, now_ms)),
+            Code::G(4) => return Ok(self.dwell(&command)),
+            Code::G(28) => return Ok(self.home(&command)),
             Code::G(20) => Ok(self.modal.units = Units::Inches),
             Code::G(21) => Ok(self.modal.units = Units::Millimetres),
             Code::G(90) => Ok(self.set_distance(Distance::Absolute)),
@@ -334,7 +404,11 @@ impl Machine {
             Code::M(82) => Ok(self.modal.extruder_distance = Distance::Absolute),
             Code::M(83) => Ok(self.modal.extruder_distance = Distance::Relative),
             Code::M(17) => Ok(self.steppers_enabled = true),
-            Code::M(18 | 84) => Ok(self.steppers_enabled = false),
+            Code::M(18 | 84) => {
+                return Ok(Outcome::Started(Running::WaitForMotion {
+                    then_disable: true,
+                }))
+            }
             Code::M(105) => {
                 // Marlin puts the report on the `ok` line itself.
                 out.write_str("ok ")?;
@@ -356,18 +430,32 @@ impl Machine {
             Code::M(118) => self.echo(text, out).map(Ok)?,
             Code::M(119) => self.report_endstops(out).map(Ok)?,
             Code::M(155) => self.set_auto_report(&command, now_ms),
-            Code::M(400) => Ok(()),
-            Code::M(92) => settings_axes(&command, &mut self.settings.steps_per_mm_milli),
-            Code::M(201) => settings_axes(&command, &mut self.settings.max_accel_um_per_s2),
-            Code::M(203) => settings_axes(&command, &mut self.settings.max_feed_um_per_s),
-            Code::M(204) => self.set_accelerations(&command),
-            Code::M(205) => self.set_advanced(&command),
-            Code::M(220) => percent(&command, &mut self.settings.feed_percent),
-            Code::M(221) => percent(&command, &mut self.settings.flow_percent),
+            Code::M(400) => {
+                return Ok(Outcome::Started(Running::WaitForMotion {
+                    then_disable: false,
+                }))
+            }
+            Code::M(92) => {
+                self.change_settings(|s| settings_axes(&command, &mut s.steps_per_mm_milli))
+            }
+            Code::M(201) => {
+                self.change_settings(|s| settings_axes(&command, &mut s.max_accel_um_per_s2))
+            }
+            Code::M(203) => {
+                self.change_settings(|s| settings_axes(&command, &mut s.max_feed_um_per_s))
+            }
+            Code::M(204) => self.change_settings(|s| set_accelerations(&command, s)),
+            Code::M(205) => self.change_settings(|s| set_advanced(&command, s)),
+            Code::M(220) => self.change_settings(|s| percent(&command, &mut s.feed_percent)),
+            Code::M(221) => self.change_settings(|s| percent(&command, &mut s.flow_percent)),
             Code::M(500) => self.save_settings(storage, out).map(Ok)?,
-            Code::M(501) => self.load_settings(storage, out).map(Ok)?,
+            Code::M(501) => {
+                self.load_settings(storage, out)?;
+                Ok(())
+            }
             Code::M(502) => {
                 self.settings = Settings::default();
+                self.motion.apply_settings(&self.settings);
                 out.write_str("echo:Hardcoded Default Settings Loaded\n")?;
                 Ok(())
             }
@@ -378,7 +466,7 @@ impl Machine {
                 Ok(())
             }
             // Parsed and acknowledged; their subsystems land with later work.
-            Code::G(10 | 11 | 28) | Code::M(104 | 109 | 140 | 190 | 301 | 302 | 303) => {
+            Code::G(10 | 11) | Code::M(104 | 109 | 140 | 190 | 301 | 302 | 303) => {
                 self.not_yet_available(text, out)?;
                 Ok(())
             }
@@ -393,8 +481,16 @@ impl Machine {
         })
     }
 
-    fn not_yet_available<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "echo:\"{}\" is not available yet in this build\n", Printable(trim(text)))
+    fn not_yet_available<W: uWrite + ?Sized>(
+        &self,
+        text: &[u8],
+        out: &mut W,
+    ) -> Result<(), W::Error> {
+        ufmt::uwrite!(
+            out,
+            "echo:\"{}\" is not available yet in this build\n",
+            Printable(trim(text))
+        )
     }
 
     fn set_distance(&mut self, distance: Distance) {
@@ -403,58 +499,17 @@ impl Machine {
         self.modal.extruder_distance = distance;
     }
 
-    /// `G0`/`G1` (or bare axis words): validate fully, then hand over.
-    fn linear_move<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
-        let mode = match command.code {
-            Code::G(0) => MotionMode::Rapid,
-            Code::G(1) => MotionMode::Linear,
-            _ => self.modal.motion_mode,
-        };
-        if matches!(mode, MotionMode::ClockwiseArc | MotionMode::CounterClockwiseArc) {
-            return self.arc_move(command, out);
-        }
-        let feed = self.modal.read_feed(command)?;
-        let _target = self.modal.target(command)?;
-        self.modal.motion_mode = mode;
-        if let Some(feed) = feed {
-            self.modal.feed_um_per_s = feed;
-        }
-        let _ = self.not_yet_available_motion(out);
+    /// Change settings all or nothing, then hand them to motion (they
+    /// apply to the moves accepted from now on).
+    fn change_settings(
+        &mut self,
+        change: impl FnOnce(&mut Settings) -> Result<(), CommandError>,
+    ) -> Result<(), CommandError> {
+        let mut settings = self.settings.clone();
+        change(&mut settings)?;
+        self.settings = settings;
+        self.motion.apply_settings(&self.settings);
         Ok(())
-    }
-
-    /// `G2`/`G3`: an arc needs a centre (`I`/`J`) or a radius (`R`).
-    fn arc_move<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
-        let feed = self.modal.read_feed(command)?;
-        let _target = self.modal.target(command)?;
-        let has_centre = command.value(b'I')?.is_some() || command.value(b'J')?.is_some();
-        let has_radius = command.value(b'R')?.is_some();
-        if !has_centre && !has_radius {
-            return Err(CommandError::Missing(b'R'));
-        }
-        if let Some(feed) = feed {
-            self.modal.feed_um_per_s = feed;
-        }
-        let _ = self.not_yet_available_motion(out);
-        Ok(())
-    }
-
-    fn not_yet_available_motion<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        out.write_str("echo:Motion is not available yet in this build: nothing moved\n")
-    }
-
-    /// `G4 P<ms>` or `G4 S<s>`.
-    fn dwell(&mut self, command: &Command, now_ms: u32) -> Outcome {
-        let ms = match (command.value(b'P'), command.value(b'S')) {
-            (Ok(Some(p)), _) => p.to_int(),
-            (_, Ok(Some(s))) => s.to_scaled(3),
-            (Ok(None), Ok(None)) => Some(0),
-            (Err(e), _) | (_, Err(e)) => return Outcome::Failed(e.into()),
-        };
-        match ms {
-            Some(ms) if ms >= 0 => Outcome::Started(Running::Dwell { until_ms: now_ms.wrapping_add(ms as u32) }),
-            _ => Outcome::Failed(CommandError::OutOfRange(if command.has(b'P') { b'P' } else { b'S' })),
-        }
     }
 
     fn set_fan(&mut self, command: &Command) -> Result<(), CommandError> {
@@ -480,53 +535,6 @@ impl Machine {
         Ok(())
     }
 
-    fn set_accelerations(&mut self, command: &Command) -> Result<(), CommandError> {
-        let read = |letter| command.value(letter)?.map(|v| positive_milli(letter, v)).transpose();
-        let (s, p, r, t) = (read(b'S')?, read(b'P')?, read(b'R')?, read(b'T')?);
-        let settings = &mut self.settings;
-        // `S` sets print and travel together (older hosts send it); P and T
-        // given on the same line win.
-        if let Some(s) = s {
-            settings.print_accel_um_per_s2 = s;
-            settings.travel_accel_um_per_s2 = s;
-        }
-        if let Some(p) = p {
-            settings.print_accel_um_per_s2 = p;
-        }
-        if let Some(r) = r {
-            settings.retract_accel_um_per_s2 = r;
-        }
-        if let Some(t) = t {
-            settings.travel_accel_um_per_s2 = t;
-        }
-        Ok(())
-    }
-
-    fn set_advanced(&mut self, command: &Command) -> Result<(), CommandError> {
-        let mut settings = self.settings.clone();
-        if let Some(value) = command.value(b'J')? {
-            match value.to_scaled(3) {
-                Some(um @ 1..=300) => settings.junction_deviation_um = um,
-                _ => return Err(CommandError::OutOfRange(b'J')),
-            }
-        }
-        for (letter, slot) in
-            [(b'S', &mut settings.min_feed_um_per_s), (b'T', &mut settings.min_travel_feed_um_per_s)]
-        {
-            if let Some(value) = command.value(letter)? {
-                *slot = non_negative_milli(letter, value)?;
-            }
-        }
-        if let Some(value) = command.value(b'B')? {
-            match value.to_int() {
-                Some(us @ 0..=1_000_000) => settings.min_segment_time_us = us,
-                _ => return Err(CommandError::OutOfRange(b'B')),
-            }
-        }
-        self.settings = settings;
-        Ok(())
-    }
-
     /// ` T:… /… B:… /… @:… B@:…` (used by M105 and auto-reports).
     pub fn write_temperatures<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         ufmt::uwrite!(
@@ -546,7 +554,7 @@ impl Machine {
         for (letter, um) in AXIS_LETTERS.iter().zip(self.modal.logical_position()) {
             ufmt::uwrite!(out, "{}:{} ", char::from(*letter), micrometres_as_mm(um))?;
         }
-        let [x, y, z] = self.position_steps;
+        let [x, y, z, _] = self.motion.motor_steps();
         ufmt::uwrite!(out, "Count X:{} Y:{} Z:{}\n", x, y, z)
     }
 
@@ -554,7 +562,10 @@ impl Machine {
     fn echo<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
         let mut message = gcode::text_argument(text);
         let mut prefix = false;
-        if let Some(rest) = message.strip_prefix(b"E1 ").or_else(|| message.strip_prefix(b"e1 ")) {
+        if let Some(rest) = message
+            .strip_prefix(b"E1 ")
+            .or_else(|| message.strip_prefix(b"e1 "))
+        {
             prefix = true;
             message = rest;
         }
@@ -570,7 +581,12 @@ impl Machine {
         for (bit, name) in ENDSTOP_NAMES.iter().enumerate() {
             let level = self.endstop_levels >> bit & 1;
             let triggered = level == self.endstop_trigger_levels >> bit & 1;
-            ufmt::uwrite!(out, "{}: {}\n", *name, if triggered { "TRIGGERED" } else { "open" })?;
+            ufmt::uwrite!(
+                out,
+                "{}: {}\n",
+                *name,
+                if triggered { "TRIGGERED" } else { "open" }
+            )?;
         }
         Ok(())
     }
@@ -590,13 +606,20 @@ enum Outcome {
 
 /// Micrometres shown as millimetres with two decimals, rounded.
 fn micrometres_as_mm(um: i32) -> Fixed {
-    let rounded = if um >= 0 { (um + 5) / 10 } else { (um - 5) / 10 };
+    let rounded = if um >= 0 {
+        (um + 5) / 10
+    } else {
+        (um - 5) / 10
+    };
     Fixed::hundredths(rounded)
 }
 
 fn trim(text: &[u8]) -> &[u8] {
     let start = text.iter().position(|&b| b != b' ').unwrap_or(text.len());
-    let end = text.iter().rposition(|&b| b != b' ').map_or(start, |i| i + 1);
+    let end = text
+        .iter()
+        .rposition(|&b| b != b' ')
+        .map_or(start, |i| i + 1);
     &text[start..end.max(start)]
 }
 
@@ -624,6 +647,57 @@ fn settings_axes(command: &Command, values: &mut [i32; AXES]) -> Result<(), Comm
         }
     }
     *values = updated;
+    Ok(())
+}
+
+/// `M204 S|P|R|T`: accelerations in mm/s².
+fn set_accelerations(command: &Command, settings: &mut Settings) -> Result<(), CommandError> {
+    let read = |letter| {
+        command
+            .value(letter)?
+            .map(|v| positive_milli(letter, v))
+            .transpose()
+    };
+    let (s, p, r, t) = (read(b'S')?, read(b'P')?, read(b'R')?, read(b'T')?);
+    // `S` sets print and travel together (older hosts send it); P and T
+    // given on the same line win.
+    if let Some(s) = s {
+        settings.print_accel_um_per_s2 = s;
+        settings.travel_accel_um_per_s2 = s;
+    }
+    if let Some(p) = p {
+        settings.print_accel_um_per_s2 = p;
+    }
+    if let Some(r) = r {
+        settings.retract_accel_um_per_s2 = r;
+    }
+    if let Some(t) = t {
+        settings.travel_accel_um_per_s2 = t;
+    }
+    Ok(())
+}
+
+fn set_advanced(command: &Command, settings: &mut Settings) -> Result<(), CommandError> {
+    if let Some(value) = command.value(b'J')? {
+        match value.to_scaled(3) {
+            Some(um @ 1..=300) => settings.junction_deviation_um = um,
+            _ => return Err(CommandError::OutOfRange(b'J')),
+        }
+    }
+    for (letter, slot) in [
+        (b'S', &mut settings.min_feed_um_per_s),
+        (b'T', &mut settings.min_travel_feed_um_per_s),
+    ] {
+        if let Some(value) = command.value(letter)? {
+            *slot = non_negative_milli(letter, value)?;
+        }
+    }
+    if let Some(value) = command.value(b'B')? {
+        match value.to_int() {
+            Some(us @ 0..=1_000_000) => settings.min_segment_time_us = us,
+            _ => return Err(CommandError::OutOfRange(b'B')),
+        }
+    }
     Ok(())
 }
 
@@ -674,7 +748,7 @@ Cap:SDCARD:0
 Cap:AUTOREPORT_SD_STATUS:0
 Cap:THERMAL_PROTECTION:0
 Cap:MOTION_MODES:0
-Cap:ARCS:0
+Cap:ARCS:1
 Cap:BABYSTEPPING:0
 Cap:CHAMBER_TEMPERATURE:0
 ";

@@ -1,0 +1,320 @@
+//! The executor's motion commands: `G0`–`G3`, `G4`, `G28`, `M400`,
+//! `M18`/`M84`, and the main loop's motion duty ([`Machine::poll_motion`]).
+//!
+//! The executor speaks the modal state's machine coordinates (µm, `G92`
+//! offsets removed) and hands finished targets to [`crate::motion`]; it
+//! never waits for a move to be stepped out except where the G-code says
+//! so (`G4`, `M400`, `M18`/`M84`, `G28`).
+//!
+//! Choices that follow Marlin:
+//! - Soft limits of a Cartesian machine clamp the target on the axes that
+//!   have been homed (Marlin's `apply_motion_limits`); an axis that was
+//!   never homed is not limited, so it can be jogged to its switch.
+//!   Deltas and the arm refuse what they cannot reach instead.
+//! - Cold extrusion (`M302`): a move that would push filament while the
+//!   hot end is too cold still moves X/Y/Z, but not E
+//!   (`echo: cold extrusion prevented`); retractions always run.
+//! - `G28` names axes by their letters (`G28 X Y`); no letter: all.
+//!
+//! Our own: a motion fault (a hard limit hit outside homing, `M410`, a
+//! step-queue stop) loses the position, so moves are refused with
+//! `Error:` until the machine is homed again.
+
+use super::error::CommandError;
+use super::modal::{MotionMode, AXES};
+use super::{Machine, Outcome, Running};
+use crate::gcode::{Code, Command};
+use crate::motion::kinematics::MachineKinematics;
+use crate::motion::{ArcCentre, MotionError, StepFault, StepperRequest, StepperStatus, E};
+use ufmt::uWrite;
+
+impl<'q> Machine<'q> {
+    /// Every pass of the main loop, before [`Machine::poll`]: hand the step
+    /// interrupt's status to the planner side, refill the step queues, and
+    /// report what went wrong. The board then does what the returned
+    /// request says to its step generator.
+    pub fn poll_motion<W: uWrite + ?Sized>(
+        &mut self,
+        status: &StepperStatus,
+        now_ms: u32,
+        out: &mut W,
+    ) -> Result<StepperRequest, W::Error> {
+        let request = self.motion.poll(status, now_ms);
+        if let Some(error) = self.motion.take_error() {
+            self.motion_failed(error, out)?;
+        }
+        Ok(request)
+    }
+
+    /// Whether everything accepted has been stepped out.
+    pub fn motion_idle(&self) -> bool {
+        self.motion.is_idle()
+    }
+
+    /// Motor positions where queued motion ends, steps (X, Y, Z, E).
+    pub fn motor_steps(&self) -> [i32; 4] {
+        self.motion.motor_steps()
+    }
+
+    fn motion_failed<W: uWrite + ?Sized>(
+        &mut self,
+        error: MotionError,
+        out: &mut W,
+    ) -> Result<(), W::Error> {
+        match error {
+            MotionError::HomingFailed(_) => {
+                // Marlin halts when a switch never triggers: the machine
+                // may be pushing against its frame.
+                out.write_str("Error:Homing Failed\n")?;
+                self.kill(out)
+            }
+            MotionError::Fault(StepFault::Stopped) => {
+                // M410 or a kill: the steps already made are not counted
+                // back, so the position is unknown.
+                self.lose_position();
+                Ok(())
+            }
+            MotionError::Fault(StepFault::LimitHit(switches)) => {
+                self.lose_position();
+                ufmt::uwrite!(out, "Error:Endstop hit during a move (switches {}): motion stopped, home with G28\n", switches)
+            }
+            other => {
+                self.lose_position();
+                CommandError::Motion(other).write(out)
+            }
+        }
+    }
+
+    fn lose_position(&mut self) {
+        self.position_lost = true;
+        if matches!(
+            self.running,
+            Running::Homing | Running::WaitForMotion { .. } | Running::DwellAfterMotion { .. }
+        ) {
+            // What they waited for will not happen as planned; finish them
+            // (their `ok` follows) rather than hang the host.
+            self.wait_cancelled = true;
+        }
+    }
+
+    /// Does a running command finish now? Moves the `G4` from "wait for
+    /// motion" to "wait for the time".
+    pub(super) fn running_done<W: uWrite + ?Sized>(
+        &mut self,
+        now_ms: u32,
+        out: &mut W,
+    ) -> Result<bool, W::Error> {
+        if self.wait_cancelled {
+            return Ok(true);
+        }
+        Ok(match self.running {
+            Running::Idle => true,
+            Running::DwellAfterMotion { ms } => {
+                if self.motion.is_idle() {
+                    self.running = Running::Dwell {
+                        until_ms: now_ms.wrapping_add(ms),
+                    };
+                    ms == 0
+                } else {
+                    false
+                }
+            }
+            Running::Dwell { until_ms } => (now_ms.wrapping_sub(until_ms) as i32) >= 0,
+            Running::WaitForMotion { then_disable } => {
+                let idle = self.motion.is_idle();
+                if idle && then_disable {
+                    self.steppers_enabled = false;
+                }
+                idle
+            }
+            Running::Homing => {
+                if self.motion.is_homing() {
+                    false
+                } else {
+                    self.homing_finished(out)?;
+                    true
+                }
+            }
+        })
+    }
+
+    /// `G0`/`G1` (or bare axis words): validate fully, then hand over.
+    pub(super) fn linear_move<W: uWrite + ?Sized>(
+        &mut self,
+        command: &Command,
+        out: &mut W,
+    ) -> Result<(), CommandError> {
+        let mode = match command.code {
+            Code::G(0) => MotionMode::Rapid,
+            Code::G(1) => MotionMode::Linear,
+            _ => self.modal.motion_mode,
+        };
+        if matches!(
+            mode,
+            MotionMode::ClockwiseArc | MotionMode::CounterClockwiseArc
+        ) {
+            return self.arc_move(command, out);
+        }
+        let feed = self.modal.read_feed(command)?;
+        let target = self.modal.target(command)?;
+        self.modal.motion_mode = mode;
+        if let Some(feed) = feed {
+            self.modal.feed_um_per_s = feed;
+        }
+        let target = self.prepare_target(target, out)?;
+        let result = self.motion.line_to(target, self.modal.feed_um_per_s);
+        self.commit_move(target, result)
+    }
+
+    /// `G2`/`G3`: an arc needs a centre (`I`/`J`, relative to the start) or
+    /// a radius (`R`; negative for the arc over half a turn).
+    pub(super) fn arc_move<W: uWrite + ?Sized>(
+        &mut self,
+        command: &Command,
+        out: &mut W,
+    ) -> Result<(), CommandError> {
+        let clockwise = match command.code {
+            Code::G(2) => true,
+            Code::G(3) => false,
+            _ => self.modal.motion_mode == MotionMode::ClockwiseArc,
+        };
+        let feed = self.modal.read_feed(command)?;
+        let target = self.modal.target(command)?;
+        let offset = |letter| -> Result<Option<i32>, CommandError> {
+            command
+                .value(letter)?
+                .map(|value| self.modal.length_um(letter, value))
+                .transpose()
+        };
+        let (i, j, r) = (offset(b'I')?, offset(b'J')?, offset(b'R')?);
+        let centre = match (i, j, r) {
+            (None, None, Some(r)) => ArcCentre::Radius(r),
+            (None, None, None) => return Err(CommandError::Missing(b'R')),
+            (i, j, _) => ArcCentre::Offset([i.unwrap_or(0), j.unwrap_or(0)]),
+        };
+        self.modal.motion_mode = if clockwise {
+            MotionMode::ClockwiseArc
+        } else {
+            MotionMode::CounterClockwiseArc
+        };
+        if let Some(feed) = feed {
+            self.modal.feed_um_per_s = feed;
+        }
+        let target = self.prepare_target(target, out)?;
+        let result = self
+            .motion
+            .arc_to(target, centre, clockwise, self.modal.feed_um_per_s);
+        self.commit_move(target, result)
+    }
+
+    /// Checks shared by lines and arcs, and the Marlin adjustments of the
+    /// target (soft-limit clamp, cold extrusion).
+    fn prepare_target<W: uWrite + ?Sized>(
+        &mut self,
+        mut target: [i32; AXES],
+        out: &mut W,
+    ) -> Result<[i32; AXES], CommandError> {
+        if self.position_lost {
+            return Err(CommandError::PositionLost);
+        }
+        if let (MachineKinematics::Cartesian(_), Some(limits), false) = (
+            self.motion.config.kinematics,
+            self.motion.config.soft_limits,
+            self.motion.config.must_home,
+        ) {
+            let homed = self.motion.homed();
+            for axis in 0..3 {
+                if homed & (1 << axis) != 0 {
+                    let (min, max) = (
+                        (limits.min[axis] * 1000.0) as i32,
+                        (limits.max[axis] * 1000.0) as i32,
+                    );
+                    target[axis] = target[axis].clamp(min, max);
+                }
+            }
+        }
+        if target[E] > self.modal.position[E] && !self.extrusion_allowed() {
+            let _ = out.write_str("echo: cold extrusion prevented\n");
+            // Marlin drops the extrusion and keeps the new E as the
+            // position, so the next absolute E does not catch it up.
+            self.motion.set_extruder_position_um(target[E]);
+        }
+        Ok(target)
+    }
+
+    fn commit_move(
+        &mut self,
+        target: [i32; AXES],
+        result: Result<(), MotionError>,
+    ) -> Result<(), CommandError> {
+        match result {
+            Ok(()) => {
+                self.modal.position = target;
+                self.steppers_enabled = true;
+                Ok(())
+            }
+            Err(error) => Err(CommandError::Motion(error)),
+        }
+    }
+
+    /// Whether the hot end may push filament (above the cold-extrusion
+    /// limit, Marlin's 170 °C).
+    pub fn extrusion_allowed(&self) -> bool {
+        self.hotend.measured.0 >= 170
+    }
+
+    /// `G4 P<ms>` or `G4 S<s>`: first the queued moves finish (Marlin's
+    /// `planner.synchronize()`), then the pause.
+    pub(super) fn dwell(&mut self, command: &Command) -> Outcome {
+        let ms = match (command.value(b'P'), command.value(b'S')) {
+            (Ok(Some(p)), _) => p.to_int(),
+            (_, Ok(Some(s))) => s.to_scaled(3),
+            (Ok(None), Ok(None)) => Some(0),
+            (Err(e), _) | (_, Err(e)) => return Outcome::Failed(e.into()),
+        };
+        match ms {
+            Some(ms) if ms >= 0 => Outcome::Started(Running::DwellAfterMotion { ms: ms as u32 }),
+            _ => Outcome::Failed(CommandError::OutOfRange(if command.has(b'P') {
+                b'P'
+            } else {
+                b'S'
+            })),
+        }
+    }
+
+    /// `G28 [X] [Y] [Z]`: home the named axes (all when none is named),
+    /// after the queued moves.
+    pub(super) fn home(&mut self, command: &Command) -> Outcome {
+        let mut motors = 0u8;
+        for (axis, letter) in [b'X', b'Y', b'Z'].into_iter().enumerate() {
+            if command.has(letter) {
+                motors |= 1 << axis;
+            }
+        }
+        match self.motion.home(motors) {
+            Ok(()) => {
+                self.steppers_enabled = true;
+                Outcome::Started(Running::Homing)
+            }
+            Err(error) => Outcome::Failed(CommandError::Motion(error)),
+        }
+    }
+
+    /// Homing ended (successfully: a failure halted the machine). The homed
+    /// axes' logical positions restart from the home position: their `G92`
+    /// offsets are cleared, as in Marlin.
+    fn homing_finished<W: uWrite + ?Sized>(&mut self, _out: &mut W) -> Result<(), W::Error> {
+        let homed = self.motion.homed();
+        let position = self.motion.position_um();
+        for axis in 0..3 {
+            if homed & (1 << axis) != 0 {
+                self.modal.offset[axis] = 0;
+            }
+        }
+        self.modal.position[..3].copy_from_slice(&position[..3]);
+        if homed & 0b111 == 0b111 {
+            self.position_lost = false;
+        }
+        Ok(())
+    }
+}

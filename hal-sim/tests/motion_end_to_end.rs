@@ -1,0 +1,198 @@
+//! G-code in, steps out: the executor, planner and step generator together
+//! on the simulated board (Prusa i3: 100 steps/mm X/Y, 400 Z, 93 E; the Y
+//! motor's direction pin is inverted so +Y is the nozzle's +Y).
+
+use hal_sim::board::SimBoard;
+
+fn booted() -> SimBoard {
+    let mut board = SimBoard::new();
+    board.take_output();
+    board
+}
+
+fn homed() -> SimBoard {
+    let mut board = booted();
+    let output = board.run_gcode("G28\n", 60_000);
+    assert_eq!(output.replace("echo:busy: processing\n", ""), "ok\n");
+    assert_eq!(board.steps.setup_violations, 0);
+    board
+}
+
+#[test]
+fn g1_x10_makes_exactly_1000_x_steps_and_m114_reports_them() {
+    let mut board = homed();
+    let start = board.steps.positions();
+    let output = board.run_gcode("G1 X10 Y-0 F600\nM400\nM114\n", 10_000);
+    assert_eq!(
+        output,
+        "ok\nok\nX:10.00 Y:0.00 Z:0.00 E:0.00 Count X:1000 Y:0 Z:0\nok\n"
+    );
+    assert_eq!(board.steps.positions()[0] - start[0], 1000);
+    assert_eq!(board.steps.positions()[1..], start[1..]);
+}
+
+#[test]
+fn m400_answers_only_once_the_move_has_been_stepped_out() {
+    let mut board = homed();
+    // 100 mm at 100 mm/s with 1500 mm/s² ramps: 1.07 s.
+    board.receive(b"G1 X100 F6000\nM400\n");
+    let begun = board.now_ms();
+    let mut output = String::new();
+    while !output.contains("ok\nok\n") {
+        board.advance(1);
+        output.push_str(&board.take_output());
+        assert!(board.now_ms() - begun < 5_000, "{output}");
+    }
+    let last_step = board.steps.motors[0].last_step().unwrap() / 2_000;
+    assert!(
+        board.now_ms() as u64 >= last_step,
+        "ok at {} ms, last step at {last_step} ms",
+        board.now_ms()
+    );
+    assert!(
+        board.now_ms() - begun >= 1_060,
+        "{} ms",
+        board.now_ms() - begun
+    );
+    assert_eq!(board.steps.positions()[0], 10_000);
+}
+
+#[test]
+fn relative_moves_g92_and_inches_land_on_exact_steps() {
+    let mut board = homed();
+    let output = board.run_gcode(
+        "G91\nG1 X5 Y5 Z0.25 F3000\nG1 X-2\nG90\nG92 X0\nG1 X1\nG20\nG1 Y1\nG21\nM114\n",
+        20_000,
+    );
+    assert!(
+        output.ends_with("X:1.00 Y:25.40 Z:0.25 E:0.00 Count X:400 Y:2540 Z:100\nok\n"),
+        "{output}"
+    );
+    assert_eq!(board.steps.positions()[..3], [400, 2540, 100]);
+}
+
+#[test]
+fn a_full_circle_with_g2_ends_where_it_started() {
+    let mut board = homed();
+    let output = board.run_gcode(
+        "G1 X50 Y50 F6000\nG2 X50 Y50 I10 J0 F3000\nG3 X70 Y50 R10\nM400\n",
+        30_000,
+    );
+    assert_eq!(output, "ok\nok\nok\nok\n");
+    assert_eq!(board.steps.positions()[..2], [7000, 5000]);
+    // The circle passed through (60, 40) and (60, 60), ±1 step.
+    let xs: Vec<i64> = board.steps.motors[0]
+        .steps
+        .iter()
+        .scan(0i64, |p, s| {
+            *p += s.1 as i64;
+            Some(*p)
+        })
+        .collect();
+    assert!(xs.iter().max().unwrap() >= &7000);
+}
+
+#[test]
+fn soft_limits_clamp_moves_of_homed_axes_like_marlin() {
+    let mut board = homed();
+    let output = board.run_gcode("G1 X250 Y-10 F12000\nM400\nM114\n", 20_000);
+    assert!(
+        output.ends_with("X:200.00 Y:0.00 Z:0.00 E:0.00 Count X:20000 Y:0 Z:0\nok\n"),
+        "{output}"
+    );
+    assert_eq!(board.steps.positions()[..2], [20_000, 0]);
+}
+
+#[test]
+fn a_cold_hot_end_moves_x_but_never_pushes_filament() {
+    let mut board = homed();
+    // Marlin keeps E = 5 as the position: E4 is a 1 mm retraction.
+    let output = board.run_gcode("G1 X10 E5 F600\nG1 E4\nM400\n", 10_000);
+    assert_eq!(output, "echo: cold extrusion prevented\nok\nok\nok\n");
+    assert_eq!(board.steps.positions()[0], 1000);
+    // The retraction ran (93 steps/mm): only E moves backwards.
+    assert_eq!(board.steps.positions()[3], -93);
+}
+
+#[test]
+fn m410_stops_a_move_at_once_and_moves_wait_for_homing() {
+    let mut board = homed();
+    board.receive(b"G1 X150 F6000\n");
+    board.advance(500);
+    board.take_output();
+    let before = board.steps.positions()[0];
+    assert!(before > 0 && before < 15_000, "{before}");
+    board.inject(b"M410\n");
+    board.advance(20);
+    let stopped_at = board.steps.positions()[0];
+    assert!(
+        stopped_at - before < 300,
+        "{} steps after M410",
+        stopped_at - before
+    );
+    board.advance(500);
+    assert_eq!(board.steps.positions()[0], stopped_at);
+    let output = board.run_gcode("G1 X10\n", 1_000);
+    assert!(
+        output
+            .contains("ok\nError:Position unknown after a motion stop: home with G28 first\nok\n"),
+        "{output}"
+    );
+    assert_eq!(board.steps.positions()[0], stopped_at);
+    // Homing makes the machine usable again.
+    board.set_endstops(Box::new(move |p: &[i64; 4]| {
+        (0..3).filter(|&m| p[m] <= 0).fold(0, |b, m| b | 1 << m)
+    }));
+    let output = board.run_gcode("G28\nG1 X10\nM400\n", 60_000);
+    assert_eq!(
+        output.replace("echo:busy: processing\n", ""),
+        "ok\nok\nok\n"
+    );
+    assert_eq!(board.steps.positions()[0], 1000);
+}
+
+#[test]
+fn m112_during_a_fast_move_stops_the_steps_and_refuses_more() {
+    let mut board = homed();
+    board.receive(b"G1 X180 F12000\n");
+    board.advance(400);
+    board.inject(b"M112\n");
+    board.advance(2);
+    let at = board.steps.positions()[0];
+    board.advance(1_000);
+    assert_eq!(board.steps.positions()[0], at);
+    assert!(board.link.machine.is_halted());
+    assert!(!board.link.machine.steppers_enabled());
+    let output = board.run_gcode("G1 X0\n", 200);
+    assert!(
+        output.contains("Error:Printer halted. kill() called!\nok\n"),
+        "{output}"
+    );
+}
+
+#[test]
+fn homing_without_a_switch_fails_and_halts() {
+    let mut board = booted();
+    board.set_endstops(Box::new(|_: &[i64; 4]| 0));
+    let output = board.run_gcode("G28 X\n", 120_000);
+    assert!(
+        output.ends_with("Error:Homing Failed\nError:Printer halted. kill() called!\n"),
+        "{output}"
+    );
+    assert!(board.link.machine.is_halted());
+}
+
+#[test]
+fn busy_keepalives_go_out_while_homing_takes_long() {
+    let mut board = booted();
+    // X's switch 150 mm away: the fast approach takes 3 s at 50 mm/s.
+    board.set_endstops(Box::new(|p: &[i64; 4]| {
+        let mut bits = if p[0] <= -15_000 { 1 } else { 0 };
+        bits |= (1..3).filter(|&m| p[m] <= 0).fold(0, |b, m| b | 1 << m);
+        bits
+    }));
+    let output = board.run_gcode("G28\n", 60_000);
+    assert!(output.starts_with("echo:busy: processing\n"), "{output}");
+    assert!(output.ends_with("ok\n"));
+    assert_eq!(board.steps.positions()[0], -15_000);
+}
