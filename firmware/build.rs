@@ -24,19 +24,9 @@ struct Divider {
 
 const DIVIDERS: &[Divider] = &[
     // Stock RAMPS 1.4: 100 k NTC (β 3950), 4.7 kΩ pull-up.
-    Divider {
-        name: "NTC100K_B3950_4K7",
-        r25_ohms: 100_000.0,
-        beta: 3950.0,
-        series_ohms: 4_700.0,
-    },
+    Divider { name: "NTC100K_B3950_4K7", r25_ohms: 100_000.0, beta: 3950.0, series_ohms: 4_700.0 },
     // SPEC §4 (extrusion line): the same NTC on a 4.8 kΩ resistor.
-    Divider {
-        name: "NTC100K_B3950_4K8",
-        r25_ohms: 100_000.0,
-        beta: 3950.0,
-        series_ohms: 4_800.0,
-    },
+    Divider { name: "NTC100K_B3950_4K8", r25_ohms: 100_000.0, beta: 3950.0, series_ohms: 4_800.0 },
 ];
 
 /// Hottest temperature in a table: below its ADC count the sensor is
@@ -116,8 +106,7 @@ fn main() {
             // The longest segment from `start` that keeps its bound (a
             // one-count segment always does: it is checked below).
             let mut end = start + 1;
-            let mut errors = segment_errors(d, start, end)
-                .expect("a one-count segment breaks the bound: refine the table");
+            let mut errors = segment_errors(d, start, end).expect("a one-count segment breaks the bound: refine the table");
             while end < last {
                 match segment_errors(d, start, end + 1) {
                     Some(e) => {
@@ -149,37 +138,16 @@ fn main() {
             cold = COLDEST_C,
         )
         .unwrap();
-        writeln!(
-            out,
-            "#[cfg_attr(target_arch = \"avr\", link_section = \".progmem.data\")]"
-        )
-        .unwrap();
-        writeln!(
-            out,
-            "pub static {}: crate::progmem::Flash<[(u16, i32); {}]> = crate::progmem::Flash::new([",
-            d.name,
-            rows.len()
-        )
-        .unwrap();
+        writeln!(out, "#[cfg_attr(target_arch = \"avr\", link_section = \".progmem.data\")]").unwrap();
+        writeln!(out, "pub static {}: crate::progmem::Flash<[(u16, i32); {}]> = crate::progmem::Flash::new([", d.name, rows.len()).unwrap();
         for adc in &rows {
             writeln!(out, "    ({adc}, {}),", stored(d, *adc)).unwrap();
         }
         writeln!(out, "]);").unwrap();
-        writeln!(
-            out,
-            "/// Worst interpolation error of [`{}`] from 0 to 300 °C, hundredths of °C.",
-            d.name
-        )
-        .unwrap();
-        writeln!(
-            out,
-            "pub const {}_ERROR_CENTI: i32 = {inside_centi};",
-            d.name
-        )
-        .unwrap();
+        writeln!(out, "/// Worst interpolation error of [`{}`] from 0 to 300 °C, hundredths of °C.", d.name).unwrap();
+        writeln!(out, "pub const {}_ERROR_CENTI: i32 = {inside_centi};", d.name).unwrap();
     }
-    let path =
-        std::path::Path::new(&std::env::var("OUT_DIR").unwrap()).join("thermistor_tables.rs");
+    let path = std::path::Path::new(&std::env::var("OUT_DIR").unwrap()).join("thermistor_tables.rs");
     std::fs::write(path, out).unwrap();
     println!("cargo:rerun-if-changed=build.rs");
 }

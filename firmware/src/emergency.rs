@@ -77,9 +77,7 @@ impl Default for EmergencyScanner {
 
 impl EmergencyScanner {
     pub const fn new() -> Self {
-        Self {
-            state: State::LineStart,
-        }
+        Self { state: State::LineStart }
     }
 
     /// Feed one received byte; returns the emergency it completes, if any.
@@ -91,23 +89,13 @@ impl EmergencyScanner {
             }
             (State::LineStart, b' ' | b'\t') => (State::LineStart, None),
             (State::LineStart, b'N' | b'n') => (State::LineNumber, None),
-            (State::LineStart | State::AfterLineNumber, b'M' | b'm') => (
-                State::Code {
-                    value: 0,
-                    digits: 0,
-                },
-                None,
-            ),
+            (State::LineStart | State::AfterLineNumber, b'M' | b'm') => (State::Code { value: 0, digits: 0 }, None),
             (State::LineNumber, b'0'..=b'9' | b'-') => (State::LineNumber, None),
             (State::LineNumber, b' ' | b'\t') => (State::AfterLineNumber, None),
             (State::AfterLineNumber, b' ' | b'\t') => (State::AfterLineNumber, None),
-            (State::Code { value, digits }, b'0'..=b'9') if digits < 3 => (
-                State::Code {
-                    value: value * 10 + u16::from(byte - b'0'),
-                    digits: digits + 1,
-                },
-                None,
-            ),
+            (State::Code { value, digits }, b'0'..=b'9') if digits < 3 => {
+                (State::Code { value: value * 10 + u16::from(byte - b'0'), digits: digits + 1 }, None)
+            }
             (State::Code { .. }, b' ' | b'\t' | b'*' | b';') => {
                 let found = self.finish();
                 (State::Ignore, found)
@@ -120,18 +108,9 @@ impl EmergencyScanner {
 
     fn finish(&self) -> Option<Emergency> {
         match self.state {
-            State::Code {
-                value: 112,
-                digits: 3,
-            } => Some(Emergency::Kill),
-            State::Code {
-                value: 108,
-                digits: 3,
-            } => Some(Emergency::CancelWait),
-            State::Code {
-                value: 410,
-                digits: 3,
-            } => Some(Emergency::QuickStop),
+            State::Code { value: 112, digits: 3 } => Some(Emergency::Kill),
+            State::Code { value: 108, digits: 3 } => Some(Emergency::CancelWait),
+            State::Code { value: 410, digits: 3 } => Some(Emergency::QuickStop),
             _ => None,
         }
     }
@@ -171,9 +150,6 @@ mod tests {
 
     #[test]
     fn each_line_starts_afresh() {
-        assert_eq!(
-            scan(b"G28\nM112\nM105\nM410\n"),
-            [Emergency::Kill, Emergency::QuickStop]
-        );
+        assert_eq!(scan(b"G28\nM112\nM105\nM410\n"), [Emergency::Kill, Emergency::QuickStop]);
     }
 }

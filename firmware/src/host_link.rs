@@ -29,10 +29,7 @@ pub struct HostLink<'q> {
 
 impl<'q> HostLink<'q> {
     pub fn new(machine: Machine<'q>) -> Self {
-        Self {
-            machine,
-            assembler: LineAssembler::new(),
-        }
+        Self { machine, assembler: LineAssembler::new() }
     }
 
     /// One pass: emergencies first, then input, then execution.

@@ -38,12 +38,7 @@ impl Default for LineAssembler {
 
 impl LineAssembler {
     pub const fn new() -> Self {
-        Self {
-            buffer: heapless::Vec::new(),
-            handed_out: false,
-            overflowed: false,
-            damaged: false,
-        }
+        Self { buffer: heapless::Vec::new(), handed_out: false, overflowed: false, damaged: false }
     }
 
     /// Mark the line being received as damaged (bytes were lost).

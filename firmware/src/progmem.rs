@@ -140,10 +140,7 @@ impl FlashStr {
 }
 
 impl ufmt::uDisplay for FlashStr {
-    fn fmt<W: ufmt::uWrite + ?Sized>(
-        &self,
-        f: &mut ufmt::Formatter<'_, W>,
-    ) -> Result<(), W::Error> {
+    fn fmt<W: ufmt::uWrite + ?Sized>(&self, f: &mut ufmt::Formatter<'_, W>) -> Result<(), W::Error> {
         self.for_each_piece(|text| f.write_str(text))
     }
 }
@@ -184,9 +181,7 @@ mod flash_str_tests {
         let mut out = Text::default();
         crate::flash_str!("").write_to(&mut out).unwrap();
         crate::flash_str!("Cap:EEPROM:").write_to(&mut out).unwrap();
-        crate::flash_str!("0123456789abcdefXYZ")
-            .write_to(&mut out)
-            .unwrap();
+        crate::flash_str!("0123456789abcdefXYZ").write_to(&mut out).unwrap();
         ufmt::uwrite!(out, "[{}]", crate::flash_str!("mid")).unwrap();
         assert_eq!(out.0, "Cap:EEPROM:0123456789abcdefXYZ[mid]");
     }

@@ -35,9 +35,7 @@ impl LineRejection {
     pub fn message(self) -> crate::progmem::FlashStr {
         match self {
             Self::ChecksumMismatch => crate::flash_str!("checksum mismatch"),
-            Self::LineNumberOutOfOrder => {
-                crate::flash_str!("Line Number is not Last Line Number+1")
-            }
+            Self::LineNumberOutOfOrder => crate::flash_str!("Line Number is not Last Line Number+1"),
             Self::NoChecksum => crate::flash_str!("No Checksum with line number"),
             Self::NoLineNumberWithChecksum => crate::flash_str!("No Line Number with checksum"),
             Self::MalformedHeader => crate::flash_str!("Malformed line number or checksum"),
@@ -62,10 +60,7 @@ impl Default for HostProtocol {
 
 impl HostProtocol {
     pub const fn new() -> Self {
-        Self {
-            last_line: 0,
-            numbered: false,
-        }
+        Self { last_line: 0, numbered: false }
     }
 
     pub fn last_line(&self) -> i32 {
@@ -104,8 +99,7 @@ impl HostProtocol {
         if actual != expected {
             return Err(LineRejection::ChecksumMismatch);
         }
-        let (number, used) =
-            parse_line_number(&text[start + 1..star]).ok_or(LineRejection::MalformedHeader)?;
+        let (number, used) = parse_line_number(&text[start + 1..star]).ok_or(LineRejection::MalformedHeader)?;
         let body = &text[start + 1 + used..star];
         if let Some(argument) = m110_argument(body) {
             // `N<n> M110 N<m>` numbers from m; `N<n> M110` from n.
@@ -120,20 +114,11 @@ impl HostProtocol {
 
     /// Write the reply to a refused line: the error, a resend request when
     /// the host numbers its lines, and `ok` (Marlin's order).
-    pub fn write_rejection<W: uWrite + ?Sized>(
-        &self,
-        rejection: LineRejection,
-        out: &mut W,
-    ) -> Result<(), W::Error> {
+    pub fn write_rejection<W: uWrite + ?Sized>(&self, rejection: LineRejection, out: &mut W) -> Result<(), W::Error> {
         out.write_str("Error:")?;
         rejection.message().write_to(out)?;
         if self.numbered {
-            ufmt::uwrite!(
-                out,
-                ", Last Line: {}\nResend: {}\n",
-                self.last_line,
-                self.last_line.wrapping_add(1)
-            )?;
+            ufmt::uwrite!(out, ", Last Line: {}\nResend: {}\n", self.last_line, self.last_line.wrapping_add(1))?;
         } else {
             out.write_str("\n")?;
         }
@@ -153,9 +138,7 @@ fn parse_checksum(text: &[u8]) -> Option<u8> {
     if digits == 0 || digits > 3 || text[digits..].iter().any(|&b| b != b' ') {
         return None;
     }
-    text[..digits]
-        .iter()
-        .try_fold(0u8, |sum, &b| sum.checked_mul(10)?.checked_add(b - b'0'))
+    text[..digits].iter().try_fold(0u8, |sum, &b| sum.checked_mul(10)?.checked_add(b - b'0'))
 }
 
 /// `Some(N argument)` when the body's command is `M110` (the numbering
@@ -181,22 +164,14 @@ mod tests {
     }
 
     fn accept(protocol: &mut HostProtocol, line: &str) -> Result<String, LineRejection> {
-        protocol
-            .accept(Line::Text(line.as_bytes()))
-            .map(|body| String::from_utf8(body.to_vec()).unwrap())
+        protocol.accept(Line::Text(line.as_bytes())).map(|body| String::from_utf8(body.to_vec()).unwrap())
     }
 
     #[test]
     fn numbered_lines_in_order_are_accepted_and_stripped() {
         let mut p = HostProtocol::new();
-        assert_eq!(
-            accept(&mut p, &with_checksum("N1 G1 X5")),
-            Ok(" G1 X5".into())
-        );
-        assert_eq!(
-            accept(&mut p, &with_checksum("N2 M105")),
-            Ok(" M105".into())
-        );
+        assert_eq!(accept(&mut p, &with_checksum("N1 G1 X5")), Ok(" G1 X5".into()));
+        assert_eq!(accept(&mut p, &with_checksum("N2 M105")), Ok(" M105".into()));
         assert_eq!(p.last_line(), 2);
     }
 
@@ -227,44 +202,27 @@ mod tests {
         assert_eq!(err, LineRejection::ChecksumMismatch);
         let mut out = Text::default();
         p.write_rejection(err, &mut out).unwrap();
-        assert_eq!(
-            out.0,
-            "Error:checksum mismatch, Last Line: 1\nResend: 2\nok\n"
-        );
+        assert_eq!(out.0, "Error:checksum mismatch, Last Line: 1\nResend: 2\nok\n");
     }
 
     #[test]
     fn a_skipped_line_number_is_refused() {
         let mut p = HostProtocol::new();
         accept(&mut p, &with_checksum("N1 G28")).unwrap();
-        assert_eq!(
-            accept(&mut p, &with_checksum("N3 G28")),
-            Err(LineRejection::LineNumberOutOfOrder)
-        );
+        assert_eq!(accept(&mut p, &with_checksum("N3 G28")), Err(LineRejection::LineNumberOutOfOrder));
         let mut out = Text::default();
-        p.write_rejection(LineRejection::LineNumberOutOfOrder, &mut out)
-            .unwrap();
-        assert_eq!(
-            out.0,
-            "Error:Line Number is not Last Line Number+1, Last Line: 1\nResend: 2\nok\n"
-        );
+        p.write_rejection(LineRejection::LineNumberOutOfOrder, &mut out).unwrap();
+        assert_eq!(out.0, "Error:Line Number is not Last Line Number+1, Last Line: 1\nResend: 2\nok\n");
     }
 
     #[test]
     fn a_number_without_checksum_and_a_checksum_without_number_are_refused() {
         let mut p = HostProtocol::new();
         assert_eq!(accept(&mut p, "N1 G28"), Err(LineRejection::NoChecksum));
-        assert_eq!(
-            accept(&mut p, "G28*18"),
-            Err(LineRejection::NoLineNumberWithChecksum)
-        );
+        assert_eq!(accept(&mut p, "G28*18"), Err(LineRejection::NoLineNumberWithChecksum));
         let mut out = Text::default();
-        p.write_rejection(LineRejection::NoChecksum, &mut out)
-            .unwrap();
-        assert_eq!(
-            out.0,
-            "Error:No Checksum with line number, Last Line: 0\nResend: 1\nok\n"
-        );
+        p.write_rejection(LineRejection::NoChecksum, &mut out).unwrap();
+        assert_eq!(out.0, "Error:No Checksum with line number, Last Line: 0\nResend: 1\nok\n");
     }
 
     #[test]
@@ -279,13 +237,7 @@ mod tests {
     #[test]
     fn a_garbled_checksum_field_is_refused() {
         let mut p = HostProtocol::new();
-        assert_eq!(
-            accept(&mut p, "N1 G28*1x"),
-            Err(LineRejection::MalformedHeader)
-        );
-        assert_eq!(
-            accept(&mut p, "N1 G28*999"),
-            Err(LineRejection::MalformedHeader)
-        );
+        assert_eq!(accept(&mut p, "N1 G28*1x"), Err(LineRejection::MalformedHeader));
+        assert_eq!(accept(&mut p, "N1 G28*999"), Err(LineRejection::MalformedHeader));
     }
 }

@@ -8,11 +8,7 @@
 use ufmt::{uWrite, Formatter};
 
 /// Write `mantissa × 10^(−digits)` with exactly `digits` decimals.
-pub fn write_fixed<W: uWrite + ?Sized>(
-    f: &mut Formatter<'_, W>,
-    mantissa: i32,
-    digits: u8,
-) -> Result<(), W::Error> {
+pub fn write_fixed<W: uWrite + ?Sized>(f: &mut Formatter<'_, W>, mantissa: i32, digits: u8) -> Result<(), W::Error> {
     let mut divisor: u32 = 1;
     for _ in 0..digits {
         divisor *= 10;
@@ -46,10 +42,7 @@ pub struct Fixed {
 impl Fixed {
     /// Hundredths (`1234` → `12.34`), Marlin's usual precision.
     pub const fn hundredths(mantissa: i32) -> Self {
-        Self {
-            mantissa,
-            digits: 2,
-        }
+        Self { mantissa, digits: 2 }
     }
 }
 
@@ -66,11 +59,7 @@ pub struct Printable<'a>(pub &'a [u8]);
 impl ufmt::uDisplay for Printable<'_> {
     fn fmt<W: uWrite + ?Sized>(&self, f: &mut Formatter<'_, W>) -> Result<(), W::Error> {
         for &byte in self.0 {
-            let shown = if (0x20..0x7f).contains(&byte) && byte != b'"' {
-                byte
-            } else {
-                b'?'
-            };
+            let shown = if (0x20..0x7f).contains(&byte) && byte != b'"' { byte } else { b'?' };
             f.write_char(char::from(shown))?;
         }
         Ok(())
@@ -108,20 +97,8 @@ mod tests {
         assert_eq!(shown(Fixed::hundredths(21050)), "210.50");
         assert_eq!(shown(Fixed::hundredths(-5)), "-0.05");
         assert_eq!(shown(Fixed::hundredths(0)), "0.00");
-        assert_eq!(
-            shown(Fixed {
-                mantissa: 7,
-                digits: 0
-            }),
-            "7"
-        );
-        assert_eq!(
-            shown(Fixed {
-                mantissa: i32::MIN,
-                digits: 3
-            }),
-            "-2147483.648"
-        );
+        assert_eq!(shown(Fixed { mantissa: 7, digits: 0 }), "7");
+        assert_eq!(shown(Fixed { mantissa: i32::MIN, digits: 3 }), "-2147483.648");
     }
 
     #[test]

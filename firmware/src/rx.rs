@@ -32,14 +32,7 @@ pub struct RxConsumer<'a> {
 /// Split a queue into its two ends.
 pub fn split(queue: &mut RxQueue) -> (RxProducer<'_>, RxConsumer<'_>) {
     let (producer, consumer) = queue.split();
-    (
-        RxProducer {
-            queue: producer,
-            dropped: 0,
-            emergency: EmergencyScanner::new(),
-        },
-        RxConsumer { queue: consumer },
-    )
+    (RxProducer { queue: producer, dropped: 0, emergency: EmergencyScanner::new() }, RxConsumer { queue: consumer })
 }
 
 impl RxProducer<'_> {

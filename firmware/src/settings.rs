@@ -95,28 +95,16 @@ impl Settings {
             self.min_segment_time_us,
             milli(self.min_feed_um_per_s),
             milli(self.min_travel_feed_um_per_s),
-            Fixed {
-                mantissa: self.junction_deviation_um,
-                digits: 3
-            }
+            Fixed { mantissa: self.junction_deviation_um, digits: 3 }
         )?;
         crate::flash_str!("echo:; Feedrate and flow:\necho:  M220 S").write_to(out)?;
-        ufmt::uwrite!(
-            out,
-            "{}\necho:  M221 S{}\n",
-            self.feed_percent,
-            self.flow_percent
-        )
+        ufmt::uwrite!(out, "{}\necho:  M221 S{}\n", self.feed_percent, self.flow_percent)
     }
 }
 
 /// A milli-unit value with two decimals, rounded (Marlin prints two).
 fn milli(value: i32) -> Fixed {
-    let rounded = if value >= 0 {
-        (value + 5) / 10
-    } else {
-        (value - 5) / 10
-    };
+    let rounded = if value >= 0 { (value + 5) / 10 } else { (value - 5) / 10 };
     Fixed::hundredths(rounded)
 }
 

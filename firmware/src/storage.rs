@@ -68,10 +68,7 @@ pub struct Stored {
 }
 
 /// Save `settings` into the slot not holding the newest image.
-pub fn save(
-    storage: &mut (impl NonVolatile + ?Sized),
-    settings: &Settings,
-) -> Result<Stored, LoadError> {
+pub fn save(storage: &mut (impl NonVolatile + ?Sized), settings: &Settings) -> Result<Stored, LoadError> {
     if storage.capacity() < STORAGE_NEEDED {
         return Err(LoadError::TooSmall);
     }
@@ -92,10 +89,7 @@ pub fn save(
             storage.write(base + index, image[index]);
         }
     }
-    Ok(Stored {
-        bytes: SLOT_LEN,
-        crc: u16::from_le_bytes([image[7], image[8]]),
-    })
+    Ok(Stored { bytes: SLOT_LEN, crc: u16::from_le_bytes([image[7], image[8]]) })
 }
 
 /// Load the newest valid image.
@@ -106,18 +100,10 @@ pub fn load(storage: &mut (impl NonVolatile + ?Sized)) -> Result<(Settings, Stor
     match newest(storage) {
         Some((slot, _)) => {
             let image = read_slot(storage, slot);
-            Ok((
-                decode(&image),
-                Stored {
-                    bytes: SLOT_LEN,
-                    crc: u16::from_le_bytes([image[7], image[8]]),
-                },
-            ))
+            Ok((decode(&image), Stored { bytes: SLOT_LEN, crc: u16::from_le_bytes([image[7], image[8]]) }))
         }
         // Say why nothing loaded: the first slot's problem is as good as any.
-        None => Err(check(&read_slot(storage, 0))
-            .err()
-            .unwrap_or(LoadError::NoImage)),
+        None => Err(check(&read_slot(storage, 0)).err().unwrap_or(LoadError::NoImage)),
     }
 }
 
@@ -175,11 +161,7 @@ fn crc16(mut crc: u16, bytes: &[u8]) -> u16 {
     for &byte in bytes {
         crc ^= u16::from(byte) << 8;
         for _ in 0..8 {
-            crc = if crc & 0x8000 != 0 {
-                (crc << 1) ^ 0x1021
-            } else {
-                crc << 1
-            };
+            crc = if crc & 0x8000 != 0 { (crc << 1) ^ 0x1021 } else { crc << 1 };
         }
     }
     crc
@@ -192,27 +174,10 @@ fn fields(settings: &Settings) -> [i32; 21] {
     let [e, f, g, h] = s.max_feed_um_per_s;
     let [i, j, k, l] = s.max_accel_um_per_s2;
     [
-        a,
-        b,
-        c,
-        d,
-        e,
-        f,
-        g,
-        h,
-        i,
-        j,
-        k,
-        l,
-        s.print_accel_um_per_s2,
-        s.retract_accel_um_per_s2,
-        s.travel_accel_um_per_s2,
-        s.junction_deviation_um,
-        s.min_feed_um_per_s,
-        s.min_travel_feed_um_per_s,
-        s.min_segment_time_us,
-        s.feed_percent,
-        s.flow_percent,
+        a, b, c, d, e, f, g, h, i, j, k, l,
+        s.print_accel_um_per_s2, s.retract_accel_um_per_s2, s.travel_accel_um_per_s2,
+        s.junction_deviation_um, s.min_feed_um_per_s, s.min_travel_feed_um_per_s,
+        s.min_segment_time_us, s.feed_percent, s.flow_percent,
     ]
 }
 
@@ -269,11 +234,7 @@ impl<const N: usize> Default for MemoryStorage<N> {
 impl<const N: usize> MemoryStorage<N> {
     /// Blank, like an erased EEPROM (all 0xFF).
     pub const fn new() -> Self {
-        Self {
-            bytes: [0xFF; N],
-            writes_before_power_loss: None,
-            writes: 0,
-        }
+        Self { bytes: [0xFF; N], writes_before_power_loss: None, writes: 0 }
     }
 }
 
@@ -343,17 +304,11 @@ mod tests {
         save(&mut reference, &custom()).unwrap();
         for byte in 0..SLOT_LEN {
             for bit in 0..8 {
-                let mut eeprom = Eeprom {
-                    bytes: reference.bytes,
-                    writes_before_power_loss: None,
-                    writes: 0,
-                };
+                let mut eeprom = Eeprom { bytes: reference.bytes, writes_before_power_loss: None, writes: 0 };
                 eeprom.bytes[byte] ^= 1 << bit;
                 match load(&mut eeprom) {
                     Err(_) => {}
-                    Ok((settings, _)) => {
-                        panic!("flip of byte {byte} bit {bit} loaded {settings:?}")
-                    }
+                    Ok((settings, _)) => panic!("flip of byte {byte} bit {bit} loaded {settings:?}"),
                 }
             }
         }
@@ -374,10 +329,7 @@ mod tests {
         let mut eeprom = Eeprom::new();
         save(&mut eeprom, &custom()).unwrap();
         eeprom.bytes[2] = LAYOUT_VERSION + 1;
-        assert_eq!(
-            load(&mut eeprom),
-            Err(LoadError::OldVersion(LAYOUT_VERSION + 1))
-        );
+        assert_eq!(load(&mut eeprom), Err(LoadError::OldVersion(LAYOUT_VERSION + 1)));
     }
 
     #[test]
@@ -391,10 +343,7 @@ mod tests {
             save(&mut eeprom, &new).unwrap();
             eeprom.writes_before_power_loss = None;
             let (loaded, _) = load(&mut eeprom).unwrap();
-            assert!(
-                loaded == old || loaded == new,
-                "cut after {cut} writes: {loaded:?}"
-            );
+            assert!(loaded == old || loaded == new, "cut after {cut} writes: {loaded:?}");
         }
     }
 
@@ -407,11 +356,7 @@ mod tests {
         // A third save goes to slot 0 again, which holds the same payload:
         // only the sequence number and CRC change.
         save(&mut eeprom, &custom()).unwrap();
-        assert!(
-            eeprom.writes - writes <= 4,
-            "{} writes",
-            eeprom.writes - writes
-        );
+        assert!(eeprom.writes - writes <= 4, "{} writes", eeprom.writes - writes);
     }
 
     #[test]

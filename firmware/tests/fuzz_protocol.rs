@@ -10,10 +10,7 @@ use hal_sim::board::SimBoard;
 use proptest::prelude::*;
 
 fn config() -> ProptestConfig {
-    ProptestConfig {
-        cases: 2_000,
-        ..ProptestConfig::default()
-    }
+    ProptestConfig { cases: 2_000, ..ProptestConfig::default() }
 }
 
 /// Feed lines one by one and count the `ok`s (M105's `ok T:` counts too).
@@ -28,10 +25,7 @@ fn oks_for(lines: &[Vec<u8>]) -> (usize, String) {
     let bytes: usize = lines.iter().map(|l| l.len() + 1).sum();
     board.advance(bytes as u32 / 10 + 20);
     let output = board.take_output();
-    let oks = output
-        .lines()
-        .filter(|l| *l == "ok" || l.starts_with("ok "))
-        .count();
+    let oks = output.lines().filter(|l| *l == "ok" || l.starts_with("ok ")).count();
     (oks, output)
 }
 
@@ -94,19 +88,13 @@ proptest! {
 #[test]
 fn the_corpus_is_answered_line_by_line() {
     let corpus = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus");
-    let mut files: Vec<_> = std::fs::read_dir(&corpus)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
+    let mut files: Vec<_> = std::fs::read_dir(&corpus).unwrap().map(|e| e.unwrap().path()).collect();
     files.sort();
     assert!(files.len() >= 10, "corpus at {}", corpus.display());
     for file in files {
         let bytes = std::fs::read(&file).unwrap();
-        let lines: Vec<Vec<u8>> = bytes
-            .split(|&b| b == b'\n' || b == b'\r')
-            .filter(|l| !l.is_empty())
-            .map(<[u8]>::to_vec)
-            .collect();
+        let lines: Vec<Vec<u8>> =
+            bytes.split(|&b| b == b'\n' || b == b'\r').filter(|l| !l.is_empty()).map(<[u8]>::to_vec).collect();
         let (oks, output) = oks_for(&lines);
         assert_eq!(oks, lines.len(), "{}: {output}", file.display());
     }

@@ -34,9 +34,7 @@
 //! sampled every tick, from the moment the reference starts moving until it
 //! stops, as (reference − encoder reading)², per axis, in mm²; total = X + Y.
 
-use firmware::closed_loop::control::{
-    AxisController, DriverStatus, FollowingErrorLimit, Reference,
-};
+use firmware::closed_loop::control::{AxisController, DriverStatus, FollowingErrorLimit, Reference};
 use firmware::closed_loop::nse5310::{LinearTracker, TrackerConfig, UNITS_PER_MM};
 use firmware::closed_loop::output::{StepRate, StepperScale};
 use firmware::closed_loop::reference::ReferencePath;
@@ -111,21 +109,12 @@ impl PlantConfig {
 
     /// SPEC §1's Y axis: k' 0.94.
     pub fn printer_y() -> Self {
-        Self {
-            gain: 0.94,
-            strip_offset: 3210,
-            seed: 2,
-            ..Self::printer_x()
-        }
+        Self { gain: 0.94, strip_offset: 3210, seed: 2, ..Self::printer_x() }
     }
 
     /// No noise and no glitches.
     pub fn clean(self) -> Self {
-        Self {
-            noise_counts: 0.0,
-            glitch_rate_hz: 0.0,
-            ..self
-        }
+        Self { noise_counts: 0.0, glitch_rate_hz: 0.0, ..self }
     }
 }
 
@@ -213,14 +202,11 @@ impl AxisPlant {
         self.history.push_back(self.motor_steps);
         let delayed = self.history.pop_front().unwrap_or(self.motor_steps);
         let before = self.carriage_mm;
-        self.carriage_mm = self.start_mm
-            + self.config.gain * (delayed - self.start_steps) as f64 / self.config.steps_per_mm
-            + self.slip_mm;
+        self.carriage_mm =
+            self.start_mm + self.config.gain * (delayed - self.start_steps) as f64 / self.config.steps_per_mm + self.slip_mm;
         let crossings = self.index_crossings(before, self.carriage_mm);
         self.pending_edges = self.pending_edges.saturating_add(crossings);
-        if self.config.glitch_rate_hz > 0.0
-            && self.rng.uniform() < self.config.glitch_rate_hz * self.substep_s
-        {
+        if self.config.glitch_rate_hz > 0.0 && self.rng.uniform() < self.config.glitch_rate_hz * self.substep_s {
             self.pending_edges = self.pending_edges.saturating_add(1);
         }
         if self.burst_left > 0 {
@@ -231,10 +217,7 @@ impl AxisPlant {
 
     fn index_crossings(&self, from_mm: f64, to_mm: f64) -> u8 {
         let pole = |mm: f64| {
-            ((mm * COUNTS_PER_MM + f64::from(self.config.strip_offset)
-                - f64::from(self.config.index_phase))
-                / 4096.0)
-                .floor()
+            ((mm * COUNTS_PER_MM + f64::from(self.config.strip_offset) - f64::from(self.config.index_phase)) / 4096.0).floor()
         };
         (pole(to_mm) - pole(from_mm)).abs().min(255.0) as u8
     }
@@ -258,13 +241,8 @@ impl AxisPlant {
         if let Some(raw) = self.stuck_raw {
             return raw;
         }
-        let noise = if self.config.noise_counts > 0.0 {
-            self.config.noise_counts * self.rng.gaussian()
-        } else {
-            0.0
-        };
-        let counts = (self.carriage_mm * COUNTS_PER_MM + noise).round() as i64
-            + i64::from(self.config.strip_offset);
+        let noise = if self.config.noise_counts > 0.0 { self.config.noise_counts * self.rng.gaussian() } else { 0.0 };
+        let counts = (self.carriage_mm * COUNTS_PER_MM + noise).round() as i64 + i64::from(self.config.strip_offset);
         counts.rem_euclid(4096) as u16
     }
 
@@ -381,12 +359,8 @@ pub fn thesis_reference(strategy: Strategy) -> Option<(f64, f64, f64)> {
 pub fn strategy_label(strategy: Strategy) -> String {
     match strategy {
         Strategy::OpenLoop => "open loop".into(),
-        Strategy::PFeedforward { kp_milli } => {
-            format!("P+FF Kp {:.1}", f64::from(kp_milli) / 1000.0)
-        }
-        Strategy::RobustPid { gamma_milli } => {
-            format!("PID γ {:.2}", f64::from(gamma_milli) / 1000.0)
-        }
+        Strategy::PFeedforward { kp_milli } => format!("P+FF Kp {:.1}", f64::from(kp_milli) / 1000.0),
+        Strategy::RobustPid { gamma_milli } => format!("PID γ {:.2}", f64::from(gamma_milli) / 1000.0),
         Strategy::ServoPid { .. } => "servo PID".into(),
     }
 }
@@ -414,24 +388,15 @@ pub struct CircleRow {
 
 /// Gains of `strategy` for θ and the loop period.
 pub fn gains_for(strategy: Strategy, loop_hz: u16) -> FixedGains {
-    strategy
-        .fixed_gains(0.1, 1.0 / f32::from(loop_hz))
-        .expect("the thesis' gains fit the tick")
+    strategy.fixed_gains(0.1, 1.0 / f32::from(loop_hz)).expect("the thesis' gains fit the tick")
 }
 
 /// The axis as the board builds it: NSE-5310 tracker, loop, 100 steps/mm.
 pub fn printer_axis(strategy: Strategy, options: &CircleOptions) -> EncoderAxis {
     let max_speed = i32::from(max_speed_mm_s(options.loop_hz));
-    let controller = AxisController::new(
-        gains_for(strategy, options.loop_hz),
-        max_speed * UNITS_PER_MM,
-        options.following_error,
-    );
+    let controller = AxisController::new(gains_for(strategy, options.loop_hz), max_speed * UNITS_PER_MM, options.following_error);
     EncoderAxis::new(
-        LinearTracker::new(
-            TrackerConfig::for_read_rate(max_speed_mm_s(options.loop_hz), options.loop_hz)
-                .expect("unwrappable"),
-        ),
+        LinearTracker::new(TrackerConfig::for_read_rate(max_speed_mm_s(options.loop_hz), options.loop_hz).expect("unwrappable")),
         controller,
         StepperScale::new(100.0, UNITS_PER_MM as f32).expect("scale"),
     )
@@ -472,35 +437,16 @@ pub fn run_circle(strategy: Strategy, speed_mm_s: f64, options: &CircleOptions) 
         px = px.clean();
         py = py.clean();
     }
-    let mut plants = [
-        AxisPlant::new(px, start.0, substep),
-        AxisPlant::new(py, start.1, substep),
-    ];
-    let mut axes = [
-        printer_axis(strategy, options),
-        printer_axis(strategy, options),
-    ];
+    let mut plants = [AxisPlant::new(px, start.0, substep), AxisPlant::new(py, start.1, substep)];
+    let mut axes = [printer_axis(strategy, options), printer_axis(strategy, options)];
     // Homing: the first reading is the start position.
-    for (axis, (plant, start_mm)) in axes
-        .iter_mut()
-        .zip(plants.iter_mut().zip([start.0, start.1]))
-    {
-        axis.tracker
-            .update(plant.read_raw(), 0, 0)
-            .expect("first read");
+    for (axis, (plant, start_mm)) in axes.iter_mut().zip(plants.iter_mut().zip([start.0, start.1])) {
+        axis.tracker.update(plant.read_raw(), 0, 0).expect("first read");
         plant.take_index_edges();
         axis.rehome(units(start_mm));
     }
-    let preview_ticks = if options.preview {
-        (0.1 * f64::from(options.loop_hz)).round() as u16
-    } else {
-        0
-    };
-    let mut path = ReferencePath::<2, 8>::new(
-        [units(start.0), units(start.1)],
-        options.loop_hz,
-        preview_ticks,
-    );
+    let preview_ticks = if options.preview { (0.1 * f64::from(options.loop_hz)).round() as u16 } else { 0 };
+    let mut path = ReferencePath::<2, 8>::new([units(start.0), units(start.1)], options.loop_hz, preview_ticks);
     let pieces = circle_pieces(speed_mm_s);
     let mut next_piece = 0;
     let mut ticks_queued: i64 = 0;
@@ -517,8 +463,7 @@ pub fn run_circle(strategy: Strategy, speed_mm_s: f64, options: &CircleOptions) 
             let ((x, y), end_s) = pieces[next_piece];
             let end_tick = (end_s * f64::from(options.loop_hz)).round() as i64;
             let ticks = (end_tick - ticks_queued).max(1);
-            path.push([units(x), units(y)], ticks as u16)
-                .expect("queue has room");
+            path.push([units(x), units(y)], ticks as u16).expect("queue has room");
             ticks_queued += ticks;
             next_piece += 1;
         }
@@ -540,21 +485,12 @@ pub fn run_circle(strategy: Strategy, speed_mm_s: f64, options: &CircleOptions) 
         for (index, (axis, plant)) in axes.iter_mut().zip(plants.iter_mut()).enumerate() {
             let raw = plant.read_raw();
             let edges = plant.take_index_edges();
-            let result = axis.tick(
-                references[index],
-                Reading::Raw(raw),
-                edges,
-                DriverStatus::default(),
-            );
+            let result = axis.tick(references[index], Reading::Raw(raw), edges, DriverStatus::default());
             let rate = match result {
                 Ok(rate) => rate,
                 Err(error) => {
                     if fault.is_none() {
-                        fault = Some((
-                            if index == 0 { 'X' } else { 'Y' },
-                            error,
-                            circle_time.max(0.0),
-                        ));
+                        fault = Some((if index == 0 { 'X' } else { 'Y' }, error, circle_time.max(0.0)));
                     }
                     if !options.stop_on_fault {
                         axis.controller.reset();
@@ -588,14 +524,7 @@ pub fn run_circle(strategy: Strategy, speed_mm_s: f64, options: &CircleOptions) 
         for (index, (axis, plant)) in axes.iter_mut().zip(plants.iter_mut()).enumerate() {
             let raw = plant.read_raw();
             let edges = plant.take_index_edges();
-            let rate = axis
-                .tick(
-                    references[index],
-                    Reading::Raw(raw),
-                    edges,
-                    DriverStatus::default(),
-                )
-                .unwrap_or(StepRate(0));
+            let rate = axis.tick(references[index], Reading::Raw(raw), edges, DriverStatus::default()).unwrap_or(StepRate(0));
             plant.set_step_rate(rate);
         }
         for plant in plants.iter_mut() {
@@ -615,10 +544,7 @@ pub fn run_circle(strategy: Strategy, speed_mm_s: f64, options: &CircleOptions) 
         true_mse_total: true_sum / n,
         final_error_mm,
         fault,
-        index_glitches_rejected: axes
-            .iter()
-            .map(|a| u32::from(a.tracker.counters().index_glitches))
-            .sum(),
+        index_glitches_rejected: axes.iter().map(|a| u32::from(a.tracker.counters().index_glitches)).sum(),
         samples,
     }
 }
@@ -637,12 +563,7 @@ pub fn circle_experiment(options: &CircleOptions) -> Vec<CircleRow> {
 /// The benchmark figure `circle_mse_total_mm2`: robust PID γ 0.5 at 5 mm/s,
 /// noise and glitches on, [`CircleOptions::standard`].
 pub fn circle_mse_total_mm2() -> f64 {
-    run_circle(
-        Strategy::RobustPid { gamma_milli: 500 },
-        5.0,
-        &CircleOptions::standard(),
-    )
-    .mse_total
+    run_circle(Strategy::RobustPid { gamma_milli: 500 }, 5.0, &CircleOptions::standard()).mse_total
 }
 
 /// The table as text, beside the thesis' figures (which were measured at
@@ -697,12 +618,7 @@ pub struct DcServoPlant {
 }
 
 impl DcServoPlant {
-    pub fn new(
-        counts_per_s_per_duty: f64,
-        time_constant_s: f64,
-        dead_time_s: f64,
-        substep_s: f64,
-    ) -> Self {
+    pub fn new(counts_per_s_per_duty: f64, time_constant_s: f64, dead_time_s: f64, substep_s: f64) -> Self {
         let delay = (dead_time_s / substep_s).round().max(1.0) as usize;
         Self {
             counts_per_s_per_duty,

@@ -15,9 +15,7 @@
 use firmware::emergency::Pending;
 use firmware::host_link::{HostLink, SerialLink};
 use firmware::machine::Machine;
-use firmware::motion::{
-    stepper, Motion, MotionConfig, StepFault, StepGenerator, StepQueues, StepperRequest,
-};
+use firmware::motion::{stepper, Motion, MotionConfig, StepFault, StepGenerator, StepQueues, StepperRequest};
 use firmware::rx::{self, RxConsumer, RxProducer, RxQueue};
 use firmware::storage::MemoryStorage;
 
@@ -101,32 +99,18 @@ impl SimBoard {
             generator,
             steps: StepRecorder::new(stepper::TIMER_HZ, config.stepper().dir_invert),
             // Min switches where the motors were at boot.
-            endstops: Box::new(|p: &[i64; 4]| {
-                (0..3)
-                    .filter(|&m| p[m] <= 0)
-                    .fold(0, |bits, m| bits | 1 << m)
-            }),
+            endstops: Box::new(|p: &[i64; 4]| (0..3).filter(|&m| p[m] <= 0).fold(0, |bits, m| bits | 1 << m)),
             eeprom,
             producer,
             wire: std::collections::VecDeque::new(),
             bytes_per_s: DEFAULT_BAUD / 10,
             wire_credit: 0,
-            rx: SimRx {
-                consumer,
-                dropped: 0,
-                emergencies: Pending::NONE,
-            },
+            rx: SimRx { consumer, dropped: 0, emergencies: Pending::NONE },
             now_ms: 0,
             output: String::new(),
         };
-        let _ = board
-            .link
-            .machine
-            .write_banner(&mut Output(&mut board.output));
-        let _ = board
-            .link
-            .machine
-            .load_settings(&mut board.eeprom, &mut Output(&mut board.output));
+        let _ = board.link.machine.write_banner(&mut Output(&mut board.output));
+        let _ = board.link.machine.load_settings(&mut board.eeprom, &mut Output(&mut board.output));
         board
     }
 
@@ -158,18 +142,12 @@ impl SimBoard {
             self.inject(&bytes);
             let status = self.generator.status();
             let mut out = Output(&mut self.output);
-            match self
-                .link
-                .machine
-                .poll_motion(&status, self.now_ms, &mut out)
-            {
+            match self.link.machine.poll_motion(&status, self.now_ms, &mut out) {
                 Ok(StepperRequest::ClearFault) => self.generator.clear_fault(),
                 Ok(StepperRequest::Halt) => self.generator.halt(StepFault::Stopped),
                 _ => {}
             }
-            let _ = self
-                .link
-                .service(&mut self.rx, &mut self.eeprom, self.now_ms, &mut out);
+            let _ = self.link.service(&mut self.rx, &mut self.eeprom, self.now_ms, &mut out);
             if self.link.machine.is_halted() {
                 self.generator.halt(StepFault::Stopped);
             }
@@ -186,11 +164,7 @@ impl SimBoard {
                 self.generator.on_endstops(triggered);
             }
             let action = self.generator.on_timer();
-            self.steps.record(
-                action.step_mask,
-                action.dir_mask,
-                action.next_interval_ticks,
-            );
+            self.steps.record(action.step_mask, action.dir_mask, action.next_interval_ticks);
         }
     }
 
@@ -208,10 +182,7 @@ impl SimBoard {
         for _ in 0..max_ms {
             self.advance(1);
             output.push_str(&self.take_output());
-            if self.wire.is_empty()
-                && output.matches("ok").count() >= lines
-                && self.link.machine.motion_idle()
-            {
+            if self.wire.is_empty() && output.matches("ok").count() >= lines && self.link.machine.motion_idle() {
                 break;
             }
         }
@@ -252,10 +223,7 @@ mod tests {
         );
         board.receive(b"M114\n");
         board.advance(1);
-        assert_eq!(
-            board.take_output(),
-            "X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0\nok\n"
-        );
+        assert_eq!(board.take_output(), "X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0\nok\n");
     }
 
     #[test]
@@ -267,10 +235,7 @@ mod tests {
         board.inject(burst.as_bytes());
         board.advance(10);
         let output = board.take_output();
-        assert!(
-            output.contains("Error:Serial receive overrun, line lost\n"),
-            "{output}"
-        );
+        assert!(output.contains("Error:Serial receive overrun, line lost\n"), "{output}");
         // Every line got exactly one ok: lost ones through their error.
         let answered = output.matches("ok\n").count();
         assert!(answered >= 18 && answered <= 28, "{answered} in {output}");
@@ -281,17 +246,9 @@ mod tests {
         let mut board = SimBoard::new();
         board.receive(b"M92 E415\nM500\n");
         board.advance(10);
-        let mut rebooted = SimBoard::with_eeprom(SimEeprom {
-            bytes: board.eeprom.bytes,
-            ..SimEeprom::new()
-        });
-        assert!(rebooted
-            .take_output()
-            .contains("echo:V1 stored settings retrieved"));
-        assert_eq!(
-            rebooted.link.machine.settings().steps_per_mm_milli[3],
-            415_000
-        );
+        let mut rebooted = SimBoard::with_eeprom(SimEeprom { bytes: board.eeprom.bytes, ..SimEeprom::new() });
+        assert!(rebooted.take_output().contains("echo:V1 stored settings retrieved"));
+        assert_eq!(rebooted.link.machine.settings().steps_per_mm_milli[3], 415_000);
     }
 
     #[test]
@@ -299,9 +256,7 @@ mod tests {
         let mut board = SimBoard::new();
         board.receive(b"G4 S100\nM114\nM114\nM114\nM114\nM112\n");
         board.advance(5);
-        assert!(board
-            .take_output()
-            .contains("Error:Printer halted. kill() called!\n"));
+        assert!(board.take_output().contains("Error:Printer halted. kill() called!\n"));
         assert!(board.link.machine.is_halted());
     }
 }

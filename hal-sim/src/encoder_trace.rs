@@ -18,12 +18,8 @@
 //! its position is `commanded_mm` (or 0).
 
 use crate::axis_plant::{AxisPlant, PlantConfig};
-use firmware::closed_loop::control::{
-    AxisController, DriverStatus, FixedGains, FollowingErrorLimit, Reference,
-};
-use firmware::closed_loop::nse5310::{
-    EncoderFault, LinearTracker, TrackerConfig, TrackerCounters, UNITS_PER_MM,
-};
+use firmware::closed_loop::control::{AxisController, DriverStatus, FixedGains, FollowingErrorLimit, Reference};
+use firmware::closed_loop::nse5310::{EncoderFault, LinearTracker, TrackerConfig, TrackerCounters, UNITS_PER_MM};
 use firmware::closed_loop::output::StepperScale;
 use firmware::closed_loop::reference::ReferencePath;
 use firmware::closed_loop::tuning::Strategy;
@@ -60,10 +56,7 @@ pub fn parse(text: &str) -> Result<Vec<TraceRow>, TraceError> {
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
-        let error = |message: &str| TraceError {
-            line: line_number,
-            message: message.into(),
-        };
+        let error = |message: &str| TraceError { line: line_number, message: message.into() };
         if !header_seen {
             if line != HEADER {
                 return Err(error("expected the header time_s,raw,index,commanded_mm"));
@@ -86,23 +79,12 @@ pub fn parse(text: &str) -> Result<Vec<TraceRow>, TraceError> {
             Some(raw)
         };
         let index: u8 = fields[2].parse().map_err(|_| error("bad index"))?;
-        let commanded_mm = if fields[3].is_empty() {
-            None
-        } else {
-            Some(fields[3].parse().map_err(|_| error("bad commanded_mm"))?)
-        };
-        rows.push(TraceRow {
-            time_s,
-            raw,
-            index,
-            commanded_mm,
-        });
+        let commanded_mm =
+            if fields[3].is_empty() { None } else { Some(fields[3].parse().map_err(|_| error("bad commanded_mm"))?) };
+        rows.push(TraceRow { time_s, raw, index, commanded_mm });
     }
     if !header_seen {
-        return Err(TraceError {
-            line: 0,
-            message: "empty trace".into(),
-        });
+        return Err(TraceError { line: 0, message: "empty trace".into() });
     }
     Ok(rows)
 }
@@ -116,10 +98,7 @@ pub fn write(comment: &str, rows: &[TraceRow]) -> String {
     let _ = writeln!(out, "{HEADER}");
     for row in rows {
         let raw = row.raw.map(|r| r.to_string()).unwrap_or_default();
-        let commanded = row
-            .commanded_mm
-            .map(|c| format!("{c:.5}"))
-            .unwrap_or_default();
+        let commanded = row.commanded_mm.map(|c| format!("{c:.5}")).unwrap_or_default();
         let _ = writeln!(out, "{:.4},{raw},{},{commanded}", row.time_s, row.index);
     }
     out
@@ -141,17 +120,8 @@ pub struct ReplayReport {
 /// Replay `rows` through the firmware's [`LinearTracker`] and the loop's
 /// following-error check (an [`AxisController`] with open-loop gains used
 /// only as the monitor), one row per tick.
-pub fn replay(
-    rows: &[TraceRow],
-    tracker: TrackerConfig,
-    following: FollowingErrorLimit,
-) -> ReplayReport {
-    let mut report = ReplayReport {
-        positions_mm: Vec::new(),
-        counters: TrackerCounters::default(),
-        fault: None,
-        max_error_mm: 0.0,
-    };
+pub fn replay(rows: &[TraceRow], tracker: TrackerConfig, following: FollowingErrorLimit) -> ReplayReport {
+    let mut report = ReplayReport { positions_mm: Vec::new(), counters: TrackerCounters::default(), fault: None, max_error_mm: 0.0 };
     let mut encoder = LinearTracker::new(tracker);
     let mut monitor = AxisController::new(FixedGains::OPEN_LOOP, i32::MAX, following);
     let to_units = |mm: f64| (mm * f64::from(UNITS_PER_MM)).round() as i32;
@@ -166,28 +136,18 @@ pub fn replay(
                 homed = true;
                 Ok(home)
             }
-            Some(raw) => encoder.update(
-                raw,
-                row.index,
-                commanded.unwrap_or_else(|| encoder.position()),
-            ),
+            Some(raw) => encoder.update(raw, row.index, commanded.unwrap_or_else(|| encoder.position())),
             None => encoder.read_failed().map(|()| encoder.position()),
         };
         let position = encoder.position();
-        report
-            .positions_mm
-            .push(f64::from(position) / f64::from(UNITS_PER_MM));
-        let reference = Reference {
-            position: commanded.unwrap_or(position),
-            velocity: 0,
-        };
+        report.positions_mm.push(f64::from(position) / f64::from(UNITS_PER_MM));
+        let reference = Reference { position: commanded.unwrap_or(position), velocity: 0 };
         let result = monitor.tick(reference, measured, DriverStatus::default());
         if report.fault.is_none() {
             match result {
                 Err(fault) => report.fault = Some((number, fault)),
                 Ok(_) => {
-                    let error =
-                        f64::from(reference.position - position).abs() / f64::from(UNITS_PER_MM);
+                    let error = f64::from(reference.position - position).abs() / f64::from(UNITS_PER_MM);
                     report.max_error_mm = report.max_error_mm.max(error);
                 }
             }
@@ -233,26 +193,14 @@ pub const TRACE_LOOP_HZ: u16 = 250;
 pub fn record(scenario: &Scenario) -> Vec<TraceRow> {
     let period = 1.0 / f64::from(scenario.loop_hz);
     let substeps = 4;
-    let mut plant = AxisPlant::new(
-        scenario.plant.clone(),
-        scenario.start_mm,
-        period / f64::from(substeps),
-    );
-    let gains = scenario
-        .strategy
-        .fixed_gains(0.1, period as f32)
-        .expect("gains");
+    let mut plant = AxisPlant::new(scenario.plant.clone(), scenario.start_mm, period / f64::from(substeps));
+    let gains = scenario.strategy.fixed_gains(0.1, period as f32).expect("gains");
     // The recorder never stops on a following error: it records what the
     // sensor said (the replayer decides). Encoder faults do stop the loop;
     // the motor then follows the reference open loop, as a naive firmware would.
-    let following = FollowingErrorLimit {
-        limit: i32::MAX / 8,
-        hold_ticks: u16::MAX,
-    };
+    let following = FollowingErrorLimit { limit: i32::MAX / 8, hold_ticks: u16::MAX };
     let mut axis = EncoderAxis::new(
-        LinearTracker::new(
-            TrackerConfig::for_read_rate(200, scenario.loop_hz).expect("fast enough to unwrap"),
-        ),
+        LinearTracker::new(TrackerConfig::for_read_rate(200, scenario.loop_hz).expect("fast enough to unwrap")),
         AxisController::new(gains, 200 * UNITS_PER_MM, following),
         StepperScale::new(100.0, UNITS_PER_MM as f32).expect("scale"),
     );
@@ -261,15 +209,9 @@ pub fn record(scenario: &Scenario) -> Vec<TraceRow> {
     let _ = axis.tracker.update(first, 0, 0);
     axis.rehome(to_units(scenario.start_mm));
     plant.take_index_edges();
-    let mut rows = vec![TraceRow {
-        time_s: 0.0,
-        raw: Some(first),
-        index: 0,
-        commanded_mm: Some(scenario.start_mm),
-    }];
+    let mut rows = vec![TraceRow { time_s: 0.0, raw: Some(first), index: 0, commanded_mm: Some(scenario.start_mm) }];
     let preview = (0.1 * f64::from(scenario.loop_hz)).round() as u16;
-    let mut path =
-        ReferencePath::<1, 8>::new([to_units(scenario.start_mm)], scenario.loop_hz, preview);
+    let mut path = ReferencePath::<1, 8>::new([to_units(scenario.start_mm)], scenario.loop_hz, preview);
     let mut next_move = 0;
     let mut queued_s = 0.0;
     let mut queued_ticks: i64 = 0;
@@ -282,8 +224,7 @@ pub fn record(scenario: &Scenario) -> Vec<TraceRow> {
             let (end_mm, duration_s) = scenario.moves[next_move];
             queued_s += duration_s;
             let end_tick = (queued_s * f64::from(scenario.loop_hz)).round() as i64;
-            path.push([to_units(end_mm)], (end_tick - queued_ticks).max(1) as u16)
-                .expect("room");
+            path.push([to_units(end_mm)], (end_tick - queued_ticks).max(1) as u16).expect("room");
             queued_ticks = end_tick;
             next_move += 1;
         }
@@ -333,10 +274,7 @@ pub fn shipped_scenarios() -> Vec<(&'static str, Scenario)> {
             })
             .collect()
     };
-    let noisy_x = PlantConfig {
-        glitch_rate_hz: 0.0,
-        ..PlantConfig::printer_x()
-    };
+    let noisy_x = PlantConfig { glitch_rate_hz: 0.0, ..PlantConfig::printer_x() };
     vec![
         (
             "clean_circle.csv",
@@ -395,16 +333,10 @@ pub fn shipped_scenarios() -> Vec<(&'static str, Scenario)> {
 
 /// A shipped trace as text, exactly as in `hal-sim/traces/`.
 pub fn render_shipped(name: &str) -> Option<String> {
-    shipped_scenarios()
-        .into_iter()
-        .find(|(n, _)| *n == name)
-        .map(|(_, scenario)| {
-            let comment = format!(
-                "{}\ngenerated by hal_sim::encoder_trace::record (PlantConfig seed {})",
-                scenario.description, scenario.plant.seed
-            );
-            write(&comment, &record(&scenario))
-        })
+    shipped_scenarios().into_iter().find(|(n, _)| *n == name).map(|(_, scenario)| {
+        let comment = format!("{}\ngenerated by hal_sim::encoder_trace::record (PlantConfig seed {})", scenario.description, scenario.plant.seed);
+        write(&comment, &record(&scenario))
+    })
 }
 
 /// Encoder faults are [`AxisFault::Encoder`]; a helper for tests.

@@ -45,10 +45,7 @@
 
 use crate::axis_plant::Rng;
 use firmware::machines::diameter::{ClosedLoopPi, DiameterError, THESIS_KI, THESIS_KP};
-use firmware::machines::extrusion_line::{
-    ColdExtrusion, ColdExtrusionCheck, ExtrusionLine, ExtrusionLineConfig, ScrewError,
-    MIN_EXTRUSION_TEMPERATURE,
-};
+use firmware::machines::extrusion_line::{ColdExtrusion, ColdExtrusionCheck, ExtrusionLine, ExtrusionLineConfig, ScrewError, MIN_EXTRUSION_TEMPERATURE};
 use firmware::machines::velocity::DriveTrain;
 use firmware::thermal::Celsius;
 use std::collections::VecDeque;
@@ -95,20 +92,12 @@ impl DiameterPlantConfig {
 
     /// No flow variation and no camera noise.
     pub fn quiet(self) -> Self {
-        Self {
-            flow_sine: 0.0,
-            flow_walk: 0.0,
-            camera_noise_px: 0.0,
-            ..self
-        }
+        Self { flow_sine: 0.0, flow_walk: 0.0, camera_noise_px: 0.0, ..self }
     }
 
     /// The operating point moved so that 2.85 mm needs `rpm` of the puller.
     pub fn operating_at(self, rpm: f64) -> Self {
-        Self {
-            puller_rpm0: rpm,
-            ..self
-        }
+        Self { puller_rpm0: rpm, ..self }
     }
 }
 
@@ -130,15 +119,7 @@ impl DiameterPlant {
     pub fn new(config: DiameterPlantConfig, substep_s: f64) -> Self {
         let delay = (config.delay_s / substep_s).round().max(1.0) as usize;
         let rng = Rng::new(config.seed);
-        Self {
-            config,
-            rng,
-            substep_s,
-            history: VecDeque::from(vec![(0.0, 0.0); delay]),
-            diameter_mm: 0.0,
-            walk: 0.0,
-            time_s: 0.0,
-        }
+        Self { config, rng, substep_s, history: VecDeque::from(vec![(0.0, 0.0); delay]), diameter_mm: 0.0, walk: 0.0, time_s: 0.0 }
     }
 
     /// The steady diameter for these speeds (no delay, no lag, no flow variation).
@@ -158,17 +139,11 @@ impl DiameterPlant {
             let (puller, screw) = self.history.pop_front().unwrap_or((0.0, 0.0));
             let c = &self.config;
             let bound = c.flow_walk_bound;
-            self.walk = (self.walk + c.flow_walk * self.substep_s.sqrt() * self.rng.gaussian())
-                .clamp(-bound, bound);
-            let sine = if c.flow_period_s > 0.0 {
-                c.flow_sine * (2.0 * std::f64::consts::PI * self.time_s / c.flow_period_s).sin()
-            } else {
-                0.0
-            };
+            self.walk = (self.walk + c.flow_walk * self.substep_s.sqrt() * self.rng.gaussian()).clamp(-bound, bound);
+            let sine = if c.flow_period_s > 0.0 { c.flow_sine * (2.0 * std::f64::consts::PI * self.time_s / c.flow_period_s).sin() } else { 0.0 };
             let flow = 1.0 + sine + self.walk;
             let target = self.steady_mm(puller, screw) * flow.max(0.0).sqrt();
-            self.diameter_mm +=
-                (target - self.diameter_mm) * (self.substep_s / c.lag_s.max(self.substep_s));
+            self.diameter_mm += (target - self.diameter_mm) * (self.substep_s / c.lag_s.max(self.substep_s));
             self.time_s += self.substep_s;
         }
     }
@@ -205,17 +180,11 @@ pub struct BarrelStub {
 
 impl BarrelStub {
     pub fn cold(target: f64) -> Self {
-        Self {
-            celsius: 24.0,
-            target,
-            time_constant_s: 300.0,
-            overridden: false,
-        }
+        Self { celsius: 24.0, target, time_constant_s: 300.0, overridden: false }
     }
 
     pub fn advance(&mut self, duration_s: f64) {
-        self.celsius +=
-            (self.target - self.celsius) * (1.0 - (-duration_s / self.time_constant_s).exp());
+        self.celsius += (self.target - self.celsius) * (1.0 - (-duration_s / self.time_constant_s).exp());
     }
 }
 
@@ -225,10 +194,7 @@ impl ColdExtrusionCheck for BarrelStub {
         if self.overridden || measured >= MIN_EXTRUSION_TEMPERATURE {
             Ok(())
         } else {
-            Err(ColdExtrusion {
-                measured,
-                minimum: MIN_EXTRUSION_TEMPERATURE,
-            })
+            Err(ColdExtrusion { measured, minimum: MIN_EXTRUSION_TEMPERATURE })
         }
     }
 }
@@ -301,9 +267,7 @@ pub const TOLERANCE_MM: f64 = 0.05;
 pub fn run_line(options: &LineOptions) -> LineRun {
     let config = ExtrusionLineConfig::thesis(options.puller).expect("thesis configuration");
     let mut line = ExtrusionLine::new(ClosedLoopPi::new(), &config);
-    line.diameter
-        .set_gains(options.gains.0, options.gains.1)
-        .expect("reverse-acting gains");
+    line.diameter.set_gains(options.gains.0, options.gains.1).expect("reverse-acting gains");
     let mut plant = DiameterPlant::new(options.plant.clone(), 0.01);
     let mut barrel = BarrelStub::cold(210.0);
     let mut run = LineRun::default();
@@ -311,23 +275,14 @@ pub fn run_line(options: &LineOptions) -> LineRun {
     let ramps_per_s = firmware::machines::extrusion_line::RAMP_UPDATES_PER_S as usize;
     let rpm = |mrpm: u32| f64::from(mrpm) / 1000.0;
 
-    let second = |line: &mut ExtrusionLine<ClosedLoopPi>,
-                  plant: &mut DiameterPlant,
-                  barrel: &mut BarrelStub,
-                  run: &mut LineRun| {
+    let second = |line: &mut ExtrusionLine<ClosedLoopPi>, plant: &mut DiameterPlant, barrel: &mut BarrelStub, run: &mut LineRun| {
         let mut previous = line.puller.current_mrpm();
         for _ in 0..ramps_per_s {
             line.update(&config);
             let now = line.puller.current_mrpm();
-            run.largest_ramp_step_rpm = run
-                .largest_ramp_step_rpm
-                .max((rpm(now) - rpm(previous)).abs());
+            run.largest_ramp_step_rpm = run.largest_ramp_step_rpm.max((rpm(now) - rpm(previous)).abs());
             previous = now;
-            plant.advance(
-                ramp_dt,
-                rpm(line.puller.current_mrpm()),
-                rpm(line.extruder.current_mrpm()),
-            );
+            plant.advance(ramp_dt, rpm(line.puller.current_mrpm()), rpm(line.extruder.current_mrpm()));
         }
         barrel.advance(1.0);
         line.on_second(&*barrel)
@@ -339,9 +294,7 @@ pub fn run_line(options: &LineOptions) -> LineRun {
         if (t as u32).is_multiple_of(10) {
             match line.set_screw(&config, 10_000, &barrel) {
                 Ok(()) => break,
-                Err(ScrewError::Cold(cold)) => {
-                    run.refusals.push((t, f64::from(cold.measured.0) / 100.0))
-                }
+                Err(ScrewError::Cold(cold)) => run.refusals.push((t, f64::from(cold.measured.0) / 100.0)),
                 Err(other) => panic!("{other:?}"),
             }
         }
@@ -351,8 +304,7 @@ pub fn run_line(options: &LineOptions) -> LineRun {
     }
     run.screw_started_at_c = barrel.celsius;
     run.screw_started_s = t;
-    line.set_puller_manual(&config, (options.manual_puller_rpm * 1000.0).round() as u32)
-        .expect("manual puller speed");
+    line.set_puller_manual(&config, (options.manual_puller_rpm * 1000.0).round() as u32).expect("manual puller speed");
     for _ in 0..options.manual_s {
         second(&mut line, &mut plant, &mut barrel, &mut run);
         if let Some(px) = plant.camera_px() {
@@ -368,9 +320,7 @@ pub fn run_line(options: &LineOptions) -> LineRun {
             let firmware::machines::diameter::DiameterWarning::Stale { held_mrpm, .. } = warning;
             run.stale_warnings.push((f64::from(s + 1), rpm(held_mrpm)));
         }
-        let silent = options
-            .camera_gap
-            .is_some_and(|(from, to)| s >= from && s < to);
+        let silent = options.camera_gap.is_some_and(|(from, to)| s >= from && s < to);
         let measured = plant.camera_px();
         if !silent {
             if let Some(px) = measured {
@@ -404,14 +354,8 @@ pub struct DiameterFigures {
 
 /// Settling and statistics of the measured samples (camera pixels → mm).
 pub fn figures(run: &LineRun, setpoint_mm: f64) -> Option<DiameterFigures> {
-    let measured: Vec<(f64, f64)> = run
-        .samples
-        .iter()
-        .filter_map(|s| s.measured_px.map(|px| (s.t_s, f64::from(px) * MM_PER_PX)))
-        .collect();
-    let last_outside = measured
-        .iter()
-        .rposition(|&(_, mm)| (mm - setpoint_mm).abs() > TOLERANCE_MM);
+    let measured: Vec<(f64, f64)> = run.samples.iter().filter_map(|s| s.measured_px.map(|px| (s.t_s, f64::from(px) * MM_PER_PX))).collect();
+    let last_outside = measured.iter().rposition(|&(_, mm)| (mm - setpoint_mm).abs() > TOLERANCE_MM);
     let first_settled = last_outside.map_or(0, |i| i + 1);
     let settled = &measured[first_settled..];
     if settled.len() < 10 {
@@ -419,17 +363,8 @@ pub fn figures(run: &LineRun, setpoint_mm: f64) -> Option<DiameterFigures> {
     }
     let n = settled.len() as f64;
     let mean = settled.iter().map(|&(_, mm)| mm).sum::<f64>() / n;
-    let variance = settled
-        .iter()
-        .map(|&(_, mm)| (mm - mean).powi(2))
-        .sum::<f64>()
-        / (n - 1.0);
-    Some(DiameterFigures {
-        mean_mm: mean,
-        std_mm: variance.sqrt(),
-        settle_s: settled[0].0,
-        samples: settled.len(),
-    })
+    let variance = settled.iter().map(|&(_, mm)| (mm - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    Some(DiameterFigures { mean_mm: mean, std_mm: variance.sqrt(), settle_s: settled[0].0, samples: settled.len() })
 }
 
 /// SPEC §4's setpoint as the firmware holds it (132.87 px).

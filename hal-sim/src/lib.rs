@@ -4,7 +4,7 @@
 pub mod axis_plant;
 pub mod board;
 pub mod encoder_trace;
+pub mod steps;
 pub mod extrusion_plant;
 pub mod powder_bed_plant;
-pub mod steps;
 pub mod thermal_plant;

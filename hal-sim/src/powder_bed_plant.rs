@@ -24,16 +24,14 @@
 //! `c_plus_counts`.
 
 use crate::axis_plant::DcServoPlant;
-use firmware::closed_loop::control::{
-    AxisController, DriverStatus, FollowingErrorLimit, Reference,
-};
+use firmware::closed_loop::control::{AxisController, DriverStatus, FollowingErrorLimit, Reference};
 use firmware::closed_loop::output::ActiveLevel;
 use firmware::closed_loop::quadrature::QuadratureDecoder;
 use firmware::closed_loop::tuning::relay_ziegler_nichols;
 use firmware::closed_loop::FixedGains;
 use firmware::machines::powder_bed::{
-    CarriageEnd, LayerCommand, LayerEvent, Platform, PlatformAction, PlatformDriver,
-    PlatformSwitches, TravelFault, TravelLimits, TravelMeasurement, TravelReport, Vertical,
+    CarriageEnd, LayerCommand, LayerEvent, Platform, PlatformAction, PlatformDriver, PlatformSwitches, TravelFault, TravelLimits,
+    TravelMeasurement, TravelReport, Vertical,
 };
 
 /// One platform and its two reed switches.
@@ -106,11 +104,7 @@ impl PlatformPlant {
             return;
         }
         let down = self.dir_level == (self.driver.dir_down == ActiveLevel::High);
-        let next = if down {
-            self.position - 1
-        } else {
-            self.position + 1
-        };
+        let next = if down { self.position - 1 } else { self.position + 1 };
         self.position = next.clamp(self.bottom, self.top);
         self.steps_taken += 1;
     }
@@ -125,10 +119,7 @@ impl PlatformPlant {
             ActiveLevel::High => closed,
             ActiveLevel::Low => !closed,
         };
-        (
-            level(self.in_zone(self.lower_zone)),
-            level(self.in_zone(self.upper_zone)),
-        )
+        (level(self.in_zone(self.lower_zone)), level(self.in_zone(self.upper_zone)))
     }
 
     /// One step as the board does it: DIR first, then a pulse (active
@@ -176,14 +167,7 @@ impl Carriage {
         Self {
             plant: DcServoPlant::new(40.0, 0.03, 0.004, 0.0001),
             decoder: QuadratureDecoder::new(false, false, 0),
-            controller: AxisController::new(
-                fixed,
-                255,
-                FollowingErrorLimit {
-                    limit: 4000,
-                    hold_ticks: 1000,
-                },
-            ),
+            controller: AxisController::new(fixed, 255, FollowingErrorLimit { limit: 4000, hold_ticks: 1000 }),
             c_minus_counts: 0,
             c_plus_counts: 4000,
             speed_counts_per_s: 2000,
@@ -225,32 +209,17 @@ impl Carriage {
                 return Ok(());
             }
             let goal = f64::from(goal);
-            reference = if step > 0 {
-                (reference + per_tick).min(goal)
-            } else {
-                (reference + per_tick).max(goal)
-            };
+            reference = if step > 0 { (reference + per_tick).min(goal) } else { (reference + per_tick).max(goal) };
             self.tick(reference.round() as i32)?;
         }
         Err(StrokeFailed)
     }
 
     fn tick(&mut self, position: i32) -> Result<(), StrokeFailed> {
-        let duty = self
-            .controller
-            .tick(
-                Reference {
-                    position,
-                    velocity: 0,
-                },
-                Ok(self.decoder.count()),
-                DriverStatus::default(),
-            )
-            .map_err(|_| StrokeFailed)?;
+        let duty = self.controller.tick(Reference { position, velocity: 0 }, Ok(self.decoder.count()), DriverStatus::default()).map_err(|_| StrokeFailed)?;
         self.plant.set_duty(duty);
         let decoder = &mut self.decoder;
-        self.plant
-            .advance(CARRIAGE_TICK_S, |a, b| decoder.on_edge(a, b));
+        self.plant.advance(CARRIAGE_TICK_S, |a, b| decoder.on_edge(a, b));
         self.time_s += CARRIAGE_TICK_S;
         Ok(())
     }
@@ -322,11 +291,7 @@ impl PowderBed {
                 Ok(()) => LayerEvent::CarriageArrived(to),
                 Err(StrokeFailed) => LayerEvent::Failed,
             },
-            LayerCommand::StepPlatform {
-                platform,
-                direction,
-                steps,
-            } => {
+            LayerCommand::StepPlatform { platform, direction, steps } => {
                 let plant = self.platform(platform);
                 let enable = plant.driver.enable_level(true);
                 plant.set_enable(enable);
@@ -349,27 +314,17 @@ impl PowderBed {
 /// thesis' rate), driving the pins as the board does and reading the
 /// switches through the configured polarity. Returns the result and the
 /// seconds it took.
-pub fn measure_travel(
-    plant: &mut PlatformPlant,
-    limits: &TravelLimits,
-    polarity: ActiveLevel,
-) -> (Result<TravelReport, TravelFault>, f64) {
+pub fn measure_travel(plant: &mut PlatformPlant, limits: &TravelLimits, polarity: ActiveLevel) -> (Result<TravelReport, TravelFault>, f64) {
     let mut routine = TravelMeasurement::new();
     let enable = plant.driver.enable_level(true);
     plant.set_enable(enable);
     for tick in 0..10_000_000u64 {
         let (lower, upper) = plant.switch_levels();
-        match routine.tick(
-            limits,
-            PlatformSwitches::from_levels(lower, upper, polarity),
-        ) {
+        match routine.tick(limits, PlatformSwitches::from_levels(lower, upper, polarity)) {
             PlatformAction::Step(direction) => plant.pulse(direction),
             PlatformAction::Wait => {}
             PlatformAction::Finished(_) | PlatformAction::Failed(_) => {
-                return (
-                    routine.report(&plant.driver).expect("finished"),
-                    tick as f64 / 1000.0,
-                );
+                return (routine.report(&plant.driver).expect("finished"), tick as f64 / 1000.0);
             }
         }
     }

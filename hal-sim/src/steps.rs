@@ -112,12 +112,7 @@ impl StepRecorder {
     }
 
     pub fn positions(&self) -> [i64; 4] {
-        [
-            self.motors[0].position,
-            self.motors[1].position,
-            self.motors[2].position,
-            self.motors[3].position,
-        ]
+        [self.motors[0].position, self.motors[1].position, self.motors[2].position, self.motors[3].position]
     }
 
     /// Forget the steps (positions stay), e.g. between phases of a test.
@@ -141,10 +136,7 @@ mod tests {
         recorder.record(0b01, 0b00, 100); // direction change with a step: violation
         assert_eq!(recorder.positions(), [1, 1, 0, 0]);
         assert_eq!(recorder.setup_violations, 1);
-        assert_eq!(
-            recorder.motors[0].times().collect::<Vec<_>>(),
-            [100, 200, 300]
-        );
+        assert_eq!(recorder.motors[0].times().collect::<Vec<_>>(), [100, 200, 300]);
         assert_eq!(recorder.motors[0].min_interval(), Some(100));
         let speeds = recorder.motors[0].speeds(1, 2e6, 1000);
         assert_eq!(speeds[0].1, 20_000.0);

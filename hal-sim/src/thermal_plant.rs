@@ -33,10 +33,7 @@
 use crate::axis_plant::Rng;
 use firmware::progmem::Flash;
 use firmware::thermal::autotune::{Autotune, TuneConfig, TuneError, TuneResult};
-use firmware::thermal::{
-    Celsius, HeaterChannel, HeaterConfig, OutputMode, SampleAverager, SlowPwm, ThermalFault,
-    TuneProgress,
-};
+use firmware::thermal::{Celsius, HeaterChannel, HeaterConfig, OutputMode, SampleAverager, SlowPwm, ThermalFault, TuneProgress};
 use std::collections::VecDeque;
 
 /// The plant integrates in steps of this many milliseconds.
@@ -55,30 +52,10 @@ pub struct PlantModel {
 }
 
 impl PlantModel {
-    pub const BARREL_PUBLISHED: PlantModel = PlantModel {
-        gain_c_per_percent: 4.3,
-        time_constant_s: 549.0,
-        dead_time_s: 28.0,
-        ambient_c: 24.0,
-    };
-    pub const BARREL_STEP_FIT: PlantModel = PlantModel {
-        gain_c_per_percent: 4.3,
-        time_constant_s: 477.0,
-        dead_time_s: 36.0,
-        ambient_c: 24.0,
-    };
-    pub const HOTEND_40W: PlantModel = PlantModel {
-        gain_c_per_percent: 4.0,
-        time_constant_s: 120.0,
-        dead_time_s: 3.0,
-        ambient_c: 25.0,
-    };
-    pub const BED_SLOW: PlantModel = PlantModel {
-        gain_c_per_percent: 1.5,
-        time_constant_s: 2143.0,
-        dead_time_s: 10.0,
-        ambient_c: 25.0,
-    };
+    pub const BARREL_PUBLISHED: PlantModel = PlantModel { gain_c_per_percent: 4.3, time_constant_s: 549.0, dead_time_s: 28.0, ambient_c: 24.0 };
+    pub const BARREL_STEP_FIT: PlantModel = PlantModel { gain_c_per_percent: 4.3, time_constant_s: 477.0, dead_time_s: 36.0, ambient_c: 24.0 };
+    pub const HOTEND_40W: PlantModel = PlantModel { gain_c_per_percent: 4.0, time_constant_s: 120.0, dead_time_s: 3.0, ambient_c: 25.0 };
+    pub const BED_SLOW: PlantModel = PlantModel { gain_c_per_percent: 1.5, time_constant_s: 2143.0, dead_time_s: 10.0, ambient_c: 25.0 };
 }
 
 /// A heater plant on virtual time.
@@ -103,22 +80,12 @@ impl HeaterPlant {
     pub fn new(model: PlantModel) -> Self {
         let steps = (model.dead_time_s * 1000.0 / PLANT_STEP_MS as f64).round() as usize;
         let alpha = 1.0 - (-(PLANT_STEP_MS as f64 / 1000.0) / model.time_constant_s).exp();
-        Self {
-            model,
-            rise_c: 0.0,
-            pipeline: VecDeque::from(vec![0.0; steps]),
-            alpha,
-            connected: true,
-            stuck: None,
-        }
+        Self { model, rise_c: 0.0, pipeline: VecDeque::from(vec![0.0; steps]), alpha, connected: true, stuck: None }
     }
 
     /// At `celsius` (in equilibrium: the pipeline holds no power).
     pub fn at(model: PlantModel, celsius: f64) -> Self {
-        Self {
-            rise_c: celsius - model.ambient_c,
-            ..Self::new(model)
-        }
+        Self { rise_c: celsius - model.ambient_c, ..Self::new(model) }
     }
 
     pub fn model(&self) -> &PlantModel {
@@ -160,22 +127,13 @@ pub struct ThermistorCircuit {
 
 impl ThermistorCircuit {
     /// 100 k β 3950 on a stock RAMPS (4.7 kΩ).
-    pub const RAMPS: ThermistorCircuit = ThermistorCircuit {
-        r25_ohms: 100_000.0,
-        beta: 3950.0,
-        series_ohms: 4_700.0,
-    };
+    pub const RAMPS: ThermistorCircuit = ThermistorCircuit { r25_ohms: 100_000.0, beta: 3950.0, series_ohms: 4_700.0 };
     /// SPEC §4's 4.8 kΩ.
-    pub const SPEC_4K8: ThermistorCircuit = ThermistorCircuit {
-        r25_ohms: 100_000.0,
-        beta: 3950.0,
-        series_ohms: 4_800.0,
-    };
+    pub const SPEC_4K8: ThermistorCircuit = ThermistorCircuit { r25_ohms: 100_000.0, beta: 3950.0, series_ohms: 4_800.0 };
 
     /// The exact (fractional) ADC count at `celsius`.
     pub fn adc(&self, celsius: f64) -> f64 {
-        let resistance =
-            self.r25_ohms * (self.beta * (1.0 / (celsius + 273.15) - 1.0 / 298.15)).exp();
+        let resistance = self.r25_ohms * (self.beta * (1.0 / (celsius + 273.15) - 1.0 / 298.15)).exp();
         1023.0 * resistance / (resistance + self.series_ohms)
     }
 
@@ -208,12 +166,7 @@ pub struct SimulatedSensor {
 
 impl SimulatedSensor {
     pub fn new(circuit: ThermistorCircuit, noise_counts: f64, seed: u64) -> Self {
-        Self {
-            circuit,
-            noise_counts,
-            wiring: SensorWiring::Good,
-            rng: Rng::new(seed),
-        }
+        Self { circuit, noise_counts, wiring: SensorWiring::Good, rng: Rng::new(seed) }
     }
 
     /// One 10-bit conversion at `celsius`.
@@ -266,12 +219,7 @@ pub fn flash_config(config: HeaterConfig) -> &'static Flash<HeaterConfig> {
 
 impl ThermalRig {
     /// `conversions` ADC conversions are averaged per sample.
-    pub fn new(
-        channel: HeaterChannel,
-        plant: HeaterPlant,
-        sensor: SimulatedSensor,
-        conversions: u8,
-    ) -> Self {
+    pub fn new(channel: HeaterChannel, plant: HeaterPlant, sensor: SimulatedSensor, conversions: u8) -> Self {
         let config = channel.config();
         Self {
             channel,
@@ -299,9 +247,7 @@ impl ThermalRig {
             let count = self.sensor.convert(celsius);
             self.averager.push(count);
         }
-        self.averager
-            .take()
-            .expect("a full average after `conversions` pushes")
+        self.averager.take().expect("a full average after `conversions` pushes")
     }
 
     fn record(&mut self) {
@@ -330,16 +276,14 @@ impl ThermalRig {
         self.power_count += 1;
         self.now_ms += 1;
         if self.now_ms.is_multiple_of(PLANT_STEP_MS) {
-            self.plant
-                .step(self.power_sum / f64::from(self.power_count));
+            self.plant.step(self.power_sum / f64::from(self.power_count));
             self.power_sum = 0.0;
             self.power_count = 0;
         }
     }
 
     fn is_sample_time(&self) -> bool {
-        self.now_ms
-            .is_multiple_of(u64::from(self.config.sample_period_ms.max(1)))
+        self.now_ms.is_multiple_of(u64::from(self.config.sample_period_ms.max(1)))
     }
 
     /// Run the normal loop for `seconds` of virtual time.
@@ -358,15 +302,9 @@ impl ThermalRig {
     }
 
     /// Run `M303` to its end (at most `max_seconds`).
-    pub fn tune(
-        &mut self,
-        config: TuneConfig,
-        max_seconds: f64,
-    ) -> Result<TuneResult, TuneOutcome> {
+    pub fn tune(&mut self, config: TuneConfig, max_seconds: f64) -> Result<TuneResult, TuneOutcome> {
         let mut tune = Autotune::new(config);
-        self.channel
-            .start_tuning(&tune)
-            .map_err(TuneOutcome::Fault)?;
+        self.channel.start_tuning(&tune).map_err(TuneOutcome::Fault)?;
         let end = self.now_ms + (max_seconds * 1000.0).round() as u64;
         while self.now_ms < end {
             if self.is_sample_time() {
@@ -413,45 +351,21 @@ pub struct StepFigures {
 }
 
 /// Figures of `trace` (started at `trace[0]`) toward `target_c`.
-pub fn step_figures(
-    trace: &[SampleRecord],
-    target_c: f64,
-    band_c: f64,
-    tail_s: f64,
-) -> StepFigures {
+pub fn step_figures(trace: &[SampleRecord], target_c: f64, band_c: f64, tail_s: f64) -> StepFigures {
     let start = trace.first().map_or(0.0, |r| r.plant_c);
     let t0 = trace.first().map_or(0.0, |r| r.time_s);
     let ninety = start + 0.9 * (target_c - start);
-    let rise_s = trace
-        .iter()
-        .find(|r| r.plant_c >= ninety)
-        .map_or(f64::INFINITY, |r| r.time_s - t0);
-    let overshoot_c = trace
-        .iter()
-        .map(|r| r.plant_c - target_c)
-        .fold(0.0, f64::max);
-    let settle_s = match trace
-        .iter()
-        .rposition(|r| (r.plant_c - target_c).abs() > band_c)
-    {
+    let rise_s = trace.iter().find(|r| r.plant_c >= ninety).map_or(f64::INFINITY, |r| r.time_s - t0);
+    let overshoot_c = trace.iter().map(|r| r.plant_c - target_c).fold(0.0, f64::max);
+    let settle_s = match trace.iter().rposition(|r| (r.plant_c - target_c).abs() > band_c) {
         Some(i) if i + 1 < trace.len() => trace[i + 1].time_s - t0,
         Some(_) => f64::INFINITY,
         None => 0.0,
     };
     let end = trace.last().map_or(0.0, |r| r.time_s);
-    let tail = trace
-        .iter()
-        .filter(|r| r.time_s >= end - tail_s)
-        .map(|r| r.plant_c);
-    let (low, high) = tail.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
-        (lo.min(t), hi.max(t))
-    });
-    StepFigures {
-        rise_s,
-        overshoot_c,
-        settle_s,
-        ripple_c: (high - low) / 2.0,
-    }
+    let tail = trace.iter().filter(|r| r.time_s >= end - tail_s).map(|r| r.plant_c);
+    let (low, high) = tail.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| (lo.min(t), hi.max(t)));
+    StepFigures { rise_s, overshoot_c, settle_s, ripple_c: (high - low) / 2.0 }
 }
 
 /// Figures for `cargo benchmark` (issue 6's keys), from simulation with
@@ -487,31 +401,11 @@ impl ThermalBenchmark {
 }
 
 /// Tune on `plant`, then step to 210 °C with the result.
-fn tuned_step(
-    config: &'static Flash<HeaterConfig>,
-    model: PlantModel,
-    circuit: ThermistorCircuit,
-    conversions: u8,
-    seconds: f64,
-) -> (StepFigures, firmware::thermal::Gains) {
-    let rig = |gains| {
-        ThermalRig::new(
-            HeaterChannel::new(config, gains),
-            HeaterPlant::new(model),
-            SimulatedSensor::new(circuit, 0.5, 7),
-            conversions,
-        )
-    };
+fn tuned_step(config: &'static Flash<HeaterConfig>, model: PlantModel, circuit: ThermistorCircuit, conversions: u8, seconds: f64) -> (StepFigures, firmware::thermal::Gains) {
+    let rig = |gains| ThermalRig::new(HeaterChannel::new(config, gains), HeaterPlant::new(model), SimulatedSensor::new(circuit, 0.5, 7), conversions);
     let mut tuning = rig(firmware::thermal::Gains::MARLIN_HOTEND);
-    let tune = TuneConfig {
-        cycles: 8,
-        timeout_s: 3000,
-        ..TuneConfig::new(Celsius(21_000), config.load().sample_period_ms)
-    };
-    let gains = tuning
-        .tune(tune, 20_000.0)
-        .map(|r| r.gains)
-        .unwrap_or(firmware::thermal::Gains::MARLIN_HOTEND);
+    let tune = TuneConfig { cycles: 8, timeout_s: 3000, ..TuneConfig::new(Celsius(21_000), config.load().sample_period_ms) };
+    let gains = tuning.tune(tune, 20_000.0).map(|r| r.gains).unwrap_or(firmware::thermal::Gains::MARLIN_HOTEND);
     let mut run = rig(gains);
     run.channel.set_target(Celsius(21_000)).unwrap();
     run.run(seconds);
@@ -521,36 +415,16 @@ fn tuned_step(
 /// The benchmark run (≈0.1 s of real time).
 pub fn thermal_benchmark() -> ThermalBenchmark {
     use firmware::thermal::channel::{BARREL, HOTEND_0};
-    let (hotend, hotend_gains) = tuned_step(
-        &HOTEND_0,
-        PlantModel::HOTEND_40W,
-        ThermistorCircuit::RAMPS,
-        16,
-        600.0,
-    );
-    let (barrel, barrel_gains) = tuned_step(
-        flash_config(HeaterConfig {
-            control: firmware::thermal::Control::PID,
-            ..BARREL.load()
-        }),
-        PlantModel::BARREL_PUBLISHED,
-        ThermistorCircuit::SPEC_4K8,
-        10,
-        2400.0,
-    );
-    ThermalBenchmark {
-        hotend,
-        barrel,
-        hotend_gains,
-        barrel_gains,
-    }
+    let (hotend, hotend_gains) = tuned_step(&HOTEND_0, PlantModel::HOTEND_40W, ThermistorCircuit::RAMPS, 16, 600.0);
+    let (barrel, barrel_gains) = tuned_step(flash_config(HeaterConfig { control: firmware::thermal::Control::PID, ..BARREL.load() }), PlantModel::BARREL_PUBLISHED, ThermistorCircuit::SPEC_4K8, 10, 2400.0);
+    ThermalBenchmark { hotend, barrel, hotend_gains, barrel_gains }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use firmware::thermal::channel::{BARREL, BED, HOTEND_0};
-    use firmware::thermal::{Gains, GuardConfig};
+    use firmware::thermal::{GuardConfig, Gains};
 
     fn hotend_rig(gains: Gains) -> ThermalRig {
         ThermalRig::new(
@@ -568,10 +442,7 @@ mod tests {
         // Issue 6: overshoot ≤ 2 °C and ±0.5 °C steady ripple on the hot end.
         assert!(bench.hotend.overshoot_c <= 2.0, "{bench:?}");
         assert!(bench.hotend.ripple_c <= 0.5, "{bench:?}");
-        assert!(
-            bench.hotend.settle_s.is_finite() && bench.barrel.settle_s.is_finite(),
-            "{bench:?}"
-        );
+        assert!(bench.hotend.settle_s.is_finite() && bench.barrel.settle_s.is_finite(), "{bench:?}");
     }
 
     #[test]
@@ -584,11 +455,7 @@ mod tests {
         for _ in 0..(10.0 * 549.0 / 0.01) as usize {
             plant.step(0.5);
         }
-        assert!(
-            (plant.temperature_c() - 239.0).abs() < 0.01,
-            "{}",
-            plant.temperature_c()
-        );
+        assert!((plant.temperature_c() - 239.0).abs() < 0.01, "{}", plant.temperature_c());
     }
 
     #[test]
@@ -598,11 +465,7 @@ mod tests {
             plant.step(1.0);
         }
         let expected = 24.0 + 430.0 * (1.0 - (-1.0f64).exp());
-        assert!(
-            (plant.temperature_c() - expected).abs() < 0.05,
-            "{} vs {expected}",
-            plant.temperature_c()
-        );
+        assert!((plant.temperature_c() - expected).abs() < 0.05, "{} vs {expected}", plant.temperature_c());
     }
 
     #[test]
@@ -618,24 +481,9 @@ mod tests {
     #[test]
     fn the_sensor_reads_the_spec_counts_through_the_divider() {
         let circuit = ThermistorCircuit::SPEC_4K8;
-        for (adc, celsius) in [
-            (976.0, 25.07),
-            (606.0, 100.00),
-            (203.0, 174.91),
-            (118.0, 210.06),
-            (79.0, 237.77),
-            (36.0, 299.26),
-        ] {
-            assert!(
-                (circuit.celsius(adc) - celsius).abs() < 0.005,
-                "{adc}: {}",
-                circuit.celsius(adc)
-            );
-            assert!(
-                (circuit.adc(celsius) - adc).abs() < 0.05,
-                "{celsius}: {}",
-                circuit.adc(celsius)
-            );
+        for (adc, celsius) in [(976.0, 25.07), (606.0, 100.00), (203.0, 174.91), (118.0, 210.06), (79.0, 237.77), (36.0, 299.26)] {
+            assert!((circuit.celsius(adc) - celsius).abs() < 0.005, "{adc}: {}", circuit.celsius(adc));
+            assert!((circuit.adc(celsius) - adc).abs() < 0.05, "{celsius}: {}", circuit.adc(celsius));
         }
         let mut sensor = SimulatedSensor::new(circuit, 0.0, 1);
         assert_eq!(sensor.convert(210.06), 118);
@@ -654,12 +502,7 @@ mod tests {
             rig.plant = HeaterPlant::at(PlantModel::HOTEND_40W, celsius);
             rig.run(10.0);
             let n = rig.trace.len() as f64;
-            let error = rig
-                .trace
-                .iter()
-                .map(|r| f64::from(r.measured.0) / 100.0 - r.plant_c)
-                .sum::<f64>()
-                / n;
+            let error = rig.trace.iter().map(|r| f64::from(r.measured.0) / 100.0 - r.plant_c).sum::<f64>() / n;
             assert!(error.abs() < 0.12, "{celsius}: {error}");
         }
     }
@@ -667,15 +510,7 @@ mod tests {
     /// Auto-tune the hot end at 210 °C, as `M303 E0 S210 C8 U1` would.
     fn tuned_hotend() -> (ThermalRig, TuneResult) {
         let mut rig = hotend_rig(Gains::MARLIN_HOTEND);
-        let result = rig
-            .tune(
-                TuneConfig {
-                    cycles: 8,
-                    ..TuneConfig::new(Celsius(21_000), 100)
-                },
-                1800.0,
-            )
-            .expect("the tune finishes");
+        let result = rig.tune(TuneConfig { cycles: 8, ..TuneConfig::new(Celsius(21_000), 100) }, 1800.0).expect("the tune finishes");
         rig.channel.set_gains(result.gains);
         (rig, result)
     }
@@ -688,10 +523,7 @@ mod tests {
         // a period of some tens of seconds.
         assert!((50..=1000).contains(&result.oscillation.0), "{result:?}");
         assert!((5_000..=60_000).contains(&result.period_ms), "{result:?}");
-        assert!(
-            result.gains.kp > 0 && result.gains.ki > 0 && result.gains.kd > 0,
-            "{result:?}"
-        );
+        assert!(result.gains.kp > 0 && result.gains.ki > 0 && result.gains.kd > 0, "{result:?}");
     }
 
     #[test]
@@ -744,20 +576,13 @@ mod tests {
             rig.run(1600.0);
             let figures = step_figures(&rig.trace, 238.0, 1.0, 200.0);
             assert!(figures.overshoot_c < 0.5, "{model:?}: {figures:?}");
-            assert!(
-                (1100.0..=1200.0).contains(&figures.settle_s),
-                "{model:?}: {figures:?}"
-            );
+            assert!((1100.0..=1200.0).contains(&figures.settle_s), "{model:?}: {figures:?}");
             assert_eq!(rig.fault, None);
         }
     }
 
     fn slow_bed_rig(control: firmware::thermal::Control, gains: Gains) -> ThermalRig {
-        let config = HeaterConfig {
-            control,
-            guard: GuardConfig::SLOW_BED,
-            ..BED.load()
-        };
+        let config = HeaterConfig { control, guard: GuardConfig::SLOW_BED, ..BED.load() };
         ThermalRig::new(
             HeaterChannel::new(flash_config(config), gains),
             HeaterPlant::new(PlantModel::BED_SLOW),
@@ -770,12 +595,7 @@ mod tests {
         rig.channel.set_target(Celsius(10_000)).unwrap();
         rig.run(2400.0);
         assert_eq!(rig.fault, None);
-        let reached = rig
-            .trace
-            .iter()
-            .find(|r| r.plant_c >= 99.0)
-            .map(|r| r.time_s)
-            .unwrap();
+        let reached = rig.trace.iter().find(|r| r.plant_c >= 99.0).map(|r| r.time_s).unwrap();
         assert!((1000.0..=1500.0).contains(&reached), "{reached}");
         for r in rig.since(reached + 200.0) {
             assert!((r.plant_c - 100.0).abs() <= 2.5, "{r:?}");
@@ -796,10 +616,7 @@ mod tests {
     #[test]
     fn the_slow_bed_on_auto_tuned_pid_reaches_100_without_tripping() {
         let mut tuning = slow_bed_rig(firmware::thermal::Control::PID, Gains::MARLIN_BED);
-        let config = TuneConfig {
-            timeout_s: 3000,
-            ..TuneConfig::new(Celsius(10_000), 100)
-        };
+        let config = TuneConfig { timeout_s: 3000, ..TuneConfig::new(Celsius(10_000), 100) };
         let result = tuning.tune(config, 20_000.0).expect("the bed tunes");
         let mut rig = slow_bed_rig(firmware::thermal::Control::PID, result.gains);
         assert_slow_bed_holds_100(&mut rig);
@@ -810,10 +627,7 @@ mod tests {
         let mut rig = slow_bed_rig(firmware::thermal::Control::PID, Gains::MARLIN_BED);
         rig.channel.set_target(Celsius(10_000)).unwrap();
         rig.run(2400.0);
-        assert_eq!(
-            rig.fault.map(|(_, fault)| fault),
-            Some(ThermalFault::HeatingFailed)
-        );
+        assert_eq!(rig.fault.map(|(_, fault)| fault), Some(ThermalFault::HeatingFailed));
     }
 
     /// Hold 210 °C with Marlin's gains, then break something.

@@ -4,9 +4,7 @@
 //! Regenerate the shipped traces after a deliberate change with
 //! `REGENERATE_TRACES=1 cargo test -p hal-sim --test closed_loop_circle`.
 
-use firmware::closed_loop::control::{
-    AxisController, DriverStatus, FixedGains, FollowingErrorLimit, Reference,
-};
+use firmware::closed_loop::control::{AxisController, DriverStatus, FixedGains, FollowingErrorLimit, Reference};
 use firmware::closed_loop::nse5310::{EncoderFault, TrackerConfig, UNITS_PER_MM};
 use firmware::closed_loop::quadrature::QuadratureDecoder;
 use firmware::closed_loop::relay::{RelayAutotune, RelayStep};
@@ -53,17 +51,9 @@ fn pid_gamma_0_5_at_5_mm_s_with_glitches_on_beats_the_thesis_and_meets_the_goal(
 fn without_preview_the_simulation_matches_the_spec_plain_10_ms_figures() {
     // SPEC §1: "a plain simulation with a 10 ms loop gives P+FF Kp 4.3 ≈
     // 0.0103 / 0.0085 and PID γ 0.5 ≈ 0.0040 total".
-    let options = CircleOptions {
-        loop_hz: 100,
-        preview: false,
-        following_error: FollowingErrorLimit::printer_default(100),
-        ..CircleOptions::standard()
-    };
+    let options = CircleOptions { loop_hz: 100, preview: false, following_error: FollowingErrorLimit::printer_default(100), ..CircleOptions::standard() };
     let p = run_circle(Strategy::PFeedforward { kp_milli: 4300 }, 5.0, &options);
-    assert!(
-        close(p.mse_x, 0.0103, 0.05) && close(p.mse_y, 0.0085, 0.05),
-        "{p:?}"
-    );
+    assert!(close(p.mse_x, 0.0103, 0.05) && close(p.mse_y, 0.0085, 0.05), "{p:?}");
     let pid = run_circle(PID_05, 5.0, &options);
     assert!(close(pid.mse_total, 0.0040, 0.10), "{pid:?}");
 }
@@ -77,26 +67,17 @@ fn the_table_has_every_strategy_at_every_speed_and_the_closed_loops_never_fault(
         match row.strategy {
             // k' = 0.9 makes the pure feedforward 10 % short of every move:
             // the following-error check catches it.
-            Strategy::OpenLoop => assert!(
-                matches!(row.fault, Some((_, AxisFault::FollowingError { .. }, _))),
-                "{row:?}"
-            ),
+            Strategy::OpenLoop => assert!(matches!(row.fault, Some((_, AxisFault::FollowingError { .. }, _))), "{row:?}"),
             _ => assert!(row.fault.is_none(), "{row:?}"),
         }
     }
     let text = format_circle_table(&rows);
-    assert!(
-        text.contains("PID γ 0.50") && text.contains("0.0014 / 0.0033 / 0.0047"),
-        "{text}"
-    );
+    assert!(text.contains("PID γ 0.50") && text.contains("0.0014 / 0.0033 / 0.0047"), "{text}");
 }
 
 #[test]
 fn after_a_2_mm_belt_slip_every_closed_loop_recovers_and_open_loop_is_caught() {
-    let options = CircleOptions {
-        slip_x: Some((3.0, 2.0)),
-        ..CircleOptions::standard()
-    };
+    let options = CircleOptions { slip_x: Some((3.0, 2.0)), ..CircleOptions::standard() };
     for strategy in thesis_strategies() {
         let row = run_circle(strategy, 5.0, &options);
         if strategy == Strategy::OpenLoop {
@@ -106,22 +87,14 @@ fn after_a_2_mm_belt_slip_every_closed_loop_recovers_and_open_loop_is_caught() {
             assert!(at <= 3.6, "{row:?}");
         } else {
             assert!(row.fault.is_none(), "{row:?}");
-            assert!(
-                row.final_error_mm < 0.02,
-                "{} lost position: {row:?}",
-                strategy_label(strategy)
-            );
+            assert!(row.final_error_mm < 0.02, "{} lost position: {row:?}", strategy_label(strategy));
         }
     }
 }
 
 #[test]
 fn with_stop_on_fault_an_open_loop_slip_stops_the_run_at_the_fault() {
-    let options = CircleOptions {
-        slip_x: Some((1.0, 2.0)),
-        stop_on_fault: true,
-        ..CircleOptions::standard()
-    };
+    let options = CircleOptions { slip_x: Some((1.0, 2.0)), stop_on_fault: true, ..CircleOptions::standard() };
     let row = run_circle(Strategy::OpenLoop, 5.0, &options);
     let (_, _, at) = row.fault.unwrap();
     assert!(at > 1.0 && at < 1.6, "{row:?}");
@@ -137,11 +110,7 @@ fn the_plant_has_step_and_encoder_quantisation_and_the_identified_gain() {
     plant.set_step_rate(firmware::closed_loop::output::StepRate(0));
     assert!((plant.motor_mm() - 10.0).abs() < 1e-9);
     plant.advance(0.1);
-    assert!(
-        (plant.carriage_mm() - 9.0).abs() < 1e-9,
-        "{}",
-        plant.carriage_mm()
-    );
+    assert!((plant.carriage_mm() - 9.0).abs() < 1e-9, "{}", plant.carriage_mm());
     // encoder: 9 mm = 18432 counts + strip offset 1234, modulo 4096
     assert_eq!(plant.read_raw(), ((18_432 + 1234) % 4096) as u16);
     // crossed the index at 1.3975, 3.3975, 5.3975 and 7.3975 mm (count
@@ -156,11 +125,7 @@ fn the_plant_delays_the_command_by_theta() {
     plant.advance(0.0995);
     assert_eq!(plant.carriage_mm(), 0.0);
     plant.advance(0.1005);
-    assert!(
-        (plant.carriage_mm() - 0.94).abs() < 0.011,
-        "{}",
-        plant.carriage_mm()
-    );
+    assert!((plant.carriage_mm() - 0.94).abs() < 0.011, "{}", plant.carriage_mm());
 }
 
 // ---------------------------------------------------------------- traces
@@ -176,11 +141,7 @@ fn shipped(name: &str) -> Vec<TraceRow> {
 
 fn replay(rows: &[TraceRow]) -> encoder_trace::ReplayReport {
     let tracker = TrackerConfig::for_read_rate(200, encoder_trace::TRACE_LOOP_HZ).unwrap();
-    encoder_trace::replay(
-        rows,
-        tracker,
-        FollowingErrorLimit::printer_default(encoder_trace::TRACE_LOOP_HZ),
-    )
+    encoder_trace::replay(rows, tracker, FollowingErrorLimit::printer_default(encoder_trace::TRACE_LOOP_HZ))
 }
 
 #[test]
@@ -191,10 +152,7 @@ fn every_shipped_trace_is_what_the_generator_makes_today() {
             std::fs::write(&path, encoder_trace::render_shipped(name).unwrap()).unwrap();
         }
         let on_disk = std::fs::read_to_string(&path).unwrap();
-        assert!(
-            on_disk == encoder_trace::render_shipped(name).unwrap(),
-            "{name} differs from the generator"
-        );
+        assert!(on_disk == encoder_trace::render_shipped(name).unwrap(), "{name} differs from the generator");
     }
 }
 
@@ -207,20 +165,12 @@ fn clean_circle_replays_without_fault_or_glitch_and_within_0_1_mm() {
     assert_eq!(report.counters.index_glitches, 0);
     assert_eq!(report.counters.bad_reads, 0);
     // X travels 60 → 40 → 60: 40 mm, 20 index positions
-    assert!(
-        (19..=21).contains(&report.counters.index_accepted),
-        "{:?}",
-        report.counters
-    );
+    assert!((19..=21).contains(&report.counters.index_accepted), "{:?}", report.counters);
     // PID γ 0.5 at 10 mm/s: 0.076 mm at worst (the circle's MSE is 0.003 mm²)
     assert!(report.max_error_mm < 0.1, "{}", report.max_error_mm);
     // the replayed position is the commanded one, to the micrometre, at the end
     let last = rows.last().unwrap().commanded_mm.unwrap();
-    assert!(
-        (report.positions_mm.last().unwrap() - last).abs() < 0.01,
-        "{} vs {last}",
-        report.positions_mm.last().unwrap()
-    );
+    assert!((report.positions_mm.last().unwrap() - last).abs() < 0.01, "{} vs {last}", report.positions_mm.last().unwrap());
 }
 
 #[test]
@@ -228,9 +178,7 @@ fn belt_slip_in_open_loop_is_a_following_error_half_a_second_after_the_slip() {
     let rows = shipped("belt_slip.csv");
     let report = replay(&rows);
     let (row, fault) = report.fault.expect("slip must be detected");
-    let AxisFault::FollowingError { error } = fault else {
-        panic!("{fault:?}")
-    };
+    let AxisFault::FollowingError { error } = fault else { panic!("{fault:?}") };
     // the carriage ends 1.5 mm beyond the commanded 5 mm: it moved 4.5 mm
     // (k' 0.9, open loop), then the belt skipped 2 mm
     assert!(error < -UNITS_PER_MM, "{error}");
@@ -242,28 +190,16 @@ fn belt_slip_in_open_loop_is_a_following_error_half_a_second_after_the_slip() {
 #[test]
 fn a_burst_of_index_glitches_is_counted_and_rejected_without_moving_the_position() {
     let rows = shipped("index_glitch_burst.csv");
-    let burst_edges: u32 = rows
-        .iter()
-        .filter(|r| r.time_s > 0.44 && r.time_s < 0.65)
-        .map(|r| u32::from(r.index))
-        .sum();
+    let burst_edges: u32 = rows.iter().filter(|r| r.time_s > 0.44 && r.time_s < 0.65).map(|r| u32::from(r.index)).sum();
     assert!(burst_edges >= 160, "{burst_edges}");
     let report = replay(&rows);
     assert_eq!(report.fault, None);
-    assert!(
-        report.counters.index_glitches >= 100,
-        "{:?}",
-        report.counters
-    );
+    assert!(report.counters.index_glitches >= 100, "{:?}", report.counters);
     // the same trace without its Index column gives exactly the same positions
     let without_index: Vec<TraceRow> = rows.iter().map(|r| TraceRow { index: 0, ..*r }).collect();
     assert_eq!(replay(&without_index).positions_mm, report.positions_mm);
     let last = rows.last().unwrap().commanded_mm.unwrap();
-    assert!(
-        (report.positions_mm.last().unwrap() - last).abs() < 0.01,
-        "{} vs {last}",
-        report.positions_mm.last().unwrap()
-    );
+    assert!((report.positions_mm.last().unwrap() - last).abs() < 0.01, "{} vs {last}", report.positions_mm.last().unwrap());
 }
 
 #[test]
@@ -274,61 +210,27 @@ fn a_stuck_sensor_is_a_fault_once_the_axis_was_commanded_a_quarter_mm_further() 
     assert_eq!(fault, AxisFault::Encoder(EncoderFault::Stuck));
     // frozen at 0.4 s; 10 mm/s is 0.04 mm per read: 0.25 mm takes 7 reads
     let frozen = rows.iter().position(|r| r.time_s >= 0.4).unwrap();
-    assert!(
-        (frozen + 6..=frozen + 9).contains(&row),
-        "frozen at row {frozen}, fault at row {row}"
-    );
+    assert!((frozen + 6..=frozen + 9).contains(&row), "frozen at row {frozen}, fault at row {row}");
 }
 
 #[test]
 fn trace_parser_names_the_bad_line() {
     assert!(encoder_trace::parse("time_s,raw,index,commanded_mm\n0.0,1,0,0.0\n").is_ok());
     let rows = encoder_trace::parse("# c\ntime_s,raw,index,commanded_mm\n0.0,,0,\n").unwrap();
-    assert_eq!(
-        rows[0],
-        TraceRow {
-            time_s: 0.0,
-            raw: None,
-            index: 0,
-            commanded_mm: None
-        }
-    );
+    assert_eq!(rows[0], TraceRow { time_s: 0.0, raw: None, index: 0, commanded_mm: None });
     assert_eq!(encoder_trace::parse("time,raw\n").unwrap_err().line, 1);
-    assert_eq!(
-        encoder_trace::parse("time_s,raw,index,commanded_mm\n0,4096,0,0\n")
-            .unwrap_err()
-            .line,
-        2
-    );
-    assert_eq!(
-        encoder_trace::parse("time_s,raw,index,commanded_mm\n0,1,x,0\n")
-            .unwrap_err()
-            .message,
-        "bad index"
-    );
+    assert_eq!(encoder_trace::parse("time_s,raw,index,commanded_mm\n0,4096,0,0\n").unwrap_err().line, 2);
+    assert_eq!(encoder_trace::parse("time_s,raw,index,commanded_mm\n0,1,x,0\n").unwrap_err().message, "bad index");
 }
 
 #[test]
 fn failed_reads_in_a_trace_count_towards_no_reading() {
-    let mut rows = vec![TraceRow {
-        time_s: 0.0,
-        raw: Some(100),
-        index: 0,
-        commanded_mm: Some(0.0),
-    }];
+    let mut rows = vec![TraceRow { time_s: 0.0, raw: Some(100), index: 0, commanded_mm: Some(0.0) }];
     for i in 1..=5 {
-        rows.push(TraceRow {
-            time_s: f64::from(i) * 0.004,
-            raw: None,
-            index: 0,
-            commanded_mm: Some(0.0),
-        });
+        rows.push(TraceRow { time_s: f64::from(i) * 0.004, raw: None, index: 0, commanded_mm: Some(0.0) });
     }
     let report = replay(&rows);
-    assert_eq!(
-        report.fault,
-        Some((5, AxisFault::Encoder(EncoderFault::NoReading)))
-    );
+    assert_eq!(report.fault, Some((5, AxisFault::Encoder(EncoderFault::NoReading))));
 }
 
 // ---------------------------------------------------------------- DC servo
@@ -364,57 +266,25 @@ fn relay_autotune_on_the_dc_servo_gives_gains_that_hold_and_move_the_axis() {
     let mut decoder = QuadratureDecoder::new(false, false, 200);
     let mut relay = RelayAutotune::new(0, 127, 0, 2, 2000, 30);
     let mut result = None;
-    run_servo(&mut plant, &mut decoder, 20_000, |count| {
-        match relay.tick(count) {
-            RelayStep::Output(duty) => Some(duty),
-            RelayStep::Done(r) => {
-                result = Some(r);
-                None
-            }
-            RelayStep::Failed => panic!("relay failed"),
+    run_servo(&mut plant, &mut decoder, 20_000, |count| match relay.tick(count) {
+        RelayStep::Output(duty) => Some(duty),
+        RelayStep::Done(r) => {
+            result = Some(r);
+            None
         }
+        RelayStep::Failed => panic!("relay failed"),
     });
     let result = result.expect("relay finished");
-    let gains = relay_ziegler_nichols(
-        127.0,
-        result.oscillation_amplitude as f32,
-        result.period_ticks as f32 / 1000.0,
-    )
-    .unwrap();
-    assert!(
-        gains.kp > 0.0 && gains.ki > 0.0 && gains.kd > 0.0,
-        "{gains:?}"
-    );
+    let gains = relay_ziegler_nichols(127.0, result.oscillation_amplitude as f32, result.period_ticks as f32 / 1000.0).unwrap();
+    assert!(gains.kp > 0.0 && gains.ki > 0.0 && gains.kd > 0.0, "{gains:?}");
     let fixed = FixedGains::servo_pid(&gains, 0.001).unwrap();
-    let mut controller = AxisController::new(
-        fixed,
-        255,
-        FollowingErrorLimit {
-            limit: 4000,
-            hold_ticks: 1000,
-        },
-    );
+    let mut controller = AxisController::new(fixed, 255, FollowingErrorLimit { limit: 4000, hold_ticks: 1000 });
     // move to 1000 counts (5 revolutions) and hold
     let target = 1000;
     run_servo(&mut plant, &mut decoder, 3000, |count| {
-        Some(
-            controller
-                .tick(
-                    Reference {
-                        position: target,
-                        velocity: 0,
-                    },
-                    Ok(count),
-                    DriverStatus::default(),
-                )
-                .unwrap(),
-        )
+        Some(controller.tick(Reference { position: target, velocity: 0 }, Ok(count), DriverStatus::default()).unwrap())
     });
-    assert!(
-        (decoder.count() - target).abs() <= 3,
-        "count {} gains {gains:?}",
-        decoder.count()
-    );
+    assert!((decoder.count() - target).abs() <= 3, "count {} gains {gains:?}", decoder.count());
     assert_eq!(decoder.illegal_transitions(), 0);
 }
 
@@ -422,30 +292,12 @@ fn relay_autotune_on_the_dc_servo_gives_gains_that_hold_and_move_the_axis() {
 fn a_bridge_fault_stops_the_servo_axis_and_latches() {
     let mut plant = servo_plant();
     let mut decoder = QuadratureDecoder::new(false, false, 0);
-    let fixed =
-        FixedGains::servo_pid(&relay_ziegler_nichols(127.0, 10.0, 0.05).unwrap(), 0.001).unwrap();
-    let mut controller = AxisController::new(
-        fixed,
-        255,
-        FollowingErrorLimit {
-            limit: 4000,
-            hold_ticks: 1000,
-        },
-    );
+    let fixed = FixedGains::servo_pid(&relay_ziegler_nichols(127.0, 10.0, 0.05).unwrap(), 0.001).unwrap();
+    let mut controller = AxisController::new(fixed, 255, FollowingErrorLimit { limit: 4000, hold_ticks: 1000 });
     let mut faults = Vec::new();
     let stopped_at = run_servo(&mut plant, &mut decoder, 1000, |count| {
         let bridge_fault = !faults.is_empty() || count > 200;
-        match controller.tick(
-            Reference {
-                position: 2000,
-                velocity: 0,
-            },
-            Ok(count),
-            DriverStatus {
-                alarm: false,
-                bridge_fault,
-            },
-        ) {
+        match controller.tick(Reference { position: 2000, velocity: 0 }, Ok(count), DriverStatus { alarm: false, bridge_fault }) {
             Ok(duty) => Some(duty),
             Err(fault) => {
                 faults.push(fault);
@@ -464,26 +316,11 @@ fn a_driver_alarm_stops_a_printer_axis_like_a_following_error() {
     let mut axis = printer_axis(PID_05, &options);
     axis.tracker.update(100, 0, 0).unwrap();
     axis.rehome(0);
-    let alarm = DriverStatus {
-        alarm: true,
-        bridge_fault: false,
-    };
-    let result = axis.tick(
-        Reference::default(),
-        firmware::closed_loop::Reading::Raw(100),
-        0,
-        alarm,
-    );
+    let alarm = DriverStatus { alarm: true, bridge_fault: false };
+    let result = axis.tick(Reference::default(), firmware::closed_loop::Reading::Raw(100), 0, alarm);
     assert_eq!(result, Err(AxisFault::DriverAlarm));
     axis.rehome(0);
-    assert!(axis
-        .tick(
-            Reference::default(),
-            firmware::closed_loop::Reading::Raw(100),
-            0,
-            DriverStatus::default()
-        )
-        .is_ok());
+    assert!(axis.tick(Reference::default(), firmware::closed_loop::Reading::Raw(100), 0, DriverStatus::default()).is_ok());
 }
 
 #[test]

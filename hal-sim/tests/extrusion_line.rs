@@ -5,9 +5,7 @@
 //! The barrel temperature is a stub (first order to 210 °C): the thermal
 //! module's barrel plant, PI and SSR slow PWM do not exist yet.
 
-use firmware::machines::velocity::{
-    DriveTrain, TimerChange, VelocityConfig, VelocityStepper, MEGA_STEP_TIMER_HZ,
-};
+use firmware::machines::velocity::{DriveTrain, TimerChange, VelocityConfig, VelocityStepper, MEGA_STEP_TIMER_HZ};
 use hal_sim::extrusion_plant::*;
 
 fn within_tolerance_after(run: &LineRun, settle_s: f64) -> Vec<(f64, f64)> {
@@ -26,11 +24,7 @@ fn starts_cold_refuses_the_screw_below_175_c_then_holds_2_85_mm_on_every_sample(
     assert!(run.refusals.len() > 10, "{:?}", run.refusals);
     assert!(run.refusals.iter().all(|&(_, c)| c < 175.0));
     assert!(run.refusals[0].1 < 30.0, "the first try is cold");
-    assert!(
-        run.screw_started_at_c >= 175.0 && run.screw_started_at_c < 190.0,
-        "{}",
-        run.screw_started_at_c
-    );
+    assert!(run.screw_started_at_c >= 175.0 && run.screw_started_at_c < 190.0, "{}", run.screw_started_at_c);
     // Diameter: settled within two minutes of switching to automatic, then
     // every camera sample of the 20 minutes is within ±0.05 mm of 2.85 mm.
     let f = figures(&run, setpoint_mm()).expect("settles");
@@ -80,12 +74,7 @@ fn the_camera_sees_a_puller_change_3_s_late_and_in_whole_pixels() {
     let before = plant.diameter_mm();
     assert!((before - 2.85).abs() < 1e-6);
     plant.advance(2.99, 8.0, 10.0);
-    assert!(
-        (plant.diameter_mm() - before).abs() < 1e-9 * before.max(1.0) + 1e-9,
-        "nothing within 3 s: {} {}",
-        plant.diameter_mm(),
-        before
-    );
+    assert!((plant.diameter_mm() - before).abs() < 1e-9 * before.max(1.0) + 1e-9, "nothing within 3 s: {} {}", plant.diameter_mm(), before);
     plant.advance(0.2, 8.0, 10.0);
     assert!(plant.diameter_mm() < before, "then thinner");
     // 3 s lag: 63 % of the way after a further 3 s
@@ -106,12 +95,8 @@ fn thesis_gains_limit_cycle_near_2_rpm_and_are_stable_from_3_rpm() {
         options.plant = options.plant.operating_at(rpm).quiet();
         options.manual_puller_rpm = rpm * 1.2;
         let run = run_line(&options);
-        let tail: Vec<f64> = run.samples[run.samples.len() - 300..]
-            .iter()
-            .map(|s| s.true_mm)
-            .collect();
-        tail.iter().cloned().fold(f64::MIN, f64::max)
-            - tail.iter().cloned().fold(f64::MAX, f64::min)
+        let tail: Vec<f64> = run.samples[run.samples.len() - 300..].iter().map(|s| s.true_mm).collect();
+        tail.iter().cloned().fold(f64::MIN, f64::max) - tail.iter().cloned().fold(f64::MAX, f64::min)
     };
     assert!(swing(2.0) > 0.5, "limit cycle at 2 rpm: {}", swing(2.0));
     assert!(swing(3.0) < 0.06, "stable at 3 rpm: {}", swing(3.0));
@@ -126,16 +111,8 @@ fn a_silent_camera_holds_the_puller_warns_once_and_the_loop_resumes() {
     assert_eq!(run.stale_warnings.len(), 1, "{:?}", run.stale_warnings);
     let (at, held) = run.stale_warnings[0];
     assert_eq!(at, 305.0, "5 s after the last measurement");
-    let during: Vec<f64> = run
-        .samples
-        .iter()
-        .filter(|s| s.t_s > 301.0 && s.t_s <= 320.0)
-        .map(|s| s.puller_rpm)
-        .collect();
-    assert!(
-        during.iter().all(|&rpm| (rpm - held).abs() < 1e-9),
-        "held at {held}: {during:?}"
-    );
+    let during: Vec<f64> = run.samples.iter().filter(|s| s.t_s > 301.0 && s.t_s <= 320.0).map(|s| s.puller_rpm).collect();
+    assert!(during.iter().all(|&rpm| (rpm - held).abs() < 1e-9), "held at {held}: {during:?}");
     // back within tolerance on every sample after the gap
     assert!(within_tolerance_after(&run, 120.0).is_empty());
 }
@@ -144,11 +121,7 @@ fn a_silent_camera_holds_the_puller_warns_once_and_the_loop_resumes() {
 fn the_puller_ramps_instead_of_jumping() {
     let run = run_line(&LineOptions::standard());
     // 5 rpm/s at 50 updates/s
-    assert!(
-        run.largest_ramp_step_rpm <= 0.1 + 1e-9,
-        "{}",
-        run.largest_ramp_step_rpm
-    );
+    assert!(run.largest_ramp_step_rpm <= 0.1 + 1e-9, "{}", run.largest_ramp_step_rpm);
 }
 
 #[test]
@@ -163,8 +136,7 @@ fn the_4_to_1_puller_holds_the_diameter_too() {
 /// 3000 steps/rev and 1/16 is 8000 steps/s, 125 ticks per half period.
 #[test]
 fn the_screw_at_10_rpm_makes_8000_steps_per_second() {
-    let config =
-        VelocityConfig::new(DriveTrain::EXTRUDER_SCREW, MEGA_STEP_TIMER_HZ, 20, 5, 50).unwrap();
+    let config = VelocityConfig::new(DriveTrain::EXTRUDER_SCREW, MEGA_STEP_TIMER_HZ, 20, 5, 50).unwrap();
     let mut screw = VelocityStepper::new();
     screw.set_target(&config, 10_000).unwrap();
     let mut change = TimerChange::None;

@@ -5,8 +5,7 @@
 
 use firmware::closed_loop::output::ActiveLevel;
 use firmware::machines::powder_bed::{
-    CarriageEnd, LayerCommand, LayerCycle, LayerSettings, Platform, PlatformDriver, TravelFault,
-    TravelLimits, TravelReport, Vertical,
+    CarriageEnd, LayerCommand, LayerCycle, LayerSettings, Platform, PlatformDriver, TravelFault, TravelLimits, TravelReport, Vertical,
 };
 use hal_sim::powder_bed_plant::*;
 
@@ -17,13 +16,7 @@ fn travel_measurement_reports_the_configured_travel_in_steps_and_mm() {
     // 40 000 steps at 200 steps/mm: 200 mm
     let mut plant = PlatformPlant::new(DRIVER, 40_000, 12_345);
     let (result, seconds) = measure_travel(&mut plant, &TravelLimits::DEFAULT, ActiveLevel::Low);
-    assert_eq!(
-        result,
-        Ok(TravelReport {
-            steps: 40_000,
-            um: 200_000
-        })
-    );
+    assert_eq!(result, Ok(TravelReport { steps: 40_000, um: 200_000 }));
     assert_eq!(plant.position, 40_000, "it stops on the upper switch");
     assert_eq!(plant.edges_while_disabled, 0);
     // 12 345 down + 40 000 up at 1 kHz, plus the pause
@@ -36,43 +29,24 @@ fn starting_on_the_lower_switch_gives_the_same_travel() {
         let mut plant = PlatformPlant::new(DRIVER, 40_000, start);
         assert!(!plant.switch_levels().0, "starts on A (active low)");
         let (result, _) = measure_travel(&mut plant, &TravelLimits::DEFAULT, ActiveLevel::Low);
-        assert_eq!(
-            result,
-            Ok(TravelReport {
-                steps: 40_000,
-                um: 200_000
-            }),
-            "start {start}"
-        );
+        assert_eq!(result, Ok(TravelReport { steps: 40_000, um: 200_000 }), "start {start}");
     }
 }
 
 #[test]
 fn fractional_steps_per_mm_report_rounded_mm() {
     // a 3 mm lead at 800 ppr: 266.667 steps/mm; 32 000 steps = 120.000 mm
-    let driver = PlatformDriver {
-        steps_per_m: 266_667,
-        ..DRIVER
-    };
+    let driver = PlatformDriver { steps_per_m: 266_667, ..DRIVER };
     let mut plant = PlatformPlant::new(driver, 32_000, 5_000);
     let (result, _) = measure_travel(&mut plant, &TravelLimits::DEFAULT, ActiveLevel::Low);
-    assert_eq!(
-        result,
-        Ok(TravelReport {
-            steps: 32_000,
-            um: 120_000
-        })
-    );
+    assert_eq!(result, Ok(TravelReport { steps: 32_000, um: 120_000 }));
 }
 
 #[test]
 fn a_missing_upper_switch_faults_after_the_step_limit() {
     let mut plant = PlatformPlant::new(DRIVER, 40_000, 5_000);
     plant.upper_zone = None;
-    let limits = TravelLimits {
-        max_steps: 45_000,
-        ..TravelLimits::DEFAULT
-    };
+    let limits = TravelLimits { max_steps: 45_000, ..TravelLimits::DEFAULT };
     let (result, _) = measure_travel(&mut plant, &limits, ActiveLevel::Low);
     assert_eq!(result, Err(TravelFault::UpperSwitchNotFound));
 }
@@ -81,10 +55,7 @@ fn a_missing_upper_switch_faults_after_the_step_limit() {
 fn a_missing_lower_switch_faults_after_the_step_limit() {
     let mut plant = PlatformPlant::new(DRIVER, 40_000, 5_000);
     plant.lower_zone = None;
-    let limits = TravelLimits {
-        max_steps: 45_000,
-        ..TravelLimits::DEFAULT
-    };
+    let limits = TravelLimits { max_steps: 45_000, ..TravelLimits::DEFAULT };
     let (result, _) = measure_travel(&mut plant, &limits, ActiveLevel::Low);
     assert_eq!(result, Err(TravelFault::LowerSwitchNotFound));
 }
@@ -100,13 +71,7 @@ fn the_wrong_switch_polarity_is_caught_not_measured() {
     let mut plant = PlatformPlant::new(DRIVER, 40_000, 5_000);
     plant.switch_active = ActiveLevel::High;
     let (result, _) = measure_travel(&mut plant, &TravelLimits::DEFAULT, ActiveLevel::High);
-    assert_eq!(
-        result,
-        Ok(TravelReport {
-            steps: 40_000,
-            um: 200_000
-        })
-    );
+    assert_eq!(result, Ok(TravelReport { steps: 40_000, um: 200_000 }));
 }
 
 #[test]
@@ -136,15 +101,9 @@ fn run_layer(bed: &mut PowderBed, cycle: &mut LayerCycle) -> LayerCommand {
 #[test]
 fn a_layer_cycle_runs_in_order_and_moves_each_platform_by_exactly_one_layer() {
     let mut bed = PowderBed::new(DRIVER, 40_000);
-    let mut cycle = LayerCycle::new(LayerSettings {
-        thickness_um: 100,
-        suction_while_spreading: true,
-    });
+    let mut cycle = LayerCycle::new(LayerSettings { thickness_um: 100, suction_while_spreading: true });
     let (feed0, build0) = (bed.feed.position, bed.build.position);
-    assert_eq!(
-        run_layer(&mut bed, &mut cycle),
-        LayerCommand::Finished { layer: 1 }
-    );
+    assert_eq!(run_layer(&mut bed, &mut cycle), LayerCommand::Finished { layer: 1 });
     // one layer = 0.1 mm = 20 steps at 200 steps/mm
     assert_eq!(bed.feed.position - feed0, 20, "feed up one layer");
     assert_eq!(build0 - bed.build.position, 20, "build down one layer");
@@ -155,39 +114,19 @@ fn a_layer_cycle_runs_in_order_and_moves_each_platform_by_exactly_one_layer() {
         [
             LayerCommand::Roller(true),
             LayerCommand::Suction(true),
-            LayerCommand::MoveCarriage {
-                to: CarriageEnd::Plus,
-                print_pass: false
-            },
+            LayerCommand::MoveCarriage { to: CarriageEnd::Plus, print_pass: false },
             LayerCommand::Roller(false),
             LayerCommand::Suction(false),
-            LayerCommand::MoveCarriage {
-                to: CarriageEnd::Minus,
-                print_pass: true
-            },
-            LayerCommand::StepPlatform {
-                platform: Platform::Feed,
-                direction: Vertical::Up,
-                steps: 20
-            },
-            LayerCommand::StepPlatform {
-                platform: Platform::Build,
-                direction: Vertical::Down,
-                steps: 20
-            },
+            LayerCommand::MoveCarriage { to: CarriageEnd::Minus, print_pass: true },
+            LayerCommand::StepPlatform { platform: Platform::Feed, direction: Vertical::Up, steps: 20 },
+            LayerCommand::StepPlatform { platform: Platform::Build, direction: Vertical::Down, steps: 20 },
             LayerCommand::Finished { layer: 1 },
         ]
     );
     // the spread starts at C− with the roller turning; the print pass
     // starts at C+ with it stopped; the platforms move with the carriage home
-    assert_eq!(
-        (bed.log[2].carriage_at, bed.log[2].roller_on),
-        (Some(CarriageEnd::Minus), true)
-    );
-    assert_eq!(
-        (bed.log[5].carriage_at, bed.log[5].roller_on),
-        (Some(CarriageEnd::Plus), false)
-    );
+    assert_eq!((bed.log[2].carriage_at, bed.log[2].roller_on), (Some(CarriageEnd::Minus), true));
+    assert_eq!((bed.log[5].carriage_at, bed.log[5].roller_on), (Some(CarriageEnd::Plus), false));
     assert_eq!(bed.log[6].carriage_at, Some(CarriageEnd::Minus));
     assert_eq!(bed.carriage.at(), Some(CarriageEnd::Minus));
     assert_eq!(bed.carriage.decoder.illegal_transitions(), 0);
@@ -196,16 +135,10 @@ fn a_layer_cycle_runs_in_order_and_moves_each_platform_by_exactly_one_layer() {
 #[test]
 fn fifty_layers_of_0_05_mm_at_a_fractional_pitch_move_exactly_2_5_mm() {
     // 266.667 steps/mm: 13.33 steps per layer; 50 layers = 666.67 → 666 steps
-    let driver = PlatformDriver {
-        steps_per_m: 266_667,
-        ..DRIVER
-    };
+    let driver = PlatformDriver { steps_per_m: 266_667, ..DRIVER };
     let mut bed = PowderBed::new(driver, 40_000);
     bed.carriage.speed_counts_per_s = 8000;
-    let mut cycle = LayerCycle::new(LayerSettings {
-        thickness_um: 50,
-        suction_while_spreading: false,
-    });
+    let mut cycle = LayerCycle::new(LayerSettings { thickness_um: 50, suction_while_spreading: false });
     let (feed0, build0) = (bed.feed.position, bed.build.position);
     for layer in 1..=50 {
         let mut command = cycle.start(&driver, &driver, bed.carriage.at());
@@ -223,18 +156,9 @@ fn fifty_layers_of_0_05_mm_at_a_fractional_pitch_move_exactly_2_5_mm() {
 fn a_carriage_left_in_the_middle_returns_to_c_minus_before_spreading() {
     let mut bed = PowderBed::new(DRIVER, 40_000);
     bed.carriage.stroke(CarriageEnd::Plus).unwrap();
-    let mut cycle = LayerCycle::new(LayerSettings {
-        thickness_um: 100,
-        suction_while_spreading: false,
-    });
+    let mut cycle = LayerCycle::new(LayerSettings { thickness_um: 100, suction_while_spreading: false });
     run_layer(&mut bed, &mut cycle);
-    assert_eq!(
-        bed.log[0].command,
-        LayerCommand::MoveCarriage {
-            to: CarriageEnd::Minus,
-            print_pass: false
-        }
-    );
+    assert_eq!(bed.log[0].command, LayerCommand::MoveCarriage { to: CarriageEnd::Minus, print_pass: false });
     assert!(!bed.log[0].roller_on);
     assert_eq!(bed.log[1].command, LayerCommand::Roller(true));
 }
@@ -243,17 +167,10 @@ fn a_carriage_left_in_the_middle_returns_to_c_minus_before_spreading() {
 fn a_carriage_that_cannot_reach_its_sensor_aborts_the_layer_with_everything_off() {
     let mut bed = PowderBed::new(DRIVER, 40_000);
     bed.carriage.c_plus_counts = 1_000_000; // sensor unplugged
-    let mut cycle = LayerCycle::new(LayerSettings {
-        thickness_um: 100,
-        suction_while_spreading: true,
-    });
+    let mut cycle = LayerCycle::new(LayerSettings { thickness_um: 100, suction_while_spreading: true });
     let last = run_layer(&mut bed, &mut cycle);
     assert!(matches!(last, LayerCommand::Aborted(_)), "{last:?}");
     assert!(!bed.roller_on && !bed.suction_on);
-    let feed_moves = bed
-        .log
-        .iter()
-        .filter(|e| matches!(e.command, LayerCommand::StepPlatform { .. }))
-        .count();
+    let feed_moves = bed.log.iter().filter(|e| matches!(e.command, LayerCommand::StepPlatform { .. })).count();
     assert_eq!(feed_moves, 0, "no platform moves after a failed spread");
 }

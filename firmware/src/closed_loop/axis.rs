@@ -27,29 +27,15 @@ pub enum Reading {
 }
 
 impl EncoderAxis {
-    pub const fn new(
-        tracker: LinearTracker,
-        controller: AxisController,
-        scale: StepperScale,
-    ) -> Self {
-        Self {
-            tracker,
-            controller,
-            scale,
-        }
+    pub const fn new(tracker: LinearTracker, controller: AxisController, scale: StepperScale) -> Self {
+        Self { tracker, controller, scale }
     }
 
     /// The tick for this axis: feed the reading (and the debounced index
     /// edges since the last tick), run the loop, return the step rate to run
     /// until the next tick. On `Err` the stepper must stop (zero rate) and
     /// the fault is latched until [`rehome`](Self::rehome).
-    pub fn tick(
-        &mut self,
-        reference: Reference,
-        reading: Reading,
-        index_edges: u8,
-        driver: DriverStatus,
-    ) -> Result<StepRate, AxisFault> {
+    pub fn tick(&mut self, reference: Reference, reading: Reading, index_edges: u8, driver: DriverStatus) -> Result<StepRate, AxisFault> {
         let measured = match reading {
             Reading::Raw(raw) => self.tracker.update(raw, index_edges, reference.position),
             Reading::Failed => self.tracker.read_failed().map(|()| self.tracker.position()),

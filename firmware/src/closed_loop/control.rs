@@ -59,11 +59,7 @@ impl Q16 {
             return None;
         }
         // Round half away from zero without libm.
-        let rounded = if scaled >= 0.0 {
-            scaled + 0.5
-        } else {
-            scaled - 0.5
-        };
+        let rounded = if scaled >= 0.0 { scaled + 0.5 } else { scaled - 0.5 };
         Some(Q16(rounded as i32))
     }
 
@@ -115,11 +111,7 @@ pub fn mul_shift<const SHIFT: u32>(value: i32, factor: i32) -> i32 {
     if fits_i32(value.unsigned_abs(), factor.unsigned_abs()) {
         // |product| < 2^31 and SHIFT ≥ 1, so ± half cannot overflow.
         let product = value * factor;
-        return if product >= 0 {
-            (product + half) >> SHIFT
-        } else {
-            -((half - product) >> SHIFT)
-        };
+        return if product >= 0 { (product + half) >> SHIFT } else { -((half - product) >> SHIFT) };
     }
     mul_shift_wide::<SHIFT>(value, factor)
 }
@@ -131,11 +123,7 @@ fn mul_shift_wide<const SHIFT: u32>(value: i32, factor: i32) -> i32 {
     let (high, low) = wide_magnitude(value.unsigned_abs(), factor.unsigned_abs());
     let (low, carry) = low.overflowing_add(half);
     let high = high.wrapping_add(u32::from(carry));
-    let magnitude = if high >> SHIFT != 0 {
-        u32::MAX
-    } else {
-        (high << (32 - SHIFT)) | (low >> SHIFT)
-    };
+    let magnitude = if high >> SHIFT != 0 { u32::MAX } else { (high << (32 - SHIFT)) | (low >> SHIFT) };
     if negative {
         if magnitude > 1 << 31 {
             i32::MIN
@@ -159,11 +147,7 @@ fn mul_q16_split(value: i32, factor: i32) -> (i32, u16) {
     }
     let negative = (value < 0) != (factor < 0);
     let (high, low) = wide_magnitude(value.unsigned_abs(), factor.unsigned_abs());
-    let whole = if high >> 15 != 0 {
-        i32::MAX as u32
-    } else {
-        (high << 16) | (low >> 16)
-    };
+    let whole = if high >> 15 != 0 { i32::MAX as u32 } else { (high << 16) | (low >> 16) };
     let fraction = low as u16;
     if !negative {
         (whole as i32, fraction)
@@ -229,10 +213,7 @@ pub struct FollowingErrorLimit {
 impl FollowingErrorLimit {
     /// 1 mm held for 0.5 s at the given loop rate.
     pub const fn printer_default(loop_hz: u16) -> Self {
-        Self {
-            limit: super::nse5310::UNITS_PER_MM,
-            hold_ticks: loop_hz / 2,
-        }
+        Self { limit: super::nse5310::UNITS_PER_MM, hold_ticks: loop_hz / 2 }
     }
 }
 
@@ -301,12 +282,7 @@ impl AxisController {
     /// One loop sample: returns the command (units/s or duty, within
     /// ±output_limit), or the latched fault (the axis must then stop: zero
     /// step rate, or brake).
-    pub fn tick(
-        &mut self,
-        reference: Reference,
-        measured: Result<Units, EncoderFault>,
-        driver: DriverStatus,
-    ) -> Result<i32, AxisFault> {
+    pub fn tick(&mut self, reference: Reference, measured: Result<Units, EncoderFault>, driver: DriverStatus) -> Result<i32, AxisFault> {
         if let Some(fault) = self.fault {
             return Err(fault);
         }
@@ -343,8 +319,8 @@ impl AxisController {
         }
         if self.gains.derivative.0 != 0 {
             let change = signal.saturating_sub(self.previous_signal);
-            self.derivative = mul_q16(self.derivative, self.gains.derivative_decay)
-                .saturating_add(mul_q16(change, self.gains.derivative));
+            self.derivative =
+                mul_q16(self.derivative, self.gains.derivative_decay).saturating_add(mul_q16(change, self.gains.derivative));
         }
         self.previous_signal = signal;
 
@@ -367,10 +343,7 @@ impl AxisController {
                 let (whole, fraction) = mul_q16_split(error, integral_gain);
                 let (fraction, carry) = self.integral_fraction.overflowing_add(fraction);
                 self.integral_fraction = fraction;
-                self.integral = self
-                    .integral
-                    .saturating_add(whole)
-                    .saturating_add(i32::from(carry));
+                self.integral = self.integral.saturating_add(whole).saturating_add(i32::from(carry));
                 if self.integral >= self.output_limit {
                     self.integral = self.output_limit;
                     self.integral_fraction = 0;
@@ -453,10 +426,7 @@ impl AxisController {
 mod tests {
     use super::*;
 
-    const FOLLOW: FollowingErrorLimit = FollowingErrorLimit {
-        limit: 2048,
-        hold_ticks: 10,
-    };
+    const FOLLOW: FollowingErrorLimit = FollowingErrorLimit { limit: 2048, hold_ticks: 10 };
 
     fn gains(kp: f32, ki_tick: f32, kd: f32, decay: f32, on: DerivativeOn) -> FixedGains {
         FixedGains {
@@ -473,10 +443,7 @@ mod tests {
         Reference { position, velocity }
     }
 
-    const OK: DriverStatus = DriverStatus {
-        alarm: false,
-        bridge_fault: false,
-    };
+    const OK: DriverStatus = DriverStatus { alarm: false, bridge_fault: false };
 
     #[test]
     fn mul_q16_rounds_and_saturates() {
@@ -492,38 +459,16 @@ mod tests {
 
     #[test]
     fn the_wide_multiply_agrees_with_64_bit_arithmetic() {
-        let values = [
-            0i32,
-            1,
-            -1,
-            2047,
-            -2048,
-            65_535,
-            65_536,
-            -65_537,
-            1 << 20,
-            -(1 << 23) + 3,
-            123_456_789,
-            i32::MAX,
-            i32::MIN,
-        ];
+        let values = [0i32, 1, -1, 2047, -2048, 65_535, 65_536, -65_537, 1 << 20, -(1 << 23) + 3, 123_456_789, i32::MAX, i32::MIN];
         for &a in &values {
             for &b in &values {
                 let exact = i64::from(a) * i64::from(b);
-                let rounded = if exact >= 0 {
-                    (exact + (1 << 15)) >> 16
-                } else {
-                    -((-exact + (1 << 15)) >> 16)
-                };
+                let rounded = if exact >= 0 { (exact + (1 << 15)) >> 16 } else { -((-exact + (1 << 15)) >> 16) };
                 let expected = rounded.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
                 assert_eq!(mul_shift::<16>(a, b), expected, "{a} × {b}");
                 if exact.abs() < (1i64 << 46) {
                     let (whole, fraction) = mul_q16_split(a, b);
-                    assert_eq!(
-                        i64::from(whole) * 65_536 + i64::from(fraction),
-                        exact,
-                        "{a} × {b}"
-                    );
+                    assert_eq!(i64::from(whole) * 65_536 + i64::from(fraction), exact, "{a} × {b}");
                 }
             }
         }
@@ -545,30 +490,21 @@ mod tests {
 
     #[test]
     fn p_plus_feedforward_is_velocity_plus_kp_times_error() {
-        let mut c = AxisController::new(
-            gains(4.3, 0.0, 0.0, 0.0, DerivativeOn::Error),
-            409_600,
-            FOLLOW,
-        );
+        let mut c = AxisController::new(gains(4.3, 0.0, 0.0, 0.0, DerivativeOn::Error), 409_600, FOLLOW);
         // xd − x = 1000 units, vd = 10240 units/s (5 mm/s): u = 10240 + 4300
         assert_eq!(c.tick(at(1000, 10_240), Ok(0), OK), Ok(14_540));
     }
 
     #[test]
     fn output_saturates_at_the_limit() {
-        let mut c =
-            AxisController::new(gains(5.0, 0.0, 0.0, 0.0, DerivativeOn::Error), 1000, FOLLOW);
+        let mut c = AxisController::new(gains(5.0, 0.0, 0.0, 0.0, DerivativeOn::Error), 1000, FOLLOW);
         assert_eq!(c.tick(at(1000, 0), Ok(0), OK), Ok(1000));
         assert_eq!(c.tick(at(-1000, 0), Ok(0), OK), Ok(-1000));
     }
 
     #[test]
     fn integral_accumulates_ki_t_times_error_each_tick() {
-        let mut c = AxisController::new(
-            gains(0.0, 0.5, 0.0, 0.0, DerivativeOn::Error),
-            100_000,
-            FOLLOW,
-        );
+        let mut c = AxisController::new(gains(0.0, 0.5, 0.0, 0.0, DerivativeOn::Error), 100_000, FOLLOW);
         assert_eq!(c.tick(at(100, 0), Ok(0), OK), Ok(50));
         assert_eq!(c.tick(at(100, 0), Ok(0), OK), Ok(100));
         assert_eq!(c.integral(), 100);
@@ -576,8 +512,7 @@ mod tests {
 
     #[test]
     fn integral_stops_growing_while_the_output_is_saturated_anti_windup() {
-        let mut c =
-            AxisController::new(gains(1.0, 0.5, 0.0, 0.0, DerivativeOn::Error), 1000, FOLLOW);
+        let mut c = AxisController::new(gains(1.0, 0.5, 0.0, 0.0, DerivativeOn::Error), 1000, FOLLOW);
         for _ in 0..1000 {
             assert_eq!(c.tick(at(2000, 0), Ok(0), OK), Ok(1000));
         }
@@ -590,11 +525,7 @@ mod tests {
     #[test]
     fn small_errors_still_integrate_exactly() {
         // Ki·T = 0.01: one unit of error adds 0.01 units/s per tick.
-        let mut c = AxisController::new(
-            gains(0.0, 0.01, 0.0, 0.0, DerivativeOn::Error),
-            100_000,
-            FOLLOW,
-        );
+        let mut c = AxisController::new(gains(0.0, 0.01, 0.0, 0.0, DerivativeOn::Error), 100_000, FOLLOW);
         for _ in 0..1000 {
             c.tick(at(1, 0), Ok(0), OK).unwrap();
         }
@@ -606,11 +537,7 @@ mod tests {
     fn derivative_on_error_filters_a_ramp_to_kd_times_slope() {
         // Kd/(Tf+T) = 1, decay 0.5: a ramp of 10 units per tick converges
         // to 10 / (1 − 0.5) = 20.
-        let mut c = AxisController::new(
-            gains(0.0, 0.0, 1.0, 0.5, DerivativeOn::Error),
-            100_000,
-            FOLLOW,
-        );
+        let mut c = AxisController::new(gains(0.0, 0.0, 1.0, 0.5, DerivativeOn::Error), 100_000, FOLLOW);
         let mut out = 0;
         for k in 0..40 {
             out = c.tick(at(10 * k, 0), Ok(0), OK).unwrap();
@@ -620,11 +547,7 @@ mod tests {
 
     #[test]
     fn derivative_on_measurement_ignores_reference_steps() {
-        let mut c = AxisController::new(
-            gains(0.0, 0.0, 1.0, 0.5, DerivativeOn::Measurement),
-            100_000,
-            FOLLOW,
-        );
+        let mut c = AxisController::new(gains(0.0, 0.0, 1.0, 0.5, DerivativeOn::Measurement), 100_000, FOLLOW);
         c.tick(at(0, 0), Ok(0), OK).unwrap();
         assert_eq!(c.tick(at(1000, 0), Ok(0), OK), Ok(0));
         // the axis moving up by 10 brakes
@@ -633,34 +556,20 @@ mod tests {
 
     #[test]
     fn following_error_above_limit_for_longer_than_hold_is_a_fault() {
-        let mut c = AxisController::new(
-            gains(1.0, 0.0, 0.0, 0.0, DerivativeOn::Error),
-            100_000,
-            FOLLOW,
-        );
+        let mut c = AxisController::new(gains(1.0, 0.0, 0.0, 0.0, DerivativeOn::Error), 100_000, FOLLOW);
         for _ in 0..10 {
             assert!(c.tick(at(3000, 0), Ok(0), OK).is_ok());
         }
-        assert_eq!(
-            c.tick(at(3000, 0), Ok(0), OK),
-            Err(AxisFault::FollowingError { error: 3000 })
-        );
+        assert_eq!(c.tick(at(3000, 0), Ok(0), OK), Err(AxisFault::FollowingError { error: 3000 }));
         // latched: stays stopped until reset
-        assert_eq!(
-            c.tick(at(0, 0), Ok(0), OK),
-            Err(AxisFault::FollowingError { error: 3000 })
-        );
+        assert_eq!(c.tick(at(0, 0), Ok(0), OK), Err(AxisFault::FollowingError { error: 3000 }));
         c.reset();
         assert!(c.tick(at(0, 0), Ok(0), OK).is_ok());
     }
 
     #[test]
     fn a_short_excursion_above_the_limit_recovers_without_fault() {
-        let mut c = AxisController::new(
-            gains(1.0, 0.0, 0.0, 0.0, DerivativeOn::Error),
-            100_000,
-            FOLLOW,
-        );
+        let mut c = AxisController::new(gains(1.0, 0.0, 0.0, 0.0, DerivativeOn::Error), 100_000, FOLLOW);
         for _ in 0..10 {
             assert!(c.tick(at(3000, 0), Ok(0), OK).is_ok());
         }
@@ -673,51 +582,21 @@ mod tests {
     #[test]
     fn an_error_over_four_times_the_limit_is_a_fault_at_once() {
         let mut c = AxisController::new(FixedGains::OPEN_LOOP, 100_000, FOLLOW);
-        assert_eq!(
-            c.tick(at(4 * 2048 + 4, 0), Ok(0), OK),
-            Err(AxisFault::FollowingError { error: 8196 })
-        );
+        assert_eq!(c.tick(at(4 * 2048 + 4, 0), Ok(0), OK), Err(AxisFault::FollowingError { error: 8196 }));
     }
 
     #[test]
     fn driver_alarm_bridge_fault_and_encoder_fault_stop_the_axis() {
         let mut c = AxisController::new(FixedGains::OPEN_LOOP, 100_000, FOLLOW);
-        assert_eq!(
-            c.tick(
-                at(0, 0),
-                Ok(0),
-                DriverStatus {
-                    alarm: true,
-                    bridge_fault: false
-                }
-            ),
-            Err(AxisFault::DriverAlarm)
-        );
+        assert_eq!(c.tick(at(0, 0), Ok(0), DriverStatus { alarm: true, bridge_fault: false }), Err(AxisFault::DriverAlarm));
         let mut c = AxisController::new(FixedGains::OPEN_LOOP, 100_000, FOLLOW);
-        assert_eq!(
-            c.tick(
-                at(0, 0),
-                Ok(0),
-                DriverStatus {
-                    alarm: false,
-                    bridge_fault: true
-                }
-            ),
-            Err(AxisFault::BridgeFault)
-        );
+        assert_eq!(c.tick(at(0, 0), Ok(0), DriverStatus { alarm: false, bridge_fault: true }), Err(AxisFault::BridgeFault));
         let mut c = AxisController::new(FixedGains::OPEN_LOOP, 100_000, FOLLOW);
-        assert_eq!(
-            c.tick(at(0, 0), Err(EncoderFault::Stuck), OK),
-            Err(AxisFault::Encoder(EncoderFault::Stuck))
-        );
+        assert_eq!(c.tick(at(0, 0), Err(EncoderFault::Stuck), OK), Err(AxisFault::Encoder(EncoderFault::Stuck)));
     }
 
     #[test]
     fn the_loop_state_is_small() {
-        assert!(
-            core::mem::size_of::<AxisController>() <= 64,
-            "{}",
-            core::mem::size_of::<AxisController>()
-        );
+        assert!(core::mem::size_of::<AxisController>() <= 64, "{}", core::mem::size_of::<AxisController>());
     }
 }

@@ -133,12 +133,7 @@ pub enum AxisFault {
 impl AxisFault {
     /// The `Error:` line for `axis` (its letter), with the error in mm for a
     /// following error (`units_per_mm`: 2048 on the NSE-5310 axes).
-    pub fn write_error<W: ufmt::uWrite + ?Sized>(
-        self,
-        axis: u8,
-        units_per_mm: i32,
-        out: &mut W,
-    ) -> Result<(), W::Error> {
+    pub fn write_error<W: ufmt::uWrite + ?Sized>(self, axis: u8, units_per_mm: i32, out: &mut W) -> Result<(), W::Error> {
         ufmt::uwrite!(out, "Error:{} ", char::from(axis))?;
         match self {
             AxisFault::FollowingError { error } => {
@@ -149,9 +144,7 @@ impl AxisFault {
             AxisFault::DriverAlarm => out.write_str("driver ALARM")?,
             AxisFault::BridgeFault => out.write_str("motor bridge fault (EN/DIAG)")?,
             AxisFault::Encoder(EncoderFault::Stuck) => out.write_str("encoder stuck")?,
-            AxisFault::Encoder(EncoderFault::NoReading) => {
-                out.write_str("encoder not responding")?
-            }
+            AxisFault::Encoder(EncoderFault::NoReading) => out.write_str("encoder not responding")?,
             AxisFault::Stopped => out.write_str("stopped")?,
         }
         out.write_str(", job stopped (re-home with G28)\n")
@@ -160,11 +153,7 @@ impl AxisFault {
 
 /// `units / units_per_mm` with three decimals, rounded (32-bit only: the
 /// main loop of the AVR has no 64-bit division to spare).
-fn write_millimetres<W: ufmt::uWrite + ?Sized>(
-    out: &mut W,
-    units: Units,
-    units_per_mm: i32,
-) -> Result<(), W::Error> {
+fn write_millimetres<W: ufmt::uWrite + ?Sized>(out: &mut W, units: Units, units_per_mm: i32) -> Result<(), W::Error> {
     let per_mm = units_per_mm.unsigned_abs().clamp(1, 1 << 20);
     let magnitude = units.unsigned_abs();
     let mut whole = magnitude / per_mm;
@@ -209,25 +198,10 @@ mod tests {
 
     #[test]
     fn faults_print_an_error_line_that_stops_the_job() {
-        assert_eq!(
-            line(AxisFault::FollowingError { error: 5140 }),
-            "Error:X following error 2.510 mm, job stopped (re-home with G28)\n"
-        );
-        assert_eq!(
-            line(AxisFault::FollowingError { error: -20 }),
-            "Error:X following error -0.010 mm, job stopped (re-home with G28)\n"
-        );
-        assert_eq!(
-            line(AxisFault::DriverAlarm),
-            "Error:X driver ALARM, job stopped (re-home with G28)\n"
-        );
-        assert_eq!(
-            line(AxisFault::BridgeFault),
-            "Error:X motor bridge fault (EN/DIAG), job stopped (re-home with G28)\n"
-        );
-        assert_eq!(
-            line(AxisFault::Encoder(EncoderFault::Stuck)),
-            "Error:X encoder stuck, job stopped (re-home with G28)\n"
-        );
+        assert_eq!(line(AxisFault::FollowingError { error: 5140 }), "Error:X following error 2.510 mm, job stopped (re-home with G28)\n");
+        assert_eq!(line(AxisFault::FollowingError { error: -20 }), "Error:X following error -0.010 mm, job stopped (re-home with G28)\n");
+        assert_eq!(line(AxisFault::DriverAlarm), "Error:X driver ALARM, job stopped (re-home with G28)\n");
+        assert_eq!(line(AxisFault::BridgeFault), "Error:X motor bridge fault (EN/DIAG), job stopped (re-home with G28)\n");
+        assert_eq!(line(AxisFault::Encoder(EncoderFault::Stuck)), "Error:X encoder stuck, job stopped (re-home with G28)\n");
     }
 }

@@ -83,9 +83,7 @@ impl<I2C: I2c> Nse5310<I2C> {
     /// Read the raw 12-bit count (one 2-byte read transfer, ≈ 60 µs at 400 kHz).
     pub fn read_raw(&mut self) -> Result<u16, ReadError<I2C::Error>> {
         let mut frame = [0u8; 2];
-        self.i2c
-            .read(self.address, &mut frame)
-            .map_err(ReadError::Bus)?;
+        self.i2c.read(self.address, &mut frame).map_err(ReadError::Bus)?;
         decode_frame(frame).map_err(|error| match error {
             ReadError::Bus(never) => match never {},
             ReadError::NotReady => ReadError::NotReady,
@@ -119,13 +117,7 @@ pub struct IndexDebouncer {
 
 impl IndexDebouncer {
     pub const fn new(min_spacing_us: u32) -> Self {
-        Self {
-            min_spacing_us,
-            last_edge_us: 0,
-            seen_edge: false,
-            pending: 0,
-            bounces: 0,
-        }
+        Self { min_spacing_us, last_edge_us: 0, seen_edge: false, pending: 0, bounces: 0 }
     }
 
     /// Call from the Index pin's external interrupt (rising edge), with a
@@ -186,13 +178,7 @@ impl TrackerConfig {
     /// at a 1 kHz read rate, 100 mm/s at 200 Hz), 5 bad reads, stuck after
     /// 0.25 mm of commanded travel.
     pub const fn default_for_printer() -> Self {
-        Self {
-            index_phase: 0,
-            index_window: 256,
-            max_jump: 1024,
-            max_bad_reads: 5,
-            stuck_travel: UNITS_PER_MM / 4,
-        }
+        Self { index_phase: 0, index_window: 256, max_jump: 1024, max_bad_reads: 5, stuck_travel: UNITS_PER_MM / 4 }
     }
 
     /// The printer defaults with `max_jump` sized for an axis that moves at
@@ -209,10 +195,7 @@ impl TrackerConfig {
             return None;
         }
         let max_jump = (per_read * 3 / 2 + 64).min(HALF_POLE_PAIR as u32 - 1) as u16;
-        Some(Self {
-            max_jump,
-            ..Self::default_for_printer()
-        })
+        Some(Self { max_jump, ..Self::default_for_printer() })
     }
 }
 
@@ -277,12 +260,7 @@ impl LinearTracker {
     /// read; `commanded`: where the firmware has commanded the axis (units,
     /// same zero), for the stuck-sensor check. Returns the position (units
     /// from the homing zero) or the latched fault.
-    pub fn update(
-        &mut self,
-        raw: u16,
-        index_edges: u8,
-        commanded: i32,
-    ) -> Result<i32, EncoderFault> {
+    pub fn update(&mut self, raw: u16, index_edges: u8, commanded: i32) -> Result<i32, EncoderFault> {
         if let Some(fault) = self.fault {
             return Err(fault);
         }
@@ -311,9 +289,7 @@ impl LinearTracker {
         self.unwrapped = self.unwrapped.wrapping_add(jump);
         if raw != self.last_raw {
             self.commanded_at_change = commanded;
-        } else if (commanded.wrapping_sub(self.commanded_at_change)).unsigned_abs()
-            > self.config.stuck_travel.unsigned_abs()
-        {
+        } else if (commanded.wrapping_sub(self.commanded_at_change)).unsigned_abs() > self.config.stuck_travel.unsigned_abs() {
             self.fault = Some(EncoderFault::Stuck);
             return Err(EncoderFault::Stuck);
         }
@@ -356,15 +332,9 @@ impl LinearTracker {
         let distance = relative.min(COUNTS_PER_POLE_PAIR - relative);
         if crossed || distance <= i32::from(self.config.index_window) {
             self.counters.index_accepted = self.counters.index_accepted.saturating_add(1);
-            self.counters.index_bounces = self
-                .counters
-                .index_bounces
-                .saturating_add(u16::from(index_edges - 1));
+            self.counters.index_bounces = self.counters.index_bounces.saturating_add(u16::from(index_edges - 1));
         } else {
-            self.counters.index_glitches = self
-                .counters
-                .index_glitches
-                .saturating_add(u16::from(index_edges));
+            self.counters.index_glitches = self.counters.index_glitches.saturating_add(u16::from(index_edges));
         }
     }
 
@@ -490,10 +460,7 @@ mod tests {
 
     #[test]
     fn the_index_phase_is_configurable() {
-        let mut t = LinearTracker::new(TrackerConfig {
-            index_phase: 1000,
-            ..TrackerConfig::default_for_printer()
-        });
+        let mut t = LinearTracker::new(TrackerConfig { index_phase: 1000, ..TrackerConfig::default_for_printer() });
         t.update(990, 0, 0).unwrap();
         t.update(1010, 1, 20).unwrap();
         assert_eq!(t.counters().index_accepted, 1);
@@ -561,10 +528,7 @@ mod tests {
     #[test]
     fn max_jump_follows_speed_and_read_rate_and_refuses_ambiguous_rates() {
         // 200 mm/s at 500 Hz: 0.4 mm = 819 counts per read → 1292
-        assert_eq!(
-            TrackerConfig::for_read_rate(200, 500).map(|c| c.max_jump),
-            Some(1292)
-        );
+        assert_eq!(TrackerConfig::for_read_rate(200, 500).map(|c| c.max_jump), Some(1292));
         // 200 mm/s at 200 Hz is 1 mm per read: refused
         assert_eq!(TrackerConfig::for_read_rate(200, 200), None);
         assert_eq!(TrackerConfig::for_read_rate(200, 0), None);
@@ -606,16 +570,10 @@ mod tests {
     }
 
     impl I2c for FakeBus {
-        fn transaction(
-            &mut self,
-            address: u8,
-            operations: &mut [embedded_hal::i2c::Operation<'_>],
-        ) -> Result<(), Self::Error> {
+        fn transaction(&mut self, address: u8, operations: &mut [embedded_hal::i2c::Operation<'_>]) -> Result<(), Self::Error> {
             self.address_seen = address;
             if self.fail {
-                return Err(embedded_hal::i2c::ErrorKind::NoAcknowledge(
-                    embedded_hal::i2c::NoAcknowledgeSource::Address,
-                ));
+                return Err(embedded_hal::i2c::ErrorKind::NoAcknowledge(embedded_hal::i2c::NoAcknowledgeSource::Address));
             }
             for operation in operations {
                 if let embedded_hal::i2c::Operation::Read(buffer) = operation {
@@ -628,24 +586,10 @@ mod tests {
 
     #[test]
     fn reads_through_embedded_hal_i2c_at_the_configured_address() {
-        let mut chip = Nse5310::new(
-            FakeBus {
-                address_seen: 0,
-                frame: [0x12, 0x38],
-                fail: false,
-            },
-            DEFAULT_ADDRESS,
-        );
+        let mut chip = Nse5310::new(FakeBus { address_seen: 0, frame: [0x12, 0x38], fail: false }, DEFAULT_ADDRESS);
         assert_eq!(chip.read_raw(), Ok(0x123));
         assert_eq!(chip.release().address_seen, 0x40);
-        let mut chip = Nse5310::new(
-            FakeBus {
-                address_seen: 0,
-                frame: [0, 0],
-                fail: true,
-            },
-            0x41,
-        );
+        let mut chip = Nse5310::new(FakeBus { address_seen: 0, frame: [0, 0], fail: true }, 0x41);
         assert!(matches!(chip.read_raw(), Err(ReadError::Bus(_))));
         assert_eq!(chip.address(), 0x41);
     }

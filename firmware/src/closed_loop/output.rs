@@ -32,9 +32,7 @@ impl StepperScale {
         if !(1.0..2_147_483_000.0).contains(&q16) {
             return None;
         }
-        Some(Self {
-            steps_per_unit_q16: (q16 + 0.5) as i32,
-        })
+        Some(Self { steps_per_unit_q16: (q16 + 0.5) as i32 })
     }
 
     /// In the tick: velocity (units/s) → step rate (one multiply).
@@ -95,17 +93,10 @@ pub struct HBridge<Pwm, Ina, Inb, Diag> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BridgeWriteError;
 
-impl<Pwm: SetDutyCycle, Ina: OutputPin, Inb: OutputPin, Diag: InputPin>
-    HBridge<Pwm, Ina, Inb, Diag>
-{
+impl<Pwm: SetDutyCycle, Ina: OutputPin, Inb: OutputPin, Diag: InputPin> HBridge<Pwm, Ina, Inb, Diag> {
     /// `diag_active`: the VNH5019 pulls EN/DIAG low on a fault (`Low`).
     pub fn new(pwm: Pwm, ina: Ina, inb: Inb, diag: Diag, diag_active: ActiveLevel) -> Self {
-        let mut bridge = Self {
-            pwm,
-            ina,
-            inb,
-            diag: FaultInput::new(diag, diag_active),
-        };
+        let mut bridge = Self { pwm, ina, inb, diag: FaultInput::new(diag, diag_active) };
         let _ = bridge.brake();
         bridge
     }
@@ -130,16 +121,10 @@ impl<Pwm: SetDutyCycle, Ina: OutputPin, Inb: OutputPin, Diag: InputPin>
         let magnitude = duty.unsigned_abs().min(max as u32) as u16;
         // Direction first with the PWM off, so a reversal never shoots through.
         self.pwm.set_duty_cycle(0).map_err(|_| BridgeWriteError)?;
-        let (a, b) = if duty > 0 {
-            (true, false)
-        } else {
-            (false, true)
-        };
+        let (a, b) = if duty > 0 { (true, false) } else { (false, true) };
         self.ina.set_state(a.into()).map_err(|_| BridgeWriteError)?;
         self.inb.set_state(b.into()).map_err(|_| BridgeWriteError)?;
-        self.pwm
-            .set_duty_cycle(magnitude)
-            .map_err(|_| BridgeWriteError)
+        self.pwm.set_duty_cycle(magnitude).map_err(|_| BridgeWriteError)
     }
 
     /// Brake to ground: INA = INB = 0, PWM 0.
@@ -174,15 +159,11 @@ mod tests {
     }
     impl OutputPin for Pin {
         fn set_low(&mut self) -> Result<(), Self::Error> {
-            self.1
-                .borrow_mut()
-                .push(if self.0 == "A" { "A0" } else { "B0" });
+            self.1.borrow_mut().push(if self.0 == "A" { "A0" } else { "B0" });
             Ok(())
         }
         fn set_high(&mut self) -> Result<(), Self::Error> {
-            self.1
-                .borrow_mut()
-                .push(if self.0 == "A" { "A1" } else { "B1" });
+            self.1.borrow_mut().push(if self.0 == "A" { "A1" } else { "B1" });
             Ok(())
         }
     }

@@ -120,12 +120,7 @@ mod tests {
         }
         assert_eq!(q.count(), 40);
         for _ in 0..3 {
-            for (a, b) in FORWARD
-                .iter()
-                .rev()
-                .skip(1)
-                .chain(core::iter::once(&(false, false)))
-            {
+            for (a, b) in FORWARD.iter().rev().skip(1).chain(core::iter::once(&(false, false))) {
                 q.on_edge(*a, *b);
             }
         }

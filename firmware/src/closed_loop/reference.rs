@@ -77,13 +77,7 @@ impl<const AXES: usize, const N: usize> ReferencePath<AXES, N> {
     /// feedforward `preview_ticks` ahead.
     pub fn new(start: [Units; AXES], tick_hz: u16, preview_ticks: u16) -> Self {
         Self {
-            pieces: [Piece {
-                end: [0; AXES],
-                increment: [0; AXES],
-                increment_fraction: [0; AXES],
-                velocity: [0; AXES],
-                ticks: 0,
-            }; N],
+            pieces: [Piece { end: [0; AXES], increment: [0; AXES], increment_fraction: [0; AXES], velocity: [0; AXES], ticks: 0 }; N],
             head: 0,
             len: 0,
             queued_end: start,
@@ -106,13 +100,7 @@ impl<const AXES: usize, const N: usize> ReferencePath<AXES, N> {
         if usize::from(self.len) >= N {
             return Err(PathError::Full);
         }
-        let mut piece = Piece {
-            end,
-            increment: [0; AXES],
-            increment_fraction: [0; AXES],
-            velocity: [0; AXES],
-            ticks,
-        };
+        let mut piece = Piece { end, increment: [0; AXES], increment_fraction: [0; AXES], velocity: [0; AXES], ticks };
         #[allow(clippy::needless_range_loop)] // four arrays in step
         for axis in 0..AXES {
             let distance = i64::from(end[axis]) - i64::from(self.queued_end[axis]);
@@ -175,12 +163,9 @@ impl<const AXES: usize, const N: usize> ReferencePath<AXES, N> {
             } else {
                 let piece = &self.pieces[head];
                 for axis in 0..AXES {
-                    let (fraction, carry) = self.position_fraction[axis]
-                        .overflowing_add(piece.increment_fraction[axis]);
+                    let (fraction, carry) = self.position_fraction[axis].overflowing_add(piece.increment_fraction[axis]);
                     self.position_fraction[axis] = fraction;
-                    self.position[axis] = self.position[axis]
-                        .wrapping_add(piece.increment[axis])
-                        .wrapping_add(i32::from(carry));
+                    self.position[axis] = self.position[axis].wrapping_add(piece.increment[axis]).wrapping_add(i32::from(carry));
                 }
             }
         }
@@ -264,22 +249,10 @@ mod tests {
         let mut path = ReferencePath::<1, 4>::new([0], 1000, 2);
         path.push([400], 4).unwrap();
         path.push([400], 2).unwrap(); // a pause
-        let seen: Vec<(i32, i32)> = (0..8)
-            .map(|_| path.advance()[0])
-            .map(|r| (r.position, r.velocity))
-            .collect();
+        let seen: Vec<(i32, i32)> = (0..8).map(|_| path.advance()[0]).map(|r| (r.position, r.velocity)).collect();
         assert_eq!(
             seen,
-            [
-                (0, 100_000),
-                (0, 100_000),
-                (0, 100_000),
-                (100, 100_000),
-                (200, 0),
-                (300, 0),
-                (400, 0),
-                (400, 0)
-            ]
+            [(0, 100_000), (0, 100_000), (0, 100_000), (100, 100_000), (200, 0), (300, 0), (400, 0), (400, 0)]
         );
     }
 
@@ -320,22 +293,12 @@ mod tests {
         path.advance();
         path.clear();
         assert!(path.is_idle());
-        assert_eq!(
-            path.advance()[0],
-            Reference {
-                position: 200,
-                velocity: 0
-            }
-        );
+        assert_eq!(path.advance()[0], Reference { position: 200, velocity: 0 });
     }
 
     #[test]
     fn the_path_is_small() {
         // two axes, four pieces
-        assert!(
-            core::mem::size_of::<ReferencePath<2, 4>>() <= 176,
-            "{}",
-            core::mem::size_of::<ReferencePath<2, 4>>()
-        );
+        assert!(core::mem::size_of::<ReferencePath<2, 4>>() <= 176, "{}", core::mem::size_of::<ReferencePath<2, 4>>());
     }
 }

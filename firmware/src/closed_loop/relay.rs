@@ -56,14 +56,7 @@ impl RelayAutotune {
     /// Oscillate around `setpoint` with output `bias ± relay_amplitude`,
     /// switching outside `±noise_band`; give up after `max_cycles` cycles or
     /// if the position strays more than `max_excursion` from the set-point.
-    pub const fn new(
-        setpoint: i32,
-        relay_amplitude: i32,
-        bias: i32,
-        noise_band: i32,
-        max_excursion: i32,
-        max_cycles: u8,
-    ) -> Self {
+    pub const fn new(setpoint: i32, relay_amplitude: i32, bias: i32, noise_band: i32, max_excursion: i32, max_cycles: u8) -> Self {
         Self {
             setpoint,
             relay_amplitude,
@@ -98,11 +91,7 @@ impl RelayAutotune {
                 return result;
             }
         }
-        let output = if self.high {
-            self.relay_amplitude
-        } else {
-            -self.relay_amplitude
-        };
+        let output = if self.high { self.relay_amplitude } else { -self.relay_amplitude };
         RelayStep::Output(self.bias.saturating_add(output))
     }
 
@@ -120,9 +109,7 @@ impl RelayAutotune {
             return None;
         }
         if let Some((previous_amplitude, previous_period)) = self.previous {
-            if within_5_percent(amplitude, previous_amplitude)
-                && within_5_percent(period as i32, previous_period as i32)
-            {
+            if within_5_percent(amplitude, previous_amplitude) && within_5_percent(period as i32, previous_period as i32) {
                 return Some(RelayStep::Done(RelayResult {
                     relay_amplitude: self.relay_amplitude,
                     oscillation_amplitude: amplitude,
@@ -171,15 +158,10 @@ mod tests {
         // For k/s·e^(−θs) under a relay, Pu = 4θ and a = k·d·θ (no noise
         // band): θ = 50 ticks, k·d = 2 units per tick → Pu 200, a 100.
         let mut relay = RelayAutotune::new(0, 127, 0, 0, 10_000, 20);
-        let RelayStep::Done(result) = run(&mut relay, 50, 2.0 / 127.0) else {
-            panic!()
-        };
+        let RelayStep::Done(result) = run(&mut relay, 50, 2.0 / 127.0) else { panic!() };
         assert_eq!(result.relay_amplitude, 127);
         assert!((result.period_ticks as i32 - 200).abs() <= 4, "{result:?}");
-        assert!(
-            (result.oscillation_amplitude - 100).abs() <= 3,
-            "{result:?}"
-        );
+        assert!((result.oscillation_amplitude - 100).abs() <= 3, "{result:?}");
     }
 
     #[test]

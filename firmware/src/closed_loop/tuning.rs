@@ -78,21 +78,12 @@ pub struct RelayGains {
 
 /// `relay_amplitude` d and `oscillation_amplitude` a in the same units as
 /// the output and the measurement; `period_s` Pu in seconds.
-pub fn relay_ziegler_nichols(
-    relay_amplitude: f32,
-    oscillation_amplitude: f32,
-    period_s: f32,
-) -> Result<RelayGains, TuningError> {
+pub fn relay_ziegler_nichols(relay_amplitude: f32, oscillation_amplitude: f32, period_s: f32) -> Result<RelayGains, TuningError> {
     if !(relay_amplitude > 0.0 && oscillation_amplitude > 0.0 && period_s > 0.0) {
         return Err(TuningError::NotPositive);
     }
     let ku = 4.0 * relay_amplitude / (core::f32::consts::PI * oscillation_amplitude);
-    Ok(RelayGains {
-        ku,
-        kp: 0.6 * ku,
-        ki: 1.2 * ku / period_s,
-        kd: 0.075 * ku * period_s,
-    })
+    Ok(RelayGains { ku, kp: 0.6 * ku, ki: 1.2 * ku / period_s, kd: 0.075 * ku * period_s })
 }
 
 fn q16(value: f32) -> Result<Q16, TuningError> {
@@ -102,38 +93,19 @@ fn q16(value: f32) -> Result<Q16, TuningError> {
 impl FixedGains {
     /// u = ẋd + Kp·e.
     pub fn p_feedforward(kp: f32) -> Result<FixedGains, TuningError> {
-        Ok(FixedGains {
-            proportional: q16(kp)?,
-            ..FixedGains::OPEN_LOOP
-        })
+        Ok(FixedGains { proportional: q16(kp)?, ..FixedGains::OPEN_LOOP })
     }
 
     /// The robust PID with the ẋd feedforward and K0 on the error (ours,
     /// see [`control`](super::control)), discretised for `period_s`:
     /// backward Euler for the integral and the filtered derivative.
     pub fn robust_pid(pid: &RobustPid, period_s: f32) -> Result<FixedGains, TuningError> {
-        Self::parallel(
-            1.0,
-            pid.k0 + pid.kp,
-            pid.kp / pid.ti,
-            pid.kp * pid.td,
-            pid.tf,
-            period_s,
-            DerivativeOn::Error,
-        )
+        Self::parallel(1.0, pid.k0 + pid.kp, pid.kp / pid.ti, pid.kp * pid.td, pid.tf, period_s, DerivativeOn::Error)
     }
 
     /// A parallel PID u = Kff·vd + Kp·e + Ki∫e + Kd·s/(1 + Tf·s)(·), for
     /// `period_s`. `ki` in 1/s² (or duty/(unit·s)), `kd` in s.
-    pub fn parallel(
-        feedforward: f32,
-        kp: f32,
-        ki: f32,
-        kd: f32,
-        tf: f32,
-        period_s: f32,
-        derivative_on: DerivativeOn,
-    ) -> Result<FixedGains, TuningError> {
+    pub fn parallel(feedforward: f32, kp: f32, ki: f32, kd: f32, tf: f32, period_s: f32, derivative_on: DerivativeOn) -> Result<FixedGains, TuningError> {
         if !(period_s > 0.0) || !(tf >= 0.0) {
             return Err(TuningError::NotPositive);
         }
@@ -154,20 +126,8 @@ impl FixedGains {
     /// SPEC §5's servo PID from relay gains: derivative on the measurement,
     /// derivative filter Tf = Td/10 (ours), no feedforward.
     pub fn servo_pid(gains: &RelayGains, period_s: f32) -> Result<FixedGains, TuningError> {
-        let td = if gains.kp > 0.0 {
-            gains.kd / gains.kp
-        } else {
-            0.0
-        };
-        Self::parallel(
-            0.0,
-            gains.kp,
-            gains.ki,
-            gains.kd,
-            td / 10.0,
-            period_s,
-            DerivativeOn::Measurement,
-        )
+        let td = if gains.kp > 0.0 { gains.kd / gains.kp } else { 0.0 };
+        Self::parallel(0.0, gains.kp, gains.ki, gains.kd, td / 10.0, period_s, DerivativeOn::Measurement)
     }
 }
 
@@ -192,20 +152,12 @@ impl Strategy {
     pub fn fixed_gains(self, dead_time_s: f32, period_s: f32) -> Result<FixedGains, TuningError> {
         match self {
             Strategy::OpenLoop => Ok(FixedGains::OPEN_LOOP),
-            Strategy::PFeedforward { kp_milli } => {
-                FixedGains::p_feedforward(f32::from(kp_milli) / 1000.0)
+            Strategy::PFeedforward { kp_milli } => FixedGains::p_feedforward(f32::from(kp_milli) / 1000.0),
+            Strategy::RobustPid { gamma_milli } => {
+                FixedGains::robust_pid(&normey_rico(dead_time_s, f32::from(gamma_milli) / 1000.0)?, period_s)
             }
-            Strategy::RobustPid { gamma_milli } => FixedGains::robust_pid(
-                &normey_rico(dead_time_s, f32::from(gamma_milli) / 1000.0)?,
-                period_s,
-            ),
             Strategy::ServoPid { kp, ki, kd } => {
-                let gains = RelayGains {
-                    ku: 0.0,
-                    kp: kp.to_f32(),
-                    ki: ki.to_f32(),
-                    kd: kd.to_f32(),
-                };
+                let gains = RelayGains { ku: 0.0, kp: kp.to_f32(), ki: ki.to_f32(), kd: kd.to_f32() };
                 FixedGains::servo_pid(&gains, period_s)
             }
         }
@@ -243,53 +195,25 @@ mod tests {
     fn normey_rico_rejects_gamma_outside_0_to_0_75_and_non_positive_theta() {
         assert_eq!(normey_rico(0.1, 0.0), Err(TuningError::GammaOutOfRange));
         assert_eq!(normey_rico(0.1, 0.76), Err(TuningError::GammaOutOfRange));
-        assert_eq!(
-            normey_rico(0.1, f32::NAN),
-            Err(TuningError::GammaOutOfRange)
-        );
+        assert_eq!(normey_rico(0.1, f32::NAN), Err(TuningError::GammaOutOfRange));
         assert_eq!(normey_rico(0.0, 0.5), Err(TuningError::NotPositive));
     }
 
     #[test]
     fn relay_rules_reproduce_the_spec_vectors() {
         let g = relay_ziegler_nichols(127.0, 10.0, 0.2).unwrap();
-        assert!(
-            close(g.ku, 16.1701, 5e-5) && close(g.kp, 9.7021, 5e-5),
-            "{g:?}"
-        );
-        assert!(
-            close(g.ki, 97.0209, 5e-4) && close(g.kd, 0.2426, 5e-5),
-            "{g:?}"
-        );
+        assert!(close(g.ku, 16.1701, 5e-5) && close(g.kp, 9.7021, 5e-5), "{g:?}");
+        assert!(close(g.ki, 97.0209, 5e-4) && close(g.kd, 0.2426, 5e-5), "{g:?}");
         let g = relay_ziegler_nichols(100.0, 50.0, 1.0).unwrap();
-        assert!(
-            close(g.ku, 2.5465, 5e-5) && close(g.kp, 1.5279, 5e-5),
-            "{g:?}"
-        );
-        assert!(
-            close(g.ki, 3.0558, 5e-5) && close(g.kd, 0.1910, 5e-5),
-            "{g:?}"
-        );
-        assert_eq!(
-            relay_ziegler_nichols(0.0, 1.0, 1.0),
-            Err(TuningError::NotPositive)
-        );
+        assert!(close(g.ku, 2.5465, 5e-5) && close(g.kp, 1.5279, 5e-5), "{g:?}");
+        assert!(close(g.ki, 3.0558, 5e-5) && close(g.kd, 0.1910, 5e-5), "{g:?}");
+        assert_eq!(relay_ziegler_nichols(0.0, 1.0, 1.0), Err(TuningError::NotPositive));
     }
 
     #[test]
     fn sqrt_matches_known_roots() {
-        for (x, r) in [
-            (0.24f32, 0.48989795),
-            (2.0, core::f32::consts::SQRT_2),
-            (1e-6, 1e-3),
-            (1e6, 1000.0),
-            (0.0, 0.0),
-        ] {
-            assert!(
-                close(sqrt_f32(x), r, r * 1e-6 + 1e-9),
-                "√{x} = {}",
-                sqrt_f32(x)
-            );
+        for (x, r) in [(0.24f32, 0.48989795), (2.0, core::f32::consts::SQRT_2), (1e-6, 1e-3), (1e6, 1000.0), (0.0, 0.0)] {
+            assert!(close(sqrt_f32(x), r, r * 1e-6 + 1e-9), "√{x} = {}", sqrt_f32(x));
         }
     }
 
@@ -297,9 +221,7 @@ mod tests {
     fn robust_pid_at_1_khz_becomes_these_fixed_gains() {
         // γ 0.5: K0 + Kp = 6.715729, Ki·T = 1.715729/0.1 × 0.001,
         // Kd/(Tf + T) = 1.715729 × 0.05 / 0.051, Tf/(Tf + T) = 0.05/0.051.
-        let g = Strategy::RobustPid { gamma_milli: 500 }
-            .fixed_gains(0.1, 0.001)
-            .unwrap();
+        let g = Strategy::RobustPid { gamma_milli: 500 }.fixed_gains(0.1, 0.001).unwrap();
         assert_eq!(g.feedforward, Q16::ONE);
         assert!(close(g.proportional.to_f32(), 6.715729, 2e-5));
         assert!(close(g.integral_per_tick.to_f32(), 0.01715729, 2e-5));
@@ -310,17 +232,9 @@ mod tests {
 
     #[test]
     fn p_feedforward_and_open_loop_gains() {
-        let g = Strategy::PFeedforward { kp_milli: 4300 }
-            .fixed_gains(0.1, 0.001)
-            .unwrap();
-        assert_eq!(
-            (g.feedforward, g.proportional, g.integral_per_tick),
-            (Q16::ONE, Q16::from_f32(4.3).unwrap(), Q16::ZERO)
-        );
-        assert_eq!(
-            Strategy::OpenLoop.fixed_gains(0.1, 0.001),
-            Ok(FixedGains::OPEN_LOOP)
-        );
+        let g = Strategy::PFeedforward { kp_milli: 4300 }.fixed_gains(0.1, 0.001).unwrap();
+        assert_eq!((g.feedforward, g.proportional, g.integral_per_tick), (Q16::ONE, Q16::from_f32(4.3).unwrap(), Q16::ZERO));
+        assert_eq!(Strategy::OpenLoop.fixed_gains(0.1, 0.001), Ok(FixedGains::OPEN_LOOP));
     }
 
     #[test]
@@ -335,15 +249,9 @@ mod tests {
 
     #[test]
     fn gains_that_do_not_fit_the_tick_are_refused() {
-        assert_eq!(
-            FixedGains::p_feedforward(40_000.0),
-            Err(TuningError::GainOutOfRange)
-        );
+        assert_eq!(FixedGains::p_feedforward(40_000.0), Err(TuningError::GainOutOfRange));
         // Ki·T = 97 × 0.1 s: too coarse a sample period
         let relay = relay_ziegler_nichols(127.0, 10.0, 0.2).unwrap();
-        assert_eq!(
-            FixedGains::servo_pid(&relay, 0.1),
-            Err(TuningError::GainOutOfRange)
-        );
+        assert_eq!(FixedGains::servo_pid(&relay, 0.1), Err(TuningError::GainOutOfRange));
     }
 }

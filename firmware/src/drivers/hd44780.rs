@@ -74,14 +74,7 @@ where
 {
     /// Take the pins; nothing is written until [`init`](Self::init).
     pub fn new(rs: Rs, e: E, d4: D4, d5: D5, d6: D6, d7: D7) -> Self {
-        Self {
-            rs,
-            e,
-            d4,
-            d5,
-            d6,
-            d7,
-        }
+        Self { rs, e, d4, d5, d6, d7 }
     }
 
     /// The power-on initialisation by instruction (see the module docs).
@@ -113,17 +106,11 @@ where
     }
 
     /// Put the cursor at `column` (0–15) of `row` (0–1).
-    pub fn set_cursor(
-        &mut self,
-        column: u8,
-        row: u8,
-        delay: &mut impl DelayNs,
-    ) -> Result<(), CursorOrPinError> {
+    pub fn set_cursor(&mut self, column: u8, row: u8, delay: &mut impl DelayNs) -> Result<(), CursorOrPinError> {
         if column >= COLUMNS || row >= ROWS {
             return Err(CursorOrPinError::Cursor(CursorError::OutOfRange));
         }
-        self.command(SET_DDRAM | (ROW_ADDRESS[usize::from(row)] + column), delay)
-            .map_err(CursorOrPinError::Pin)
+        self.command(SET_DDRAM | (ROW_ADDRESS[usize::from(row)] + column), delay).map_err(CursorOrPinError::Pin)
     }
 
     /// Write characters at the cursor (the character ROM maps 0x20–0x7D
@@ -163,12 +150,7 @@ where
         (self.rs, self.e, self.d4, self.d5, self.d6, self.d7)
     }
 
-    fn write_byte(
-        &mut self,
-        data: bool,
-        byte: u8,
-        delay: &mut impl DelayNs,
-    ) -> Result<(), PinError> {
+    fn write_byte(&mut self, data: bool, byte: u8, delay: &mut impl DelayNs) -> Result<(), PinError> {
         self.rs.set_state(data.into()).map_err(|_| PinError)?;
         self.write_nibble(byte >> 4, delay)?;
         self.write_nibble(byte & 0x0F, delay)
@@ -177,18 +159,10 @@ where
     /// D4–D7 from the low four bits, then an E pulse (the display latches
     /// on E's falling edge).
     fn write_nibble(&mut self, nibble: u8, delay: &mut impl DelayNs) -> Result<(), PinError> {
-        self.d4
-            .set_state((nibble & 0x1 != 0).into())
-            .map_err(|_| PinError)?;
-        self.d5
-            .set_state((nibble & 0x2 != 0).into())
-            .map_err(|_| PinError)?;
-        self.d6
-            .set_state((nibble & 0x4 != 0).into())
-            .map_err(|_| PinError)?;
-        self.d7
-            .set_state((nibble & 0x8 != 0).into())
-            .map_err(|_| PinError)?;
+        self.d4.set_state((nibble & 0x1 != 0).into()).map_err(|_| PinError)?;
+        self.d5.set_state((nibble & 0x2 != 0).into()).map_err(|_| PinError)?;
+        self.d6.set_state((nibble & 0x4 != 0).into()).map_err(|_| PinError)?;
+        self.d7.set_state((nibble & 0x8 != 0).into()).map_err(|_| PinError)?;
         self.e.set_high().map_err(|_| PinError)?;
         delay.delay_us(1);
         self.e.set_low().map_err(|_| PinError)?;
@@ -230,12 +204,7 @@ mod tests {
 
     impl Expected {
         fn new() -> Self {
-            Self {
-                rs: vec![],
-                e: vec![],
-                d: [vec![], vec![], vec![], vec![]],
-                delay: vec![],
-            }
+            Self { rs: vec![], e: vec![], d: [vec![], vec![], vec![], vec![]], delay: vec![] }
         }
 
         fn nibble(&mut self, nibble: u8) {
@@ -255,25 +224,12 @@ mod tests {
             self.delay.push(wait);
         }
 
-        fn run(
-            self,
-            body: impl FnOnce(
-                &mut Hd44780<PinMock, PinMock, PinMock, PinMock, PinMock, PinMock>,
-                &mut CheckedDelay,
-            ),
-        ) {
+        fn run(self, body: impl FnOnce(&mut Hd44780<PinMock, PinMock, PinMock, PinMock, PinMock, PinMock>, &mut CheckedDelay)) {
             let mut rs = PinMock::new(&self.rs);
             let mut e = PinMock::new(&self.e);
             let mut d: Vec<PinMock> = self.d.iter().map(PinMock::new).collect();
             let mut delay = CheckedDelay::new(&self.delay);
-            let mut lcd = Hd44780::new(
-                rs.clone(),
-                e.clone(),
-                d[0].clone(),
-                d[1].clone(),
-                d[2].clone(),
-                d[3].clone(),
-            );
+            let mut lcd = Hd44780::new(rs.clone(), e.clone(), d[0].clone(), d[1].clone(), d[2].clone(), d[3].clone());
             body(&mut lcd, &mut delay);
             rs.done();
             e.done();
@@ -320,14 +276,8 @@ mod tests {
         x.run(|lcd, delay| {
             lcd.set_cursor(5, 1, delay).unwrap();
             lcd.set_cursor(0, 0, delay).unwrap();
-            assert_eq!(
-                lcd.set_cursor(16, 0, delay),
-                Err(CursorOrPinError::Cursor(CursorError::OutOfRange))
-            );
-            assert_eq!(
-                lcd.set_cursor(0, 2, delay),
-                Err(CursorOrPinError::Cursor(CursorError::OutOfRange))
-            );
+            assert_eq!(lcd.set_cursor(16, 0, delay), Err(CursorOrPinError::Cursor(CursorError::OutOfRange)));
+            assert_eq!(lcd.set_cursor(0, 2, delay), Err(CursorOrPinError::Cursor(CursorError::OutOfRange)));
         });
     }
 
@@ -360,14 +310,7 @@ mod tests {
     fn data_lines_settle_before_e_rises_and_e_falls_to_latch() {
         let log = Rc::new(RefCell::new(Vec::new()));
         let pin = |name| Logged(name, log.clone());
-        let mut lcd = Hd44780::new(
-            pin("RS"),
-            pin("E"),
-            pin("D4"),
-            pin("D5"),
-            pin("D6"),
-            pin("D7"),
-        );
+        let mut lcd = Hd44780::new(pin("RS"), pin("E"), pin("D4"), pin("D5"), pin("D6"), pin("D7"));
         lcd.write_str("A", &mut NoopDelay::new()).unwrap();
         assert_eq!(
             log.borrow().join(" "),
@@ -379,14 +322,7 @@ mod tests {
     fn a_screen_is_two_rows_of_sixteen() {
         let log = Rc::new(RefCell::new(Vec::new()));
         let pin = |name| Logged(name, log.clone());
-        let mut lcd = Hd44780::new(
-            pin("RS"),
-            pin("E"),
-            pin("D4"),
-            pin("D5"),
-            pin("D6"),
-            pin("D7"),
-        );
+        let mut lcd = Hd44780::new(pin("RS"), pin("E"), pin("D4"), pin("D5"), pin("D6"), pin("D7"));
         lcd.show(&[b'x'; 32], &mut NoopDelay::new()).unwrap();
         let rs_high = log.borrow().iter().filter(|s| *s == "RS1").count();
         let rs_low = log.borrow().iter().filter(|s| *s == "RS0").count();

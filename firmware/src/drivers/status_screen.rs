@@ -36,10 +36,7 @@ impl Default for Row {
 
 impl Row {
     pub const fn new() -> Self {
-        Self {
-            text: [b' '; 16],
-            length: 0,
-        }
+        Self { text: [b' '; 16], length: 0 }
     }
 
     pub fn push_bytes(&mut self, bytes: &[u8]) -> &mut Self {
@@ -116,27 +113,15 @@ pub fn format_fixed(value: i32, decimals: u8, out: &mut [u8; 12]) -> usize {
 
 /// Build a screen: `state` on the left of row 0, the position (µm, shown
 /// in mm with two decimals) on its right, the temperatures on row 1.
-pub fn format_status(
-    state: &str,
-    position: Option<(u8, i32)>,
-    temperatures: &[Temperature],
-) -> [u8; 32] {
+pub fn format_status(state: &str, position: Option<(u8, i32)>, temperatures: &[Temperature]) -> [u8; 32] {
     let mut screen = [b' '; 32];
     let mut right = Row::new();
     if let Some((axis, um)) = position {
         // µm → hundredths of a mm, rounded half away from zero
-        let hundredths = if um >= 0 {
-            (um + 5) / 10
-        } else {
-            (um - 5) / 10
-        };
+        let hundredths = if um >= 0 { (um + 5) / 10 } else { (um - 5) / 10 };
         right.push_bytes(&[axis]).push_fixed(hundredths, 2);
     }
-    let room = if right.is_empty() {
-        16
-    } else {
-        15 - right.len()
-    };
+    let room = if right.is_empty() { 16 } else { 15 - right.len() };
     let state = state.as_bytes();
     let state = &state[..state.len().min(room)];
     screen[..state.len()].copy_from_slice(state);
@@ -172,27 +157,16 @@ mod tests {
     use super::*;
 
     fn text(screen: &[u8; 32]) -> (&str, &str) {
-        (
-            core::str::from_utf8(&screen[..16]).unwrap(),
-            core::str::from_utf8(&screen[16..]).unwrap(),
-        )
+        (core::str::from_utf8(&screen[..16]).unwrap(), core::str::from_utf8(&screen[16..]).unwrap())
     }
 
     fn t(label: u8, measured: i32, target: i32) -> Temperature {
-        Temperature {
-            label,
-            measured: Celsius(measured),
-            target: Celsius(target),
-        }
+        Temperature { label, measured: Celsius(measured), target: Celsius(target) }
     }
 
     #[test]
     fn printer_screen_state_position_and_two_temperatures() {
-        let screen = format_status(
-            "Printing",
-            Some((b'Z', 12_345)),
-            &[t(b'T', 20_960, 21_000), t(b'B', 6_000, 6_000)],
-        );
+        let screen = format_status("Printing", Some((b'Z', 12_345)), &[t(b'T', 20_960, 21_000), t(b'B', 6_000, 6_000)]);
         assert_eq!(text(&screen), ("Printing  Z12.35", "T210/210 B60/60 "));
     }
 

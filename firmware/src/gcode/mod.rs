@@ -73,18 +73,12 @@ pub struct Command {
 
 impl Command {
     pub fn new(code: Code) -> Self {
-        Self {
-            code,
-            words: heapless::Vec::new(),
-        }
+        Self { code, words: heapless::Vec::new() }
     }
 
     /// Add a word (tests and generated commands).
     pub fn with(mut self, letter: u8, value: Decimal) -> Self {
-        let _ = self.words.push(Word {
-            letter,
-            value: Some(value),
-        });
+        let _ = self.words.push(Word { letter, value: Some(value) });
         self
     }
 
@@ -113,14 +107,11 @@ pub fn parse(text: &[u8]) -> Result<Command, ParseError> {
     let first = lexer.next_word()?.ok_or(ParseError::Empty)?;
     let code = match first.letter {
         b'G' | b'M' | b'T' => {
-            let value = first
-                .value
-                .ok_or(ParseError::WordWithoutValue(first.letter))?;
+            let value = first.value.ok_or(ParseError::WordWithoutValue(first.letter))?;
             if value.fraction_digits() != 0 || value.is_negative() {
                 return Err(ParseError::BadCommandNumber);
             }
-            let number =
-                u16::try_from(value.mantissa()).map_err(|_| ParseError::BadCommandNumber)?;
+            let number = u16::try_from(value.mantissa()).map_err(|_| ParseError::BadCommandNumber)?;
             match first.letter {
                 b'G' => Code::G(number),
                 b'M' => Code::M(number),
@@ -134,19 +125,13 @@ pub fn parse(text: &[u8]) -> Result<Command, ParseError> {
         return Ok(command); // the rest is free text
     }
     if code == Code::Modal {
-        command
-            .words
-            .push(first)
-            .map_err(|_| ParseError::TooManyWords)?;
+        command.words.push(first).map_err(|_| ParseError::TooManyWords)?;
     }
     while let Some(word) = lexer.next_word()? {
         if command.has(word.letter) {
             return Err(ParseError::DuplicateWord(word.letter));
         }
-        command
-            .words
-            .push(word)
-            .map_err(|_| ParseError::TooManyWords)?;
+        command.words.push(word).map_err(|_| ParseError::TooManyWords)?;
     }
     Ok(command)
 }
@@ -181,9 +166,7 @@ impl Lexer<'_> {
     /// Skip spaces and comments; `Ok(None)` at the end of the line.
     fn skip_blank(&mut self) -> Result<Option<u8>, ParseError> {
         loop {
-            let Some(&byte) = self.text.get(self.index) else {
-                return Ok(None);
-            };
+            let Some(&byte) = self.text.get(self.index) else { return Ok(None) };
             match byte {
                 b' ' | b'\t' => self.index += 1,
                 b';' => {
@@ -192,10 +175,7 @@ impl Lexer<'_> {
                 }
                 b'(' => {
                     let rest = &self.text[self.index..];
-                    let close = rest
-                        .iter()
-                        .position(|&b| b == b')')
-                        .ok_or(ParseError::UnterminatedComment)?;
+                    let close = rest.iter().position(|&b| b == b')').ok_or(ParseError::UnterminatedComment)?;
                     self.index += close + 1;
                 }
                 _ => return Ok(Some(byte)),
@@ -204,9 +184,7 @@ impl Lexer<'_> {
     }
 
     fn next_word(&mut self) -> Result<Option<Word>, ParseError> {
-        let Some(byte) = self.skip_blank()? else {
-            return Ok(None);
-        };
+        let Some(byte) = self.skip_blank()? else { return Ok(None) };
         if !byte.is_ascii_alphabetic() {
             return Err(ParseError::UnexpectedByte(byte));
         }
@@ -216,23 +194,14 @@ impl Lexer<'_> {
         while matches!(self.text.get(self.index), Some(b' ' | b'\t')) {
             self.index += 1;
         }
-        let starts_number = matches!(
-            self.text.get(self.index),
-            Some(b'0'..=b'9' | b'-' | b'+' | b'.')
-        );
+        let starts_number = matches!(self.text.get(self.index), Some(b'0'..=b'9' | b'-' | b'+' | b'.'));
         if !starts_number {
-            return Ok(Some(Word {
-                letter,
-                value: None,
-            }));
+            return Ok(Some(Word { letter, value: None }));
         }
         match Decimal::parse(&self.text[self.index..]) {
             Ok((value, used)) => {
                 self.index += used;
-                Ok(Some(Word {
-                    letter,
-                    value: Some(value),
-                }))
+                Ok(Some(Word { letter, value: Some(value) }))
             }
             Err(NumberError::Malformed) => Err(ParseError::BadNumber(letter)),
             Err(NumberError::OutOfRange) => Err(ParseError::NumberOutOfRange(letter)),

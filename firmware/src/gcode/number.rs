@@ -45,34 +45,18 @@ fn times_ten_plus(value: i32, digit: i32) -> Option<i32> {
     }
 }
 
-const POWERS_OF_TEN: [i32; 10] = [
-    1,
-    10,
-    100,
-    1_000,
-    10_000,
-    100_000,
-    1_000_000,
-    10_000_000,
-    100_000_000,
-    1_000_000_000,
-];
+const POWERS_OF_TEN: [i32; 10] =
+    [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000, 1_000_000_000];
 
 impl Decimal {
     /// `mantissa × 10^(−fraction_digits)`.
     pub const fn new(mantissa: i32, fraction_digits: u8) -> Self {
-        Self {
-            mantissa,
-            fraction_digits,
-        }
+        Self { mantissa, fraction_digits }
     }
 
     /// A whole number.
     pub const fn from_int(value: i32) -> Self {
-        Self {
-            mantissa: value,
-            fraction_digits: 0,
-        }
+        Self { mantissa: value, fraction_digits: 0 }
     }
 
     pub const fn mantissa(self) -> i32 {
@@ -163,8 +147,7 @@ impl Decimal {
                             }
                         }
                     } else {
-                        magnitude =
-                            times_ten_plus(magnitude, digit).ok_or(NumberError::OutOfRange)?;
+                        magnitude = times_ten_plus(magnitude, digit).ok_or(NumberError::OutOfRange)?;
                     }
                 }
                 b'.' if !seen_point => seen_point = true,
@@ -183,21 +166,12 @@ impl Decimal {
             return Err(NumberError::Malformed);
         }
         let mantissa = if negative { -magnitude } else { magnitude };
-        Ok((
-            Self {
-                mantissa,
-                fraction_digits,
-            },
-            index,
-        ))
+        Ok((Self { mantissa, fraction_digits }, index))
     }
 }
 
 impl ufmt::uDisplay for Decimal {
-    fn fmt<W: ufmt::uWrite + ?Sized>(
-        &self,
-        f: &mut ufmt::Formatter<'_, W>,
-    ) -> Result<(), W::Error> {
+    fn fmt<W: ufmt::uWrite + ?Sized>(&self, f: &mut ufmt::Formatter<'_, W>) -> Result<(), W::Error> {
         crate::reply::write_fixed(f, self.mantissa, self.fraction_digits)
     }
 }

@@ -41,10 +41,7 @@ fn malformed_numbers_name_their_word() {
     assert_eq!(parse(b"G1 X1.2.3"), Err(ParseError::BadNumber(b'X')));
     assert_eq!(parse(b"G1 x1e30"), Err(ParseError::BadNumber(b'X')));
     assert_eq!(parse(b"G1 Y-"), Err(ParseError::BadNumber(b'Y')));
-    assert_eq!(
-        parse(b"G1 Z99999999999"),
-        Err(ParseError::NumberOutOfRange(b'Z'))
-    );
+    assert_eq!(parse(b"G1 Z99999999999"), Err(ParseError::NumberOutOfRange(b'Z')));
 }
 
 #[test]
@@ -57,10 +54,7 @@ fn a_flag_is_kept_and_reading_its_value_is_an_error() {
 #[test]
 fn bytes_that_are_not_gcode_are_rejected() {
     assert_eq!(parse(b"G1 X1 \0"), Err(ParseError::UnexpectedByte(0)));
-    assert_eq!(
-        parse("G1 X1 \u{e9}".as_bytes()),
-        Err(ParseError::UnexpectedByte(0xc3))
-    );
+    assert_eq!(parse("G1 X1 \u{e9}".as_bytes()), Err(ParseError::UnexpectedByte(0xc3)));
     assert_eq!(parse(b"#1=5"), Err(ParseError::UnexpectedByte(b'#')));
 }
 
@@ -71,10 +65,7 @@ fn a_repeated_letter_is_an_error() {
 
 #[test]
 fn too_many_words_is_an_error() {
-    assert_eq!(
-        parse(b"G1 A1 B1 C1 D1 E1 F1 H1 I1 J1 K1 L1 O1 P1"),
-        Err(ParseError::TooManyWords)
-    );
+    assert_eq!(parse(b"G1 A1 B1 C1 D1 E1 F1 H1 I1 J1 K1 L1 O1 P1"), Err(ParseError::TooManyWords));
 }
 
 #[test]

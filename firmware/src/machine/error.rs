@@ -37,19 +37,12 @@ impl CommandError {
         out.write_str("Error:")?;
         match self {
             Self::Parse(error) => write_parse_error(error, out),
-            Self::InvalidFeedRate => {
-                crate::flash_str!("Invalid feed rate (F must be > 0)").write_to(out)
-            }
-            Self::OutOfRange(letter) => {
-                ufmt::uwrite!(out, "Value out of range for {}", char::from(letter))
-            }
+            Self::InvalidFeedRate => crate::flash_str!("Invalid feed rate (F must be > 0)").write_to(out),
+            Self::OutOfRange(letter) => ufmt::uwrite!(out, "Value out of range for {}", char::from(letter)),
             Self::Missing(letter) => ufmt::uwrite!(out, "Missing {} word", char::from(letter)),
             Self::Halted => crate::flash_str!("Printer halted. kill() called!").write_to(out),
             Self::Motion(error) => write_motion_error(error, out),
-            Self::PositionLost => {
-                crate::flash_str!("Position unknown after a motion stop: home with G28 first")
-                    .write_to(out)
-            }
+            Self::PositionLost => crate::flash_str!("Position unknown after a motion stop: home with G28 first").write_to(out),
         }?;
         out.write_str("\n")
     }
@@ -58,22 +51,14 @@ impl CommandError {
 fn write_motion_error<W: uWrite + ?Sized>(error: MotionError, out: &mut W) -> Result<(), W::Error> {
     let text = match error {
         MotionError::Busy => crate::flash_str!("Motion busy, command refused"),
-        MotionError::Unreachable(KinematicsError::OutsidePrintable) => {
-            crate::flash_str!("Move outside the printable radius")
-        }
-        MotionError::Unreachable(KinematicsError::TooTilted) => {
-            crate::flash_str!("Move tilts a rod too far")
-        }
+        MotionError::Unreachable(KinematicsError::OutsidePrintable) => crate::flash_str!("Move outside the printable radius"),
+        MotionError::Unreachable(KinematicsError::TooTilted) => crate::flash_str!("Move tilts a rod too far"),
         MotionError::Unreachable(_) => crate::flash_str!("Move out of reach"),
         MotionError::OutsideSoftLimits => crate::flash_str!("Move outside the soft limits"),
         MotionError::NotHomed => crate::flash_str!("Home XYZ first (G28)"),
         MotionError::Arc(ArcError::ZeroRadius) => crate::flash_str!("Arc with zero radius"),
-        MotionError::Arc(ArcError::RadiusMismatch) => {
-            crate::flash_str!("Arc end is not on the circle")
-        }
-        MotionError::Arc(ArcError::RadiusTooSmall) => {
-            crate::flash_str!("Arc radius too small for its end point")
-        }
+        MotionError::Arc(ArcError::RadiusMismatch) => crate::flash_str!("Arc end is not on the circle"),
+        MotionError::Arc(ArcError::RadiusTooSmall) => crate::flash_str!("Arc radius too small for its end point"),
         MotionError::HomingFailed(_) => crate::flash_str!("Homing Failed"),
         MotionError::Fault(_) => crate::flash_str!("Motion stopped"),
     };
@@ -82,22 +67,12 @@ fn write_motion_error<W: uWrite + ?Sized>(error: MotionError, out: &mut W) -> Re
 
 fn write_parse_error<W: uWrite + ?Sized>(error: ParseError, out: &mut W) -> Result<(), W::Error> {
     match error {
-        ParseError::BadNumber(letter) => {
-            ufmt::uwrite!(out, "Bad number after {}", char::from(letter))
-        }
-        ParseError::NumberOutOfRange(letter) => {
-            ufmt::uwrite!(out, "Number out of range after {}", char::from(letter))
-        }
-        ParseError::WordWithoutValue(letter) => {
-            ufmt::uwrite!(out, "Missing value after {}", char::from(letter))
-        }
+        ParseError::BadNumber(letter) => ufmt::uwrite!(out, "Bad number after {}", char::from(letter)),
+        ParseError::NumberOutOfRange(letter) => ufmt::uwrite!(out, "Number out of range after {}", char::from(letter)),
+        ParseError::WordWithoutValue(letter) => ufmt::uwrite!(out, "Missing value after {}", char::from(letter)),
         ParseError::UnterminatedComment => crate::flash_str!("Unterminated comment").write_to(out),
-        ParseError::UnexpectedByte(byte) => {
-            ufmt::uwrite!(out, "Unexpected character (byte {})", byte)
-        }
-        ParseError::DuplicateWord(letter) => {
-            ufmt::uwrite!(out, "Repeated word {}", char::from(letter))
-        }
+        ParseError::UnexpectedByte(byte) => ufmt::uwrite!(out, "Unexpected character (byte {})", byte),
+        ParseError::DuplicateWord(letter) => ufmt::uwrite!(out, "Repeated word {}", char::from(letter)),
         ParseError::TooManyWords => out.write_str("Too many words"),
         ParseError::BadCommandNumber => out.write_str("Bad command number"),
         ParseError::Empty => out.write_str("Empty command"),

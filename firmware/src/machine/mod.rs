@@ -21,8 +21,8 @@ pub mod modal;
 mod motion_commands;
 
 use crate::gcode::{self, Code, Command, ParseError};
-use crate::line::{Line, MAX_LINE};
 use crate::motion::Motion;
+use crate::line::{Line, MAX_LINE};
 use crate::protocol::HostProtocol;
 use crate::reply::{Fixed, Printable};
 use crate::settings::Settings;
@@ -47,18 +47,12 @@ type LineText = heapless::Vec<u8, MAX_LINE>;
 enum Running {
     Idle,
     /// `G4`: wait for queued motion to finish, then `ms` more.
-    DwellAfterMotion {
-        ms: u32,
-    },
+    DwellAfterMotion { ms: u32 },
     /// `G4`: wait until `until_ms`.
-    Dwell {
-        until_ms: u32,
-    },
+    Dwell { until_ms: u32 },
     /// `M400` (and `M18`/`M84`, which then disable the drivers): wait for
     /// queued motion to finish.
-    WaitForMotion {
-        then_disable: bool,
-    },
+    WaitForMotion { then_disable: bool },
     /// `G28`: homing runs in the main loop.
     Homing,
 }
@@ -134,12 +128,7 @@ impl<'q> Machine<'q> {
     /// The start banner, printed once at boot. `start` is what Printrun and
     /// OctoPrint look for to learn that the firmware (re)started.
     pub fn write_banner<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(
-            out,
-            "start\necho:{} {} ready\n",
-            crate::FIRMWARE_NAME,
-            crate::FIRMWARE_VERSION
-        )
+        ufmt::uwrite!(out, "start\necho:{} {} ready\n", crate::FIRMWARE_NAME, crate::FIRMWARE_VERSION)
     }
 
     // --- what the board reads back -----------------------------------------
@@ -208,10 +197,7 @@ impl<'q> Machine<'q> {
     /// temperature or a dwell (motion waits and homing are not cut short:
     /// Marlin's `M108` only breaks heating waits and `M0`/`M1`).
     pub fn cancel_wait(&mut self) {
-        self.wait_cancelled = matches!(
-            self.running,
-            Running::Dwell { .. } | Running::DwellAfterMotion { .. }
-        );
+        self.wait_cancelled = matches!(self.running, Running::Dwell { .. } | Running::DwellAfterMotion { .. });
     }
 
     /// `M410` from the receive interrupt: stop all motion now. The queued
@@ -225,11 +211,7 @@ impl<'q> Machine<'q> {
 
     /// Step 1: a complete line arrived. Refusals are answered now; accepted
     /// lines are queued (the caller checked [`Machine::can_accept_line`]).
-    pub fn receive_line<W: uWrite + ?Sized>(
-        &mut self,
-        line: Line<'_>,
-        out: &mut W,
-    ) -> Result<(), W::Error> {
+    pub fn receive_line<W: uWrite + ?Sized>(&mut self, line: Line<'_>, out: &mut W) -> Result<(), W::Error> {
         let body = match self.protocol.accept(line) {
             Ok(body) => body,
             Err(rejection) => return self.protocol.write_rejection(rejection, out),
@@ -240,30 +222,20 @@ impl<'q> Machine<'q> {
         if self.queue.push_back(text).is_err() {
             // Only reachable if the board ignored can_accept_line(): say so
             // rather than drop the line silently.
-            return self
-                .protocol
-                .write_rejection(crate::protocol::LineRejection::Damaged, out);
+            return self.protocol.write_rejection(crate::protocol::LineRejection::Damaged, out);
         }
         Ok(())
     }
 
     /// Load the stored settings (at boot, and for `M501`), reporting the
     /// outcome; on any problem the defaults stay in force.
-    pub fn load_settings<W: uWrite + ?Sized>(
-        &mut self,
-        storage: &mut dyn NonVolatile,
-        out: &mut W,
-    ) -> Result<(), W::Error> {
+    pub fn load_settings<W: uWrite + ?Sized>(&mut self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
         let reported = self.report_loaded_settings(storage, out);
         self.motion.apply_settings(&self.settings);
         reported
     }
 
-    fn report_loaded_settings<W: uWrite + ?Sized>(
-        &mut self,
-        storage: &mut dyn NonVolatile,
-        out: &mut W,
-    ) -> Result<(), W::Error> {
+    fn report_loaded_settings<W: uWrite + ?Sized>(&mut self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
         match storage::load(storage) {
             Ok((settings, stored)) => {
                 self.settings = settings;
@@ -290,9 +262,7 @@ impl<'q> Machine<'q> {
                         version,
                         storage::LAYOUT_VERSION
                     )?,
-                    LoadError::TooSmall => {
-                        out.write_str("echo:EEPROM too small for the settings\n")?
-                    }
+                    LoadError::TooSmall => out.write_str("echo:EEPROM too small for the settings\n")?,
                 }
                 self.settings = Settings::default();
                 out.write_str("echo:Hardcoded Default Settings Loaded\n")
@@ -300,18 +270,9 @@ impl<'q> Machine<'q> {
         }
     }
 
-    fn save_settings<W: uWrite + ?Sized>(
-        &self,
-        storage: &mut dyn NonVolatile,
-        out: &mut W,
-    ) -> Result<(), W::Error> {
+    fn save_settings<W: uWrite + ?Sized>(&self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
         match storage::save(storage, &self.settings) {
-            Ok(stored) => ufmt::uwrite!(
-                out,
-                "echo:Settings Stored ({} bytes; crc {})\n",
-                stored.bytes,
-                stored.crc
-            ),
+            Ok(stored) => ufmt::uwrite!(out, "echo:Settings Stored ({} bytes; crc {})\n", stored.bytes, stored.crc),
             Err(_) => out.write_str("Error:EEPROM too small for the settings\n"),
         }
     }
@@ -344,9 +305,7 @@ impl<'q> Machine<'q> {
             if !self.motion.ready() {
                 return Ok(());
             }
-            let Some(text) = self.queue.pop_front() else {
-                return Ok(());
-            };
+            let Some(text) = self.queue.pop_front() else { return Ok(()) };
             self.last_busy_ms = now_ms;
             match self.execute(&text, now_ms, storage, out)? {
                 Outcome::Done => out.write_str("ok\n")?,
@@ -360,11 +319,8 @@ impl<'q> Machine<'q> {
         }
     }
 
-    fn auto_report<W: uWrite + ?Sized>(
-        &mut self,
-        now_ms: u32,
-        out: &mut W,
-    ) -> Result<(), W::Error> {
+
+    fn auto_report<W: uWrite + ?Sized>(&mut self, now_ms: u32, out: &mut W) -> Result<(), W::Error> {
         if self.auto_report_s == 0 {
             return Ok(());
         }
@@ -404,11 +360,7 @@ impl<'q> Machine<'q> {
             Code::M(82) => Ok(self.modal.extruder_distance = Distance::Absolute),
             Code::M(83) => Ok(self.modal.extruder_distance = Distance::Relative),
             Code::M(17) => Ok(self.steppers_enabled = true),
-            Code::M(18 | 84) => {
-                return Ok(Outcome::Started(Running::WaitForMotion {
-                    then_disable: true,
-                }))
-            }
+            Code::M(18 | 84) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: true })),
             Code::M(105) => {
                 // Marlin puts the report on the `ok` line itself.
                 out.write_str("ok ")?;
@@ -430,20 +382,10 @@ impl<'q> Machine<'q> {
             Code::M(118) => self.echo(text, out).map(Ok)?,
             Code::M(119) => self.report_endstops(out).map(Ok)?,
             Code::M(155) => self.set_auto_report(&command, now_ms),
-            Code::M(400) => {
-                return Ok(Outcome::Started(Running::WaitForMotion {
-                    then_disable: false,
-                }))
-            }
-            Code::M(92) => {
-                self.change_settings(|s| settings_axes(&command, &mut s.steps_per_mm_milli))
-            }
-            Code::M(201) => {
-                self.change_settings(|s| settings_axes(&command, &mut s.max_accel_um_per_s2))
-            }
-            Code::M(203) => {
-                self.change_settings(|s| settings_axes(&command, &mut s.max_feed_um_per_s))
-            }
+            Code::M(400) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false })),
+            Code::M(92) => self.change_settings(|s| settings_axes(&command, &mut s.steps_per_mm_milli)),
+            Code::M(201) => self.change_settings(|s| settings_axes(&command, &mut s.max_accel_um_per_s2)),
+            Code::M(203) => self.change_settings(|s| settings_axes(&command, &mut s.max_feed_um_per_s)),
             Code::M(204) => self.change_settings(|s| set_accelerations(&command, s)),
             Code::M(205) => self.change_settings(|s| set_advanced(&command, s)),
             Code::M(220) => self.change_settings(|s| percent(&command, &mut s.feed_percent)),
@@ -481,16 +423,8 @@ impl<'q> Machine<'q> {
         })
     }
 
-    fn not_yet_available<W: uWrite + ?Sized>(
-        &self,
-        text: &[u8],
-        out: &mut W,
-    ) -> Result<(), W::Error> {
-        ufmt::uwrite!(
-            out,
-            "echo:\"{}\" is not available yet in this build\n",
-            Printable(trim(text))
-        )
+    fn not_yet_available<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
+        ufmt::uwrite!(out, "echo:\"{}\" is not available yet in this build\n", Printable(trim(text)))
     }
 
     fn set_distance(&mut self, distance: Distance) {
@@ -501,10 +435,7 @@ impl<'q> Machine<'q> {
 
     /// Change settings all or nothing, then hand them to motion (they
     /// apply to the moves accepted from now on).
-    fn change_settings(
-        &mut self,
-        change: impl FnOnce(&mut Settings) -> Result<(), CommandError>,
-    ) -> Result<(), CommandError> {
+    fn change_settings(&mut self, change: impl FnOnce(&mut Settings) -> Result<(), CommandError>) -> Result<(), CommandError> {
         let mut settings = self.settings.clone();
         change(&mut settings)?;
         self.settings = settings;
@@ -562,10 +493,7 @@ impl<'q> Machine<'q> {
     fn echo<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
         let mut message = gcode::text_argument(text);
         let mut prefix = false;
-        if let Some(rest) = message
-            .strip_prefix(b"E1 ")
-            .or_else(|| message.strip_prefix(b"e1 "))
-        {
+        if let Some(rest) = message.strip_prefix(b"E1 ").or_else(|| message.strip_prefix(b"e1 ")) {
             prefix = true;
             message = rest;
         }
@@ -581,12 +509,7 @@ impl<'q> Machine<'q> {
         for (bit, name) in ENDSTOP_NAMES.iter().enumerate() {
             let level = self.endstop_levels >> bit & 1;
             let triggered = level == self.endstop_trigger_levels >> bit & 1;
-            ufmt::uwrite!(
-                out,
-                "{}: {}\n",
-                *name,
-                if triggered { "TRIGGERED" } else { "open" }
-            )?;
+            ufmt::uwrite!(out, "{}: {}\n", *name, if triggered { "TRIGGERED" } else { "open" })?;
         }
         Ok(())
     }
@@ -606,20 +529,13 @@ enum Outcome {
 
 /// Micrometres shown as millimetres with two decimals, rounded.
 fn micrometres_as_mm(um: i32) -> Fixed {
-    let rounded = if um >= 0 {
-        (um + 5) / 10
-    } else {
-        (um - 5) / 10
-    };
+    let rounded = if um >= 0 { (um + 5) / 10 } else { (um - 5) / 10 };
     Fixed::hundredths(rounded)
 }
 
 fn trim(text: &[u8]) -> &[u8] {
     let start = text.iter().position(|&b| b != b' ').unwrap_or(text.len());
-    let end = text
-        .iter()
-        .rposition(|&b| b != b' ')
-        .map_or(start, |i| i + 1);
+    let end = text.iter().rposition(|&b| b != b' ').map_or(start, |i| i + 1);
     &text[start..end.max(start)]
 }
 
@@ -652,12 +568,7 @@ fn settings_axes(command: &Command, values: &mut [i32; AXES]) -> Result<(), Comm
 
 /// `M204 S|P|R|T`: accelerations in mm/s².
 fn set_accelerations(command: &Command, settings: &mut Settings) -> Result<(), CommandError> {
-    let read = |letter| {
-        command
-            .value(letter)?
-            .map(|v| positive_milli(letter, v))
-            .transpose()
-    };
+    let read = |letter| command.value(letter)?.map(|v| positive_milli(letter, v)).transpose();
     let (s, p, r, t) = (read(b'S')?, read(b'P')?, read(b'R')?, read(b'T')?);
     // `S` sets print and travel together (older hosts send it); P and T
     // given on the same line win.
@@ -684,10 +595,9 @@ fn set_advanced(command: &Command, settings: &mut Settings) -> Result<(), Comman
             _ => return Err(CommandError::OutOfRange(b'J')),
         }
     }
-    for (letter, slot) in [
-        (b'S', &mut settings.min_feed_um_per_s),
-        (b'T', &mut settings.min_travel_feed_um_per_s),
-    ] {
+    for (letter, slot) in
+        [(b'S', &mut settings.min_feed_um_per_s), (b'T', &mut settings.min_travel_feed_um_per_s)]
+    {
         if let Some(value) = command.value(letter)? {
             *slot = non_negative_milli(letter, value)?;
         }

@@ -113,9 +113,7 @@ impl ModalState {
     /// Read `F` if present: it must be positive (`F0` and negative feeds are
     /// refused, and the stored feed rate is left as it was).
     pub fn read_feed(&self, command: &Command) -> Result<Option<i32>, CommandError> {
-        let Some(value) = command.value(b'F')? else {
-            return Ok(None);
-        };
+        let Some(value) = command.value(b'F')? else { return Ok(None) };
         if value.is_negative() || value.is_zero() {
             return Err(CommandError::InvalidFeedRate);
         }
@@ -134,15 +132,9 @@ impl ModalState {
     pub fn target(&self, command: &Command) -> Result<Position, CommandError> {
         let mut target = self.position;
         for (axis, &letter) in AXIS_LETTERS.iter().enumerate() {
-            let Some(value) = command.value(letter)? else {
-                continue;
-            };
+            let Some(value) = command.value(letter)? else { continue };
             let um = self.length_um(letter, value)?;
-            let distance = if letter == b'E' {
-                self.extruder_distance
-            } else {
-                self.distance
-            };
+            let distance = if letter == b'E' { self.extruder_distance } else { self.distance };
             let machine = match distance {
                 Distance::Absolute => i64::from(um) - i64::from(self.offset[axis]),
                 Distance::Relative => i64::from(self.position[axis]) + i64::from(um),
@@ -181,11 +173,7 @@ fn inches_to_um(value: Decimal) -> Option<i32> {
     let hundred_thousandths = value.to_scaled(5)?;
     let whole = hundred_thousandths / 1000 * 254;
     let rest = hundred_thousandths % 1000 * 254;
-    let rounded = if rest >= 0 {
-        (rest + 500) / 1000
-    } else {
-        (rest - 500) / 1000
-    };
+    let rounded = if rest >= 0 { (rest + 500) / 1000 } else { (rest - 500) / 1000 };
     Some(whole + rounded)
 }
 
@@ -201,10 +189,7 @@ mod tests {
     #[test]
     fn absolute_targets_are_the_values_in_micrometres() {
         let state = ModalState::new();
-        assert_eq!(
-            target(&state, "G1 X10.5 Y-3 E0.04521"),
-            Ok([10_500, -3_000, 0, 45])
-        );
+        assert_eq!(target(&state, "G1 X10.5 Y-3 E0.04521"), Ok([10_500, -3_000, 0, 45]));
     }
 
     #[test]
@@ -212,10 +197,7 @@ mod tests {
         let mut state = ModalState::new();
         state.position = [1_000, 2_000, 3_000, 4_000];
         state.distance = Distance::Relative;
-        assert_eq!(
-            target(&state, "G1 X1 Z-1"),
-            Ok([2_000, 2_000, 2_000, 4_000])
-        );
+        assert_eq!(target(&state, "G1 X1 Z-1"), Ok([2_000, 2_000, 2_000, 4_000]));
     }
 
     #[test]
@@ -230,29 +212,18 @@ mod tests {
     fn inches_are_exact() {
         let mut state = ModalState::new();
         state.units = Units::Inches;
-        assert_eq!(
-            target(&state, "G1 X1 Y-0.5 Z0.001"),
-            Ok([25_400, -12_700, 25, 0])
-        );
+        assert_eq!(target(&state, "G1 X1 Y-0.5 Z0.001"), Ok([25_400, -12_700, 25, 0]));
         assert_eq!(target(&state, "G1 X-1.00001"), Ok([-25_400, 0, 0, 0]));
         assert_eq!(target(&state, "G1 X21000"), Ok([533_400_000, 0, 0, 0]));
-        assert_eq!(
-            target(&state, "G1 X80000"),
-            Err(CommandError::OutOfRange(b'X'))
-        );
-        assert_eq!(
-            state.read_feed(&parse(b"G1 F60").unwrap()),
-            Ok(Some(25_400))
-        );
+        assert_eq!(target(&state, "G1 X80000"), Err(CommandError::OutOfRange(b'X')));
+        assert_eq!(state.read_feed(&parse(b"G1 F60").unwrap()), Ok(Some(25_400)));
     }
 
     #[test]
     fn g92_shifts_logical_coordinates_without_moving() {
         let mut state = ModalState::new();
         state.position = [5_000, 0, 0, 7_000];
-        state
-            .set_logical_position(&parse(b"G92 X0 E0").unwrap())
-            .unwrap();
+        state.set_logical_position(&parse(b"G92 X0 E0").unwrap()).unwrap();
         assert_eq!(state.position, [5_000, 0, 0, 7_000]);
         assert_eq!(state.logical_position(), [0, 0, 0, 0]);
         // Absolute X10 now means machine 15 mm.
@@ -270,39 +241,21 @@ mod tests {
     #[test]
     fn feed_rates_must_be_positive() {
         let state = ModalState::new();
-        assert_eq!(
-            state.read_feed(&parse(b"G1 F0").unwrap()),
-            Err(CommandError::InvalidFeedRate)
-        );
-        assert_eq!(
-            state.read_feed(&parse(b"G1 F-100").unwrap()),
-            Err(CommandError::InvalidFeedRate)
-        );
-        assert_eq!(
-            state.read_feed(&parse(b"G1 F0.001").unwrap()),
-            Err(CommandError::InvalidFeedRate)
-        );
-        assert_eq!(
-            state.read_feed(&parse(b"G1 F1800").unwrap()),
-            Ok(Some(30_000))
-        );
+        assert_eq!(state.read_feed(&parse(b"G1 F0").unwrap()), Err(CommandError::InvalidFeedRate));
+        assert_eq!(state.read_feed(&parse(b"G1 F-100").unwrap()), Err(CommandError::InvalidFeedRate));
+        assert_eq!(state.read_feed(&parse(b"G1 F0.001").unwrap()), Err(CommandError::InvalidFeedRate));
+        assert_eq!(state.read_feed(&parse(b"G1 F1800").unwrap()), Ok(Some(30_000)));
         assert_eq!(state.read_feed(&parse(b"G1 X1").unwrap()), Ok(None));
     }
 
     #[test]
     fn coordinates_beyond_range_are_refused() {
         let state = ModalState::new();
-        assert_eq!(
-            target(&state, "G1 X2000001"),
-            Err(CommandError::OutOfRange(b'X'))
-        );
+        assert_eq!(target(&state, "G1 X2000001"), Err(CommandError::OutOfRange(b'X')));
         let mut relative = ModalState::new();
         relative.distance = Distance::Relative;
         relative.position = [MAX_COORDINATE_UM, 0, 0, 0];
-        assert_eq!(
-            target(&relative, "G1 X1"),
-            Err(CommandError::OutOfRange(b'X'))
-        );
+        assert_eq!(target(&relative, "G1 X1"), Err(CommandError::OutOfRange(b'X')));
     }
 
     #[test]
@@ -310,9 +263,7 @@ mod tests {
         let state = ModalState::new();
         assert_eq!(
             target(&state, "G1 X"),
-            Err(CommandError::Parse(
-                crate::gcode::ParseError::WordWithoutValue(b'X')
-            ))
+            Err(CommandError::Parse(crate::gcode::ParseError::WordWithoutValue(b'X')))
         );
     }
 }

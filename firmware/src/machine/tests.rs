@@ -2,16 +2,15 @@
 
 use super::*;
 use crate::line::LineAssembler;
-use crate::motion::{MotionConfig, StepQueues};
 use crate::reply::test_support::Text;
 use crate::storage::MemoryStorage;
+use crate::motion::{MotionConfig, StepQueues};
 use std::boxed::Box;
 use std::format;
 use std::string::String;
 
 /// An executor for the Prusa i3 whose step interrupt never runs (for
-/// commands that do not wait for motion; see `motion_tests` for a rig
-/// that steps).
+/// commands that do not wait for motion; hal-sim's board steps).
 fn new_machine() -> Machine<'static> {
     let queues: &'static mut StepQueues = Box::leak(Box::new(StepQueues::new()));
     let config = MotionConfig::prusa_i3();
@@ -28,9 +27,7 @@ fn converse(machine: &mut Machine, now_ms: u32, input: &str) -> String {
         if let Some(line) = assembler.push(byte) {
             machine.receive_line(line, &mut out).unwrap();
         }
-        machine
-            .poll(now_ms, &mut MemoryStorage::<512>::new(), &mut out)
-            .unwrap();
+        machine.poll(now_ms, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     }
     out.0
 }
@@ -42,10 +39,7 @@ fn reply(input: &str) -> String {
 #[test]
 fn every_line_gets_one_ok_after_its_output() {
     assert_eq!(reply("G90\nM83\nG21\n"), "ok\nok\nok\n");
-    assert_eq!(
-        reply("M9999 S1\n"),
-        "echo:Unknown command: \"M9999 S1\"\nok\n"
-    );
+    assert_eq!(reply("M9999 S1\n"), "echo:Unknown command: \"M9999 S1\"\nok\n");
     assert_eq!(reply("; only a comment\n"), "ok\n");
 }
 
@@ -60,21 +54,12 @@ fn malformed_lines_get_an_error_then_ok_and_nothing_changes() {
     for (line, error) in [
         ("G92 X1.2.3\n", "Error:Bad number after X\nok\n"),
         ("G92 x1e30\n", "Error:Bad number after X\nok\n"),
-        (
-            "G1 X10 F0\n",
-            "Error:Invalid feed rate (F must be > 0)\nok\n",
-        ),
-        (
-            "G1 X10 F-100\n",
-            "Error:Invalid feed rate (F must be > 0)\nok\n",
-        ),
+        ("G1 X10 F0\n", "Error:Invalid feed rate (F must be > 0)\nok\n"),
+        ("G1 X10 F-100\n", "Error:Invalid feed rate (F must be > 0)\nok\n"),
         ("G1 X\n", "Error:Missing value after X\nok\n"),
         ("G1 (oops X1\n", "Error:Unterminated comment\nok\n"),
         ("G1 X1 \u{0}\n", "Error:Unexpected character (byte 0)\nok\n"),
-        (
-            "G1 X\u{e9}\n",
-            "Error:Unexpected character (byte 195)\nok\n",
-        ),
+        ("G1 X\u{e9}\n", "Error:Unexpected character (byte 195)\nok\n"),
         ("G92 X3000000\n", "Error:Value out of range for X\nok\n"),
     ] {
         assert_eq!(converse(&mut machine, 0, line), error, "for {line:?}");
@@ -86,11 +71,7 @@ fn malformed_lines_get_an_error_then_ok_and_nothing_changes() {
 #[test]
 fn a_three_hundred_byte_line_is_refused_and_the_next_line_works() {
     let long = format!("G1 X1 ;{}\nM114\n", "x".repeat(300));
-    assert_eq!(
-        reply(&long),
-        "Error:Line too long\nok\nX:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0 \nok\n"
-            .replace(" \nok", "\nok")
-    );
+    assert_eq!(reply(&long), "Error:Line too long\nok\nX:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0 \nok\n".replace(" \nok", "\nok"));
 }
 
 #[test]
@@ -100,19 +81,13 @@ fn garbage_then_a_numbered_stream_resumes_with_resends() {
     assert_eq!(garbage, "Error:Unexpected character (byte 1)\nok\n");
     let n1 = checksummed("N1 M110 N0");
     assert_eq!(converse(&mut machine, 0, &format!("{n1}\n")), "ok\n");
-    assert_eq!(
-        converse(&mut machine, 0, &format!("{}\n", checksummed("N1 G91"))),
-        "ok\n"
-    );
+    assert_eq!(converse(&mut machine, 0, &format!("{}\n", checksummed("N1 G91"))), "ok\n");
     // A corrupted line: checksum error and a resend of the same number.
     assert_eq!(
         converse(&mut machine, 0, "N2 G92 X9*0\n"),
         "Error:checksum mismatch, Last Line: 1\nResend: 2\nok\n"
     );
-    assert_eq!(
-        converse(&mut machine, 0, &format!("{}\n", checksummed("N2 G92 X9"))),
-        "ok\n"
-    );
+    assert_eq!(converse(&mut machine, 0, &format!("{}\n", checksummed("N2 G92 X9"))), "ok\n");
     assert_eq!(machine.modal().logical_position()[0], 9_000);
 }
 
@@ -127,10 +102,7 @@ fn modal_state_follows_g90_g91_m82_m83_g20_g21_g92() {
     converse(&mut machine, 0, "G92 X10 E5\nG91\nM82\nG20\n");
     let modal = machine.modal();
     assert_eq!(modal.logical_position(), [10_000, 0, 0, 5_000]);
-    assert_eq!(
-        (modal.distance, modal.extruder_distance, modal.units),
-        (Distance::Relative, Distance::Absolute, Units::Inches)
-    );
+    assert_eq!((modal.distance, modal.extruder_distance, modal.units), (Distance::Relative, Distance::Absolute, Units::Inches));
 }
 
 #[test]
@@ -146,20 +118,11 @@ fn g4_blocks_the_queue_and_reports_busy_every_two_seconds() {
     assert_eq!(converse(&mut machine, 0, "G4 S5\nM114\n"), "");
     let mut out = Text::default();
     for now in [1_000, 2_000, 3_999, 4_000, 4_999] {
-        machine
-            .poll(now, &mut MemoryStorage::<512>::new(), &mut out)
-            .unwrap();
+        machine.poll(now, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     }
     assert_eq!(out.0, "echo:busy: processing\necho:busy: processing\n");
-    machine
-        .poll(5_000, &mut MemoryStorage::<512>::new(), &mut out)
-        .unwrap();
-    assert!(
-        out.0
-            .ends_with("busy: processing\nok\nX:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0\nok\n"),
-        "{}",
-        out.0
-    );
+    machine.poll(5_000, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
+    assert!(out.0.ends_with("busy: processing\nok\nX:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0\nok\n"), "{}", out.0);
 }
 
 #[test]
@@ -168,9 +131,7 @@ fn m108_ends_a_wait() {
     converse(&mut machine, 0, "G4 P60000\n");
     machine.cancel_wait();
     let mut out = Text::default();
-    machine
-        .poll(1, &mut MemoryStorage::<512>::new(), &mut out)
-        .unwrap();
+    machine.poll(1, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     assert_eq!(out.0, "ok\n");
 }
 
@@ -185,14 +146,10 @@ fn the_queue_holds_four_lines_while_a_command_blocks() {
                 machine.receive_line(l, &mut out).unwrap();
             }
         }
-        machine
-            .poll(0, &mut MemoryStorage::<512>::new(), &mut out)
-            .unwrap();
+        machine.poll(0, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     }
     assert!(!machine.can_accept_line());
-    machine
-        .poll(100, &mut MemoryStorage::<512>::new(), &mut out)
-        .unwrap();
+    machine.poll(100, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     assert_eq!(out.0.matches("ok\n").count(), 5);
 }
 
@@ -200,58 +157,30 @@ fn the_queue_holds_four_lines_while_a_command_blocks() {
 fn m112_halts_and_refuses_everything_after() {
     let mut machine = new_machine();
     let out = converse(&mut machine, 0, "M17\nM112\nG92 X1\n");
-    assert_eq!(
-        out,
-        "ok\nError:Printer halted. kill() called!\nok\nError:Printer halted. kill() called!\nok\n"
-    );
+    assert_eq!(out, "ok\nError:Printer halted. kill() called!\nok\nError:Printer halted. kill() called!\nok\n");
     assert!(machine.is_halted() && !machine.steppers_enabled());
 }
 
 #[test]
 fn settings_commands_change_what_m503_prints() {
     let mut machine = new_machine();
-    converse(
-        &mut machine,
-        0,
-        "M92 X80 E415.5\nM203 Z10\nM201 X1000\nM204 P800 T2000\nM205 J0.02\nM220 S150\n",
-    );
+    converse(&mut machine, 0, "M92 X80 E415.5\nM203 Z10\nM201 X1000\nM204 P800 T2000\nM205 J0.02\nM220 S150\n");
     let report = converse(&mut machine, 0, "M503\n");
-    assert!(
-        report.contains("echo:  M92 X80.00 Y100.00 Z400.00 E415.50\n"),
-        "{report}"
-    );
-    assert!(
-        report.contains("echo:  M203 X300.00 Y300.00 Z10.00 E25.00\n"),
-        "{report}"
-    );
-    assert!(
-        report.contains("echo:  M201 X1000.00 Y3000.00 Z100.00 E10000.00\n"),
-        "{report}"
-    );
-    assert!(
-        report.contains("echo:  M204 P800.00 R1500.00 T2000.00\n"),
-        "{report}"
-    );
+    assert!(report.contains("echo:  M92 X80.00 Y100.00 Z400.00 E415.50\n"), "{report}");
+    assert!(report.contains("echo:  M203 X300.00 Y300.00 Z10.00 E25.00\n"), "{report}");
+    assert!(report.contains("echo:  M201 X1000.00 Y3000.00 Z100.00 E10000.00\n"), "{report}");
+    assert!(report.contains("echo:  M204 P800.00 R1500.00 T2000.00\n"), "{report}");
     assert!(report.contains("J0.020\n"), "{report}");
     assert!(report.contains("echo:  M220 S150\n"), "{report}");
-    assert_eq!(
-        converse(&mut machine, 0, "M502\n"),
-        "echo:Hardcoded Default Settings Loaded\nok\n"
-    );
+    assert_eq!(converse(&mut machine, 0, "M502\n"), "echo:Hardcoded Default Settings Loaded\nok\n");
 }
 
 #[test]
 fn invalid_settings_are_refused_whole() {
     let mut machine = new_machine();
-    assert_eq!(
-        converse(&mut machine, 0, "M92 X80 Y-1\n"),
-        "Error:Value out of range for Y\nok\n"
-    );
+    assert_eq!(converse(&mut machine, 0, "M92 X80 Y-1\n"), "Error:Value out of range for Y\nok\n");
     assert_eq!(machine.settings().steps_per_mm_milli[0], 100_000);
-    assert_eq!(
-        converse(&mut machine, 0, "M220 S0\n"),
-        "Error:Value out of range for S\nok\n"
-    );
+    assert_eq!(converse(&mut machine, 0, "M220 S0\n"), "Error:Value out of range for S\nok\n");
 }
 
 #[test]
@@ -276,13 +205,9 @@ fn m155_reports_temperatures_on_its_own() {
     let mut machine = new_machine();
     converse(&mut machine, 0, "M155 S2\n");
     let mut out = Text::default();
-    machine
-        .poll(1_999, &mut MemoryStorage::<512>::new(), &mut out)
-        .unwrap();
+    machine.poll(1_999, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     assert_eq!(out.0, "");
-    machine
-        .poll(2_000, &mut MemoryStorage::<512>::new(), &mut out)
-        .unwrap();
+    machine.poll(2_000, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     assert_eq!(out.0, " T:0.00 /0.00 B:0.00 /0.00 @:0 B@:0\n");
 }
 
@@ -299,10 +224,7 @@ fn fan_commands_set_the_duty() {
     assert_eq!(machine.fan_duty(), 128);
     converse(&mut machine, 0, "M106\n");
     assert_eq!(machine.fan_duty(), 255);
-    assert_eq!(
-        converse(&mut machine, 0, "M106 S256\n"),
-        "Error:Value out of range for S\nok\n"
-    );
+    assert_eq!(converse(&mut machine, 0, "M106 S256\n"), "Error:Value out of range for S\nok\n");
     converse(&mut machine, 0, "M107\n");
     assert_eq!(machine.fan_duty(), 0);
 }
@@ -327,19 +249,9 @@ fn m500_saves_and_m501_restores_over_later_changes() {
         machine.poll(0, &mut eeprom, out).unwrap();
     };
     send(&mut machine, "M92 X80\nM500\n", &mut out);
-    assert!(
-        out.0
-            .starts_with("ok\necho:Settings Stored (93 bytes; crc "),
-        "{}",
-        out.0
-    );
+    assert!(out.0.starts_with("ok\necho:Settings Stored (93 bytes; crc "), "{}", out.0);
     send(&mut machine, "M92 X90\nM501\n", &mut out);
-    assert!(
-        out.0
-            .contains("echo:V1 stored settings retrieved (93 bytes; crc "),
-        "{}",
-        out.0
-    );
+    assert!(out.0.contains("echo:V1 stored settings retrieved (93 bytes; crc "), "{}", out.0);
     assert_eq!(machine.settings().steps_per_mm_milli[0], 80_000);
 }
 
@@ -353,15 +265,7 @@ fn a_corrupt_image_at_boot_is_reported_and_the_defaults_stay() {
     let mut machine = new_machine();
     let mut out = Text::default();
     machine.load_settings(&mut eeprom, &mut out).unwrap();
-    assert!(
-        out.0.starts_with("echo:EEPROM CRC mismatch - (stored) "),
-        "{}",
-        out.0
-    );
-    assert!(
-        out.0.ends_with("echo:Hardcoded Default Settings Loaded\n"),
-        "{}",
-        out.0
-    );
+    assert!(out.0.starts_with("echo:EEPROM CRC mismatch - (stored) "), "{}", out.0);
+    assert!(out.0.ends_with("echo:Hardcoded Default Settings Loaded\n"), "{}", out.0);
     assert_eq!(machine.settings(), &Settings::default());
 }

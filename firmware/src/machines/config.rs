@@ -45,31 +45,11 @@ pub struct StepperPins {
 /// The RAMPS 1.4 sockets (Marlin's map).
 pub mod ramps {
     use super::{MegaPin, StepperPins};
-    pub const X: StepperPins = StepperPins {
-        step: MegaPin::analog(0),
-        dir: MegaPin::analog(1),
-        enable: MegaPin(38),
-    };
-    pub const Y: StepperPins = StepperPins {
-        step: MegaPin::analog(6),
-        dir: MegaPin::analog(7),
-        enable: MegaPin::analog(2),
-    };
-    pub const Z: StepperPins = StepperPins {
-        step: MegaPin(46),
-        dir: MegaPin(48),
-        enable: MegaPin::analog(8),
-    };
-    pub const E0: StepperPins = StepperPins {
-        step: MegaPin(26),
-        dir: MegaPin(28),
-        enable: MegaPin(24),
-    };
-    pub const E1: StepperPins = StepperPins {
-        step: MegaPin(36),
-        dir: MegaPin(34),
-        enable: MegaPin(30),
-    };
+    pub const X: StepperPins = StepperPins { step: MegaPin::analog(0), dir: MegaPin::analog(1), enable: MegaPin(38) };
+    pub const Y: StepperPins = StepperPins { step: MegaPin::analog(6), dir: MegaPin::analog(7), enable: MegaPin::analog(2) };
+    pub const Z: StepperPins = StepperPins { step: MegaPin(46), dir: MegaPin(48), enable: MegaPin::analog(8) };
+    pub const E0: StepperPins = StepperPins { step: MegaPin(26), dir: MegaPin(28), enable: MegaPin(24) };
+    pub const E1: StepperPins = StepperPins { step: MegaPin(36), dir: MegaPin(34), enable: MegaPin(30) };
     pub const X_MIN: MegaPin = MegaPin(3);
     pub const X_MAX: MegaPin = MegaPin(2);
     pub const Y_MIN: MegaPin = MegaPin(14);
@@ -129,57 +109,23 @@ pub struct PrinterPins {
 /// SPEC §1 printer on a RAMPS (X, Y, Z, E0; second Z on E1).
 pub const fn prusa_i3_pins() -> PrinterPins {
     PrinterPins {
-        steppers: [
-            Some(ramps::X),
-            Some(ramps::Y),
-            Some(ramps::Z),
-            Some(ramps::E0),
-            Some(ramps::E1),
-        ],
-        endstops: [
-            Some(ramps::X_MIN),
-            None,
-            Some(ramps::Y_MIN),
-            None,
-            Some(ramps::Z_MIN),
-            None,
-        ],
+        steppers: [Some(ramps::X), Some(ramps::Y), Some(ramps::Z), Some(ramps::E0), Some(ramps::E1)],
+        endstops: [Some(ramps::X_MIN), None, Some(ramps::Y_MIN), None, Some(ramps::Z_MIN), None],
         hotend: Some(ramps::D10),
         bed: Some(ramps::D8),
         fan: Some(ramps::D9),
         hotend_adc: Some(13),
         bed_adc: Some(14),
         // NSE-5310 Index lines of X and Y
-        inputs: [
-            Some(ramps::X_MAX),
-            Some(ramps::Y_MAX),
-            None,
-            None,
-            None,
-            None,
-            None,
-        ],
+        inputs: [Some(ramps::X_MAX), Some(ramps::Y_MAX), None, None, None, None, None],
     }
 }
 
 /// SPEC §2 delta: towers on X/Y/Z, max endstops.
 pub const fn delta_pins() -> PrinterPins {
     PrinterPins {
-        steppers: [
-            Some(ramps::X),
-            Some(ramps::Y),
-            Some(ramps::Z),
-            Some(ramps::E0),
-            None,
-        ],
-        endstops: [
-            None,
-            Some(ramps::X_MAX),
-            None,
-            Some(ramps::Y_MAX),
-            None,
-            Some(ramps::Z_MAX),
-        ],
+        steppers: [Some(ramps::X), Some(ramps::Y), Some(ramps::Z), Some(ramps::E0), None],
+        endstops: [None, Some(ramps::X_MAX), None, Some(ramps::Y_MAX), None, Some(ramps::Z_MAX)],
         hotend: Some(ramps::D10),
         bed: Some(ramps::D8),
         fan: Some(ramps::D9),
@@ -194,13 +140,7 @@ pub const fn delta_pins() -> PrinterPins {
 /// relay, e-stop, rearm, four driver ALARMs.
 pub const fn arm_pins() -> PrinterPins {
     PrinterPins {
-        steppers: [
-            Some(ramps::X),
-            Some(ramps::Y),
-            Some(ramps::Z),
-            None,
-            Some(ramps::E1),
-        ],
+        steppers: [Some(ramps::X), Some(ramps::Y), Some(ramps::Z), None, Some(ramps::E1)],
         endstops: [
             Some(ramps::X_MIN),
             Some(ramps::X_MAX),
@@ -258,9 +198,7 @@ pub struct ExtrusionLineMachine {
 
 /// SPEC §4's line with the puller's `puller` drive (6:1 in the thesis
 /// code, 4:1 in its table).
-pub const fn extrusion_line(
-    puller: DriveTrain,
-) -> Result<ExtrusionLineMachine, VelocityConfigError> {
+pub const fn extrusion_line(puller: DriveTrain) -> Result<ExtrusionLineMachine, VelocityConfigError> {
     let line = match ExtrusionLineConfig::thesis(puller) {
         Ok(line) => line,
         Err(error) => return Err(error),
@@ -370,20 +308,13 @@ pub const fn powder_bed() -> PowderBedMachine {
             carriage_plus: MegaPin(6),
             roller: ramps::D10,
             suction: ramps::D8,
-            lcd: LcdPins {
-                rs: MegaPin(16),
-                e: MegaPin(17),
-                data: [MegaPin(23), MegaPin(25), MegaPin(27), MegaPin(29)],
-            },
+            lcd: LcdPins { rs: MegaPin(16), e: MegaPin(17), data: [MegaPin(23), MegaPin(25), MegaPin(27), MegaPin(29)] },
         },
         platform: PlatformDriver::M542,
         switch_active: ActiveLevel::Low,
         carriage_sensor_active: ActiveLevel::Low,
         travel: TravelLimits::DEFAULT,
-        layer: LayerSettings {
-            thickness_um: 100,
-            suction_while_spreading: true,
-        },
+        layer: LayerSettings { thickness_um: 100, suction_while_spreading: true },
         platform_step_hz: 1000,
         encoder_counts_per_rev: 200,
     }
@@ -396,8 +327,7 @@ mod tests {
     /// No pin is used twice within a machine.
     fn unique(pins: &[MegaPin]) -> bool {
         let mut seen = [false; 70];
-        pins.iter()
-            .all(|p| !core::mem::replace(&mut seen[usize::from(p.0)], true))
+        pins.iter().all(|p| !core::mem::replace(&mut seen[usize::from(p.0)], true))
     }
 
     fn stepper(p: StepperPins) -> [MegaPin; 3] {
@@ -407,28 +337,15 @@ mod tests {
     #[test]
     fn extrusion_line_uses_the_thesis_pins() {
         let m = extrusion_line(DriveTrain::PULLER_6_TO_1).unwrap();
-        assert_eq!(
-            stepper(m.pins.extruder),
-            [MegaPin(26), MegaPin(28), MegaPin(24)]
-        );
-        assert_eq!(
-            stepper(m.pins.puller),
-            [MegaPin(54), MegaPin(55), MegaPin(38)]
-        );
-        assert_eq!(
-            (m.pins.barrel_ssr, m.pins.fans, m.pins.barrel_adc),
-            (MegaPin(9), MegaPin(8), 13)
-        );
+        assert_eq!(stepper(m.pins.extruder), [MegaPin(26), MegaPin(28), MegaPin(24)]);
+        assert_eq!(stepper(m.pins.puller), [MegaPin(54), MegaPin(55), MegaPin(38)]);
+        assert_eq!((m.pins.barrel_ssr, m.pins.fans, m.pins.barrel_adc), (MegaPin(9), MegaPin(8), 13));
         assert_eq!(m.pins.thermistor_series_ohms, 4_800);
         assert_eq!(m.min_extrusion_temperature, Celsius(17_500));
         let mut all = std::vec::Vec::new();
         all.extend(stepper(m.pins.extruder));
         all.extend(stepper(m.pins.puller));
-        all.extend([
-            m.pins.barrel_ssr,
-            m.pins.fans,
-            MegaPin::analog(m.pins.barrel_adc),
-        ]);
+        all.extend([m.pins.barrel_ssr, m.pins.fans, MegaPin::analog(m.pins.barrel_adc)]);
         assert!(unique(&all));
     }
 
@@ -439,25 +356,9 @@ mod tests {
         let mut all = std::vec::Vec::new();
         all.extend(stepper(p.feed));
         all.extend(stepper(p.build));
-        all.extend([
-            p.feed_lower,
-            p.feed_upper,
-            p.build_lower,
-            p.build_upper,
-            p.carriage_minus,
-            p.carriage_plus,
-            p.roller,
-            p.suction,
-        ]);
+        all.extend([p.feed_lower, p.feed_upper, p.build_lower, p.build_upper, p.carriage_minus, p.carriage_plus, p.roller, p.suction]);
         for axis in [p.carriage_x, p.carriage_y] {
-            all.extend([
-                axis.pwm,
-                axis.ina,
-                axis.inb,
-                axis.diag,
-                axis.encoder_a,
-                axis.encoder_b,
-            ]);
+            all.extend([axis.pwm, axis.ina, axis.inb, axis.diag, axis.encoder_a, axis.encoder_b]);
         }
         all.extend([p.lcd.rs, p.lcd.e]);
         all.extend(p.lcd.data);
@@ -475,12 +376,7 @@ mod tests {
             all.extend(pins.endstops.iter().flatten());
             all.extend([pins.hotend, pins.bed, pins.fan].iter().flatten());
             all.extend(pins.inputs.iter().flatten());
-            all.extend(
-                [pins.hotend_adc, pins.bed_adc]
-                    .iter()
-                    .flatten()
-                    .map(|&c| MegaPin::analog(c)),
-            );
+            all.extend([pins.hotend_adc, pins.bed_adc].iter().flatten().map(|&c| MegaPin::analog(c)));
             assert!(unique(&all), "{pins:?}");
         }
     }

@@ -34,9 +34,7 @@
 //! with other gains and limits) when it lands; until then
 //! [`ClosedLoopPi`] adapts the closed-loop module's fixed-point loop law.
 
-use crate::closed_loop::control::{
-    AxisController, DerivativeOn, DriverStatus, FixedGains, FollowingErrorLimit, Reference, Q16,
-};
+use crate::closed_loop::control::{AxisController, DerivativeOn, DriverStatus, FixedGains, FollowingErrorLimit, Reference, Q16};
 
 /// What the diameter loop needs from a sampled PI controller. The loop
 /// calls it once per measurement; all values in the loop's units (error in
@@ -134,11 +132,7 @@ impl DiameterWarning {
     pub fn write<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         match *self {
             DiameterWarning::Stale { seconds, held_mrpm } => {
-                ufmt::uwrite!(
-                    out,
-                    "echo:Diameter measurement stale ({} s), puller held at ",
-                    seconds
-                )?;
+                ufmt::uwrite!(out, "echo:Diameter measurement stale ({} s), puller held at ", seconds)?;
                 write_milli(out, held_mrpm)?;
                 out.write_str(" rpm\n")
             }
@@ -178,20 +172,8 @@ pub struct DiameterLoop<P> {
 impl<P: PiLaw> DiameterLoop<P> {
     /// Starts in manual mode. `pi` gets the settings' limits.
     pub fn new(mut pi: P, settings: DiameterSettings) -> Self {
-        pi.set_limits(
-            settings.min_mrpm as f32 / 1000.0,
-            settings.max_mrpm as f32 / 1000.0,
-        );
-        Self {
-            pi,
-            settings,
-            mode: PullerMode::Manual,
-            output_mrpm: settings.min_mrpm,
-            last_cpx: None,
-            age_s: 0,
-            stale: false,
-            needs_preset: true,
-        }
+        pi.set_limits(settings.min_mrpm as f32 / 1000.0, settings.max_mrpm as f32 / 1000.0);
+        Self { pi, settings, mode: PullerMode::Manual, output_mrpm: settings.min_mrpm, last_cpx: None, age_s: 0, stale: false, needs_preset: true }
     }
 
     pub fn mode(&self) -> PullerMode {
@@ -211,14 +193,8 @@ impl<P: PiLaw> DiameterLoop<P> {
 
     /// A measurement in centi-pixels. In automatic mode returns the new
     /// puller speed (milli-RPM); in manual mode `Ok(None)`.
-    pub fn on_measurement(
-        &mut self,
-        cpx: u32,
-        puller_mrpm: u32,
-    ) -> Result<Option<u32>, DiameterError> {
-        if cpx < u32::from(self.settings.min_valid_cpx)
-            || cpx > u32::from(self.settings.max_valid_cpx)
-        {
+    pub fn on_measurement(&mut self, cpx: u32, puller_mrpm: u32) -> Result<Option<u32>, DiameterError> {
+        if cpx < u32::from(self.settings.min_valid_cpx) || cpx > u32::from(self.settings.max_valid_cpx) {
             return Err(DiameterError::Implausible);
         }
         self.last_cpx = Some(cpx as u16);
@@ -227,29 +203,19 @@ impl<P: PiLaw> DiameterLoop<P> {
             return Ok(None);
         }
         if self.needs_preset || self.stale {
-            self.pi.preset(
-                puller_mrpm.clamp(self.settings.min_mrpm, self.settings.max_mrpm) as f32 / 1000.0,
-            );
+            self.pi.preset(puller_mrpm.clamp(self.settings.min_mrpm, self.settings.max_mrpm) as f32 / 1000.0);
             self.needs_preset = false;
             self.stale = false;
         }
         let error_px = (i32::from(self.settings.setpoint_cpx) - cpx as i32) as f32 / 100.0;
         let rpm = self.pi.update(error_px);
-        let mrpm = if rpm.is_finite() {
-            (rpm * 1000.0 + 0.5) as u32
-        } else {
-            self.output_mrpm
-        };
+        let mrpm = if rpm.is_finite() { (rpm * 1000.0 + 0.5) as u32 } else { self.output_mrpm };
         self.output_mrpm = mrpm.clamp(self.settings.min_mrpm, self.settings.max_mrpm);
         Ok(Some(self.output_mrpm))
     }
 
     /// A measurement in µm.
-    pub fn on_measurement_um(
-        &mut self,
-        um: u32,
-        puller_mrpm: u32,
-    ) -> Result<Option<u32>, DiameterError> {
+    pub fn on_measurement_um(&mut self, um: u32, puller_mrpm: u32) -> Result<Option<u32>, DiameterError> {
         self.on_measurement(self.settings.cpx_from_um(um), puller_mrpm)
     }
 
@@ -258,24 +224,16 @@ impl<P: PiLaw> DiameterLoop<P> {
     /// puller keeps its speed (nothing to do for the caller but print).
     pub fn on_second(&mut self) -> Option<DiameterWarning> {
         self.age_s = self.age_s.saturating_add(1);
-        if self.mode == PullerMode::Automatic
-            && !self.stale
-            && self.age_s >= u16::from(self.settings.stale_after_s.max(1))
-        {
+        if self.mode == PullerMode::Automatic && !self.stale && self.age_s >= u16::from(self.settings.stale_after_s.max(1)) {
             self.stale = true;
-            return Some(DiameterWarning::Stale {
-                seconds: self.age_s,
-                held_mrpm: self.output_mrpm,
-            });
+            return Some(DiameterWarning::Stale { seconds: self.age_s, held_mrpm: self.output_mrpm });
         }
         None
     }
 
     /// New setpoint (centi-pixels), within the plausible range.
     pub fn set_setpoint_cpx(&mut self, cpx: u32) -> Result<(), DiameterError> {
-        if cpx < u32::from(self.settings.min_valid_cpx)
-            || cpx > u32::from(self.settings.max_valid_cpx)
-        {
+        if cpx < u32::from(self.settings.min_valid_cpx) || cpx > u32::from(self.settings.max_valid_cpx) {
             return Err(DiameterError::Implausible);
         }
         self.settings.setpoint_cpx = cpx as u16;
@@ -397,10 +355,7 @@ impl ClosedLoopPi {
 }
 
 /// The diameter loop has no following-error supervision.
-const NO_FOLLOWING_LIMIT: FollowingErrorLimit = FollowingErrorLimit {
-    limit: i32::MAX,
-    hold_ticks: u16::MAX,
-};
+const NO_FOLLOWING_LIMIT: FollowingErrorLimit = FollowingErrorLimit { limit: i32::MAX, hold_ticks: u16::MAX };
 
 impl PiLaw for ClosedLoopPi {
     fn update(&mut self, error: f32) -> f32 {
@@ -416,24 +371,14 @@ impl PiLaw for ClosedLoopPi {
         } else {
             (scaled - 0.5) as i32
         };
-        let reference = Reference {
-            position: -error_cpx,
-            velocity: self.bias_mrpm,
-        };
-        let u = self
-            .controller
-            .tick(reference, Ok(0), DriverStatus::default())
-            .unwrap_or(self.bias_mrpm);
+        let reference = Reference { position: -error_cpx, velocity: self.bias_mrpm };
+        let u = self.controller.tick(reference, Ok(0), DriverStatus::default()).unwrap_or(self.bias_mrpm);
         self.last_output_mrpm = self.centre_mrpm + u;
         self.last_output_mrpm as f32 / 1000.0
     }
 
     fn preset(&mut self, output: f32) {
-        let mrpm = if output.is_finite() {
-            (output * 1000.0 + 0.5) as i32
-        } else {
-            self.centre_mrpm
-        };
+        let mrpm = if output.is_finite() { (output * 1000.0 + 0.5) as i32 } else { self.centre_mrpm };
         self.restart_at(mrpm);
     }
 
@@ -454,8 +399,7 @@ impl PiLaw for ClosedLoopPi {
         let max = (max * 1000.0) as i32;
         self.centre_mrpm = (min + max) / 2;
         let limit = (max - min) / 2;
-        self.controller =
-            AxisController::new(Self::fixed(self.kp, self.ki), limit, NO_FOLLOWING_LIMIT);
+        self.controller = AxisController::new(Self::fixed(self.kp, self.ki), limit, NO_FOLLOWING_LIMIT);
         self.restart_at(self.last_output_mrpm);
     }
 }
@@ -550,10 +494,7 @@ pub(crate) mod tests {
         let mut l = looped();
         l.set_mode(PullerMode::Automatic, 4_000);
         assert_eq!(l.on_measurement(0, 4_000), Err(DiameterError::Implausible));
-        assert_eq!(
-            l.on_measurement(50_000, 4_000),
-            Err(DiameterError::Implausible)
-        );
+        assert_eq!(l.on_measurement(50_000, 4_000), Err(DiameterError::Implausible));
         assert!(l.pi().errors.is_empty());
         assert_eq!(l.last_measurement_cpx(), None);
     }
@@ -586,19 +527,10 @@ pub(crate) mod tests {
             assert_eq!(l.on_second(), None);
         }
         let warning = l.on_second().expect("warns at 5 s");
-        assert_eq!(
-            warning,
-            DiameterWarning::Stale {
-                seconds: 5,
-                held_mrpm: held
-            }
-        );
+        assert_eq!(warning, DiameterWarning::Stale { seconds: 5, held_mrpm: held });
         let mut out = Out(String::new());
         warning.write(&mut out).unwrap();
-        assert_eq!(
-            out.0,
-            "echo:Diameter measurement stale (5 s), puller held at 4.079 rpm\n"
-        );
+        assert_eq!(out.0, "echo:Diameter measurement stale (5 s), puller held at 4.079 rpm\n");
         assert_eq!(l.on_second(), None, "once");
         assert!(l.is_stale());
         // the next measurement presets from the speed the puller holds
@@ -649,10 +581,7 @@ pub(crate) mod tests {
         }
         assert!((pi.update(-200.0) - 15.0).abs() < 1e-3);
         let back = pi.update(10.0);
-        assert!(
-            back < 15.0,
-            "leaves the limit as soon as the error turns: {back}"
-        );
+        assert!(back < 15.0, "leaves the limit as soon as the error turns: {back}");
         for _ in 0..10_000 {
             assert!(pi.update(200.0) >= 1.0);
         }

@@ -8,13 +8,8 @@
 //! cold-extrusion check, configured at 175 °C for this machine, with
 //! `M302 P1` as the explicit override).
 
-use super::diameter::{
-    DiameterError, DiameterLoop, DiameterSettings, DiameterWarning, PiLaw, PullerMode,
-};
-use super::velocity::{
-    DriveTrain, SpeedError, TimerChange, VelocityConfig, VelocityConfigError, VelocityStepper,
-    MEGA_STEP_TIMER_HZ,
-};
+use super::diameter::{DiameterError, DiameterLoop, DiameterSettings, DiameterWarning, PiLaw, PullerMode};
+use super::velocity::{DriveTrain, SpeedError, TimerChange, VelocityConfig, VelocityConfigError, VelocityStepper, MEGA_STEP_TIMER_HZ};
 use crate::thermal::Celsius;
 
 /// The screw's interlock temperature (SPEC §4).
@@ -39,22 +34,12 @@ pub struct ColdExtrusion {
 impl ColdExtrusion {
     /// `Error:Cold extrusion prevented: barrel 24.00 C, minimum 175.00 C (M302 P1 overrides)`
     pub fn write_refused<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(
-            out,
-            "Error:Cold extrusion prevented: barrel {} C, minimum {} C (M302 P1 overrides)\n",
-            self.measured,
-            self.minimum
-        )
+        ufmt::uwrite!(out, "Error:Cold extrusion prevented: barrel {} C, minimum {} C (M302 P1 overrides)\n", self.measured, self.minimum)
     }
 
     /// `Error:Barrel cooled to 170.00 C (minimum 175.00 C): screw stopped`
     pub fn write_stopped<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(
-            out,
-            "Error:Barrel cooled to {} C (minimum {} C): screw stopped\n",
-            self.measured,
-            self.minimum
-        )
+        ufmt::uwrite!(out, "Error:Barrel cooled to {} C (minimum {} C): screw stopped\n", self.measured, self.minimum)
     }
 }
 
@@ -82,26 +67,15 @@ impl ExtrusionLineConfig {
     /// table) up to 15 rpm; both ramp at 5 rpm/s (ours), on the Mega's
     /// 2 MHz step timer.
     pub const fn thesis(puller: DriveTrain) -> Result<Self, VelocityConfigError> {
-        let extruder = match VelocityConfig::new(
-            DriveTrain::EXTRUDER_SCREW,
-            MEGA_STEP_TIMER_HZ,
-            20,
-            5,
-            RAMP_UPDATES_PER_S,
-        ) {
+        let extruder = match VelocityConfig::new(DriveTrain::EXTRUDER_SCREW, MEGA_STEP_TIMER_HZ, 20, 5, RAMP_UPDATES_PER_S) {
             Ok(config) => config,
             Err(error) => return Err(error),
         };
-        let puller =
-            match VelocityConfig::new(puller, MEGA_STEP_TIMER_HZ, 15, 5, RAMP_UPDATES_PER_S) {
-                Ok(config) => config,
-                Err(error) => return Err(error),
-            };
-        Ok(Self {
-            extruder,
-            puller,
-            diameter: DiameterSettings::THESIS,
-        })
+        let puller = match VelocityConfig::new(puller, MEGA_STEP_TIMER_HZ, 15, 5, RAMP_UPDATES_PER_S) {
+            Ok(config) => config,
+            Err(error) => return Err(error),
+        };
+        Ok(Self { extruder, puller, diameter: DiameterSettings::THESIS })
     }
 }
 
@@ -124,39 +98,23 @@ pub struct ExtrusionLine<P> {
 
 impl<P: PiLaw> ExtrusionLine<P> {
     pub fn new(pi: P, config: &ExtrusionLineConfig) -> Self {
-        Self {
-            extruder: VelocityStepper::new(),
-            puller: VelocityStepper::new(),
-            diameter: DiameterLoop::new(pi, config.diameter),
-        }
+        Self { extruder: VelocityStepper::new(), puller: VelocityStepper::new(), diameter: DiameterLoop::new(pi, config.diameter) }
     }
 
     /// `M3 S<rpm>`: run the screw, if the barrel is hot enough (or the
     /// check overridden). 0 stops it (always allowed).
-    pub fn set_screw(
-        &mut self,
-        config: &ExtrusionLineConfig,
-        mrpm: u32,
-        barrel: &impl ColdExtrusionCheck,
-    ) -> Result<(), ScrewError> {
+    pub fn set_screw(&mut self, config: &ExtrusionLineConfig, mrpm: u32, barrel: &impl ColdExtrusionCheck) -> Result<(), ScrewError> {
         if mrpm > 0 {
             barrel.check().map_err(ScrewError::Cold)?;
         }
-        self.extruder
-            .set_target(&config.extruder, mrpm)
-            .map_err(ScrewError::Speed)
+        self.extruder.set_target(&config.extruder, mrpm).map_err(ScrewError::Speed)
     }
 
     /// `M860 S<rpm>`: the puller at a fixed speed; the puller goes to
     /// manual mode.
-    pub fn set_puller_manual(
-        &mut self,
-        config: &ExtrusionLineConfig,
-        mrpm: u32,
-    ) -> Result<(), SpeedError> {
+    pub fn set_puller_manual(&mut self, config: &ExtrusionLineConfig, mrpm: u32) -> Result<(), SpeedError> {
         self.puller.set_target(&config.puller, mrpm)?;
-        self.diameter
-            .set_mode(PullerMode::Manual, self.puller.current_mrpm());
+        self.diameter.set_mode(PullerMode::Manual, self.puller.current_mrpm());
         Ok(())
     }
 
@@ -174,11 +132,7 @@ impl<P: PiLaw> ExtrusionLine<P> {
 
     /// `M861 P<px>` / `D<mm>`: one measurement from the camera (centi-px).
     /// In automatic mode the puller gets a new set speed.
-    pub fn on_measurement_cpx(
-        &mut self,
-        config: &ExtrusionLineConfig,
-        cpx: u32,
-    ) -> Result<(), DiameterError> {
+    pub fn on_measurement_cpx(&mut self, config: &ExtrusionLineConfig, cpx: u32) -> Result<(), DiameterError> {
         let now = self.puller.current_mrpm();
         if let Some(mrpm) = self.diameter.on_measurement(cpx, now)? {
             // within 1–15 rpm by the loop's limits, which the config allows
@@ -190,10 +144,7 @@ impl<P: PiLaw> ExtrusionLine<P> {
     /// Once per second from the main loop: the diameter watchdog and the
     /// interlock (a barrel that cools below the minimum stops the screw).
     pub fn on_second(&mut self, barrel: &impl ColdExtrusionCheck) -> SecondReport {
-        let mut report = SecondReport {
-            diameter: self.diameter.on_second(),
-            screw_stopped: None,
-        };
+        let mut report = SecondReport { diameter: self.diameter.on_second(), screw_stopped: None };
         if self.extruder.target_mrpm() > 0 || self.extruder.is_running() {
             if let Err(cold) = barrel.check() {
                 self.extruder.halt();
@@ -205,10 +156,7 @@ impl<P: PiLaw> ExtrusionLine<P> {
 
     /// The ramp tick ([`RAMP_UPDATES_PER_S`]): (extruder, puller) timer changes.
     pub fn update(&mut self, config: &ExtrusionLineConfig) -> (TimerChange, TimerChange) {
-        (
-            self.extruder.update(&config.extruder),
-            self.puller.update(&config.puller),
-        )
+        (self.extruder.update(&config.extruder), self.puller.update(&config.puller))
     }
 
     /// `M112`, a driver fault: both motors stop now.
@@ -236,22 +184,14 @@ impl<P: PiLaw> ExtrusionLine<P> {
             PullerMode::Manual => "manual",
         })?;
         if self.diameter.is_stale() {
-            ufmt::uwrite!(
-                out,
-                " stale {} s",
-                self.diameter.seconds_since_measurement()
-            )?;
+            ufmt::uwrite!(out, " stale {} s", self.diameter.seconds_since_measurement())?;
         }
         out.write_str("\n")
     }
 }
 
 /// `2.851 mm (132.91 px)`
-pub fn write_mm_px<W: ufmt::uWrite + ?Sized>(
-    out: &mut W,
-    settings: &DiameterSettings,
-    cpx: u32,
-) -> Result<(), W::Error> {
+pub fn write_mm_px<W: ufmt::uWrite + ?Sized>(out: &mut W, settings: &DiameterSettings, cpx: u32) -> Result<(), W::Error> {
     super::diameter::write_milli(out, settings.um_from_cpx(cpx))?;
     ufmt::uwrite!(out, " mm ({}.", cpx / 100)?;
     if cpx % 100 < 10 {
@@ -277,26 +217,17 @@ mod tests {
             if self.overridden || self.measured >= MIN_EXTRUSION_TEMPERATURE {
                 Ok(())
             } else {
-                Err(ColdExtrusion {
-                    measured: self.measured,
-                    minimum: MIN_EXTRUSION_TEMPERATURE,
-                })
+                Err(ColdExtrusion { measured: self.measured, minimum: MIN_EXTRUSION_TEMPERATURE })
             }
         }
     }
 
     fn cold() -> Barrel {
-        Barrel {
-            measured: Celsius(2400),
-            overridden: false,
-        }
+        Barrel { measured: Celsius(2400), overridden: false }
     }
 
     fn hot() -> Barrel {
-        Barrel {
-            measured: Celsius(21_000),
-            overridden: false,
-        }
+        Barrel { measured: Celsius(21_000), overridden: false }
     }
 
     struct Out(String);
@@ -319,9 +250,7 @@ mod tests {
     fn the_screw_does_not_turn_below_175_c() {
         let (mut line, config) = line();
         let refused = line.set_screw(&config, 10_000, &cold());
-        let Err(ScrewError::Cold(refusal)) = refused else {
-            panic!("{refused:?}")
-        };
+        let Err(ScrewError::Cold(refusal)) = refused else { panic!("{refused:?}") };
         assert_eq!(line.extruder.target_mrpm(), 0);
         let mut out = Out(String::new());
         refusal.write_refused(&mut out).unwrap();
@@ -333,15 +262,7 @@ mod tests {
     #[test]
     fn the_override_lets_a_cold_screw_turn() {
         let (mut line, config) = line();
-        line.set_screw(
-            &config,
-            10_000,
-            &Barrel {
-                overridden: true,
-                ..cold()
-            },
-        )
-        .unwrap();
+        line.set_screw(&config, 10_000, &Barrel { overridden: true, ..cold() }).unwrap();
         assert_eq!(line.extruder.target_mrpm(), 10_000);
     }
 
@@ -352,28 +273,12 @@ mod tests {
         line.update(&config);
         assert!(line.extruder.is_running());
         assert_eq!(line.on_second(&hot()).screw_stopped, None);
-        let report = line.on_second(&Barrel {
-            measured: Celsius(17_000),
-            overridden: false,
-        });
-        assert_eq!(
-            report.screw_stopped,
-            Some(ColdExtrusion {
-                measured: Celsius(17_000),
-                minimum: MIN_EXTRUSION_TEMPERATURE
-            })
-        );
+        let report = line.on_second(&Barrel { measured: Celsius(17_000), overridden: false });
+        assert_eq!(report.screw_stopped, Some(ColdExtrusion { measured: Celsius(17_000), minimum: MIN_EXTRUSION_TEMPERATURE }));
         assert!(!line.extruder.is_running());
         let mut out = Out(String::new());
-        report
-            .screw_stopped
-            .unwrap()
-            .write_stopped(&mut out)
-            .unwrap();
-        assert_eq!(
-            out.0,
-            "Error:Barrel cooled to 170.00 C (minimum 175.00 C): screw stopped\n"
-        );
+        report.screw_stopped.unwrap().write_stopped(&mut out).unwrap();
+        assert_eq!(out.0, "Error:Barrel cooled to 170.00 C (minimum 175.00 C): screw stopped\n");
     }
 
     #[test]
@@ -414,10 +319,7 @@ mod tests {
         let (mut line, config) = line();
         let mut out = Out(String::new());
         line.write_report(&mut out).unwrap();
-        assert_eq!(
-            out.0,
-            "echo:Diameter no measurement setpoint 2.850 mm (132.87 px) puller 0.000 rpm manual\n"
-        );
+        assert_eq!(out.0, "echo:Diameter no measurement setpoint 2.850 mm (132.87 px) puller 0.000 rpm manual\n");
         line.on_measurement_cpx(&config, 13_291).unwrap();
         let mut out = Out(String::new());
         line.write_report(&mut out).unwrap();
@@ -433,10 +335,6 @@ mod tests {
     #[test]
     fn state_is_small() {
         // two steppers and the loop, without the PI
-        assert!(
-            core::mem::size_of::<ExtrusionLine<()>>() <= 80,
-            "{}",
-            core::mem::size_of::<ExtrusionLine<()>>()
-        );
+        assert!(core::mem::size_of::<ExtrusionLine<()>>() <= 80, "{}", core::mem::size_of::<ExtrusionLine<()>>());
     }
 }

@@ -119,10 +119,7 @@ impl PlatformSwitches {
     /// From the raw pin levels (true = high) and the configured polarity
     /// (the Hamlin 59085 wiring of the thesis contradicts itself).
     pub fn from_levels(lower_high: bool, upper_high: bool, active: ActiveLevel) -> Self {
-        Self {
-            lower: active.is_asserted(lower_high),
-            upper: active.is_asserted(upper_high),
-        }
+        Self { lower: active.is_asserted(lower_high), upper: active.is_asserted(upper_high) }
     }
 }
 
@@ -144,12 +141,7 @@ pub struct TravelLimits {
 impl TravelLimits {
     /// 300 mm at 200 steps/mm, 10 mm of back-off, 500 ms pause at 1 kHz,
     /// three readings (ours).
-    pub const DEFAULT: TravelLimits = TravelLimits {
-        max_steps: 60_000,
-        max_backoff_steps: 2_000,
-        pause_ticks: 500,
-        debounce_ticks: 3,
-    };
+    pub const DEFAULT: TravelLimits = TravelLimits { max_steps: 60_000, max_backoff_steps: 2_000, pause_ticks: 500, debounce_ticks: 3 };
 }
 
 /// What the board does this tick.
@@ -235,12 +227,7 @@ impl Default for TravelMeasurement {
 
 impl TravelMeasurement {
     pub const fn new() -> Self {
-        Self {
-            phase: TravelPhase::SeekLower,
-            count: 0,
-            confirm: 0,
-            started: false,
-        }
+        Self { phase: TravelPhase::SeekLower, count: 0, confirm: 0, started: false }
     }
 
     /// One tick at the step rate, with the switches as read now.
@@ -323,10 +310,7 @@ impl TravelMeasurement {
     /// The result, with the mm figure from the driver's steps/m.
     pub fn report(&self, driver: &PlatformDriver) -> Option<Result<TravelReport, TravelFault>> {
         match self.phase {
-            TravelPhase::Finished(report) => Some(Ok(TravelReport {
-                steps: report.steps,
-                um: driver.steps_to_um(report.steps),
-            })),
+            TravelPhase::Finished(report) => Some(Ok(TravelReport { steps: report.steps, um: driver.steps_to_um(report.steps) })),
             TravelPhase::Failed(fault) => Some(Err(fault)),
             _ => None,
         }
@@ -363,21 +347,11 @@ pub fn write_travel_report<W: ufmt::uWrite + ?Sized>(
 ) -> Result<(), W::Error> {
     match result {
         Ok(report) => {
-            ufmt::uwrite!(
-                out,
-                "echo:{} platform travel {} steps ",
-                platform.name(),
-                report.steps
-            )?;
+            ufmt::uwrite!(out, "echo:{} platform travel {} steps ", platform.name(), report.steps)?;
             write_um_as_mm(report.um as i32, out)?;
             out.write_str(" mm\n")
         }
-        Err(fault) => ufmt::uwrite!(
-            out,
-            "Error:{} platform travel: {}\n",
-            platform.name(),
-            fault.message()
-        ),
+        Err(fault) => ufmt::uwrite!(out, "Error:{} platform travel: {}\n", platform.name(), fault.message()),
     }
 }
 
@@ -422,11 +396,7 @@ pub enum LayerCommand {
     /// [`LayerEvent::CarriageArrived`].
     MoveCarriage { to: CarriageEnd, print_pass: bool },
     /// Step one platform (see [`PlatformDriver`]). Answer [`LayerEvent::Done`].
-    StepPlatform {
-        platform: Platform,
-        direction: Vertical,
-        steps: u32,
-    },
+    StepPlatform { platform: Platform, direction: Vertical, steps: u32 },
     /// The layer is done: nothing more to do.
     Finished { layer: u16 },
     /// The cycle stopped: turn the roller and the suction off and stop the
@@ -515,7 +485,7 @@ pub fn steps_for_layer(thickness_um: u32, steps_per_m: u32, remainder: u32) -> (
     let steps_per_m = steps_per_m.min(4_294_967);
     let whole_per_m = steps_per_m / 1000; // steps/mm
     let milli = steps_per_m % 1000; // thousandths of a step per mm
-                                    // thickness_um · whole_per_m: ≤ 4294 · 4294 < 2^25, in 1/1000 step
+    // thickness_um · whole_per_m: ≤ 4294 · 4294 < 2^25, in 1/1000 step
     let from_whole = thickness_um * whole_per_m;
     // thickness_um · milli ≤ 4294 · 999 < 2^23, in 1/10⁶ step
     let from_milli = thickness_um * milli + remainder;
@@ -528,15 +498,7 @@ pub fn steps_for_layer(thickness_um: u32, steps_per_m: u32, remainder: u32) -> (
 
 impl LayerCycle {
     pub const fn new(settings: LayerSettings) -> Self {
-        Self {
-            step: LayerStep::Finished,
-            settings,
-            layer: 0,
-            feed_steps: 0,
-            build_steps: 0,
-            feed_remainder: 0,
-            build_remainder: 0,
-        }
+        Self { step: LayerStep::Finished, settings, layer: 0, feed_steps: 0, build_steps: 0, feed_remainder: 0, build_remainder: 0 }
     }
 
     /// Change the thickness (between layers).
@@ -550,63 +512,29 @@ impl LayerCycle {
 
     /// Start one layer. `carriage_at`: the end sensor that reads active now
     /// (`None`: somewhere between). Returns the first command.
-    pub fn start(
-        &mut self,
-        feed: &PlatformDriver,
-        build: &PlatformDriver,
-        carriage_at: Option<CarriageEnd>,
-    ) -> LayerCommand {
-        let (feed_steps, feed_remainder) = steps_for_layer(
-            self.settings.thickness_um,
-            feed.steps_per_m,
-            self.feed_remainder,
-        );
-        let (build_steps, build_remainder) = steps_for_layer(
-            self.settings.thickness_um,
-            build.steps_per_m,
-            self.build_remainder,
-        );
+    pub fn start(&mut self, feed: &PlatformDriver, build: &PlatformDriver, carriage_at: Option<CarriageEnd>) -> LayerCommand {
+        let (feed_steps, feed_remainder) = steps_for_layer(self.settings.thickness_um, feed.steps_per_m, self.feed_remainder);
+        let (build_steps, build_remainder) = steps_for_layer(self.settings.thickness_um, build.steps_per_m, self.build_remainder);
         self.feed_steps = feed_steps;
         self.build_steps = build_steps;
         self.feed_remainder = feed_remainder;
         self.build_remainder = build_remainder;
-        self.step = if carriage_at == Some(CarriageEnd::Minus) {
-            LayerStep::RollerOn
-        } else {
-            LayerStep::ReturnToStart
-        };
+        self.step = if carriage_at == Some(CarriageEnd::Minus) { LayerStep::RollerOn } else { LayerStep::ReturnToStart };
         self.command()
     }
 
     /// What the current step asks for (again).
     pub fn command(&self) -> LayerCommand {
         match self.step {
-            LayerStep::ReturnToStart => LayerCommand::MoveCarriage {
-                to: CarriageEnd::Minus,
-                print_pass: false,
-            },
+            LayerStep::ReturnToStart => LayerCommand::MoveCarriage { to: CarriageEnd::Minus, print_pass: false },
             LayerStep::RollerOn => LayerCommand::Roller(true),
             LayerStep::SuctionOn => LayerCommand::Suction(true),
-            LayerStep::Spread => LayerCommand::MoveCarriage {
-                to: CarriageEnd::Plus,
-                print_pass: false,
-            },
+            LayerStep::Spread => LayerCommand::MoveCarriage { to: CarriageEnd::Plus, print_pass: false },
             LayerStep::RollerOff => LayerCommand::Roller(false),
             LayerStep::SuctionOff => LayerCommand::Suction(false),
-            LayerStep::PrintPass => LayerCommand::MoveCarriage {
-                to: CarriageEnd::Minus,
-                print_pass: true,
-            },
-            LayerStep::FeedUp => LayerCommand::StepPlatform {
-                platform: Platform::Feed,
-                direction: Vertical::Up,
-                steps: self.feed_steps,
-            },
-            LayerStep::BuildDown => LayerCommand::StepPlatform {
-                platform: Platform::Build,
-                direction: Vertical::Down,
-                steps: self.build_steps,
-            },
+            LayerStep::PrintPass => LayerCommand::MoveCarriage { to: CarriageEnd::Minus, print_pass: true },
+            LayerStep::FeedUp => LayerCommand::StepPlatform { platform: Platform::Feed, direction: Vertical::Up, steps: self.feed_steps },
+            LayerStep::BuildDown => LayerCommand::StepPlatform { platform: Platform::Build, direction: Vertical::Down, steps: self.build_steps },
             LayerStep::Finished => LayerCommand::Finished { layer: self.layer },
             LayerStep::Aborted => LayerCommand::Aborted(LayerFault::Unexpected(LayerStep::Aborted)),
         }
@@ -622,9 +550,7 @@ impl LayerCycle {
             return self.abort(LayerFault::StepFailed(step));
         }
         let expected = match step {
-            LayerStep::ReturnToStart | LayerStep::PrintPass => {
-                LayerEvent::CarriageArrived(CarriageEnd::Minus)
-            }
+            LayerStep::ReturnToStart | LayerStep::PrintPass => LayerEvent::CarriageArrived(CarriageEnd::Minus),
             LayerStep::Spread => LayerEvent::CarriageArrived(CarriageEnd::Plus),
             _ => LayerEvent::Done,
         };
@@ -697,30 +623,15 @@ mod tests {
         let d = PlatformDriver::M542;
         assert!(!d.enable_level(true));
         assert!(d.enable_level(false));
-        assert!(
-            d.step_idle_level(),
-            "idle high, the step is the falling edge"
-        );
+        assert!(d.step_idle_level(), "idle high, the step is the falling edge");
         assert!(d.dir_level(Vertical::Down));
         assert!(!d.dir_level(Vertical::Up));
     }
 
     #[test]
     fn reed_switch_polarity_is_configuration() {
-        assert_eq!(
-            PlatformSwitches::from_levels(false, true, ActiveLevel::Low),
-            PlatformSwitches {
-                lower: true,
-                upper: false
-            }
-        );
-        assert_eq!(
-            PlatformSwitches::from_levels(false, true, ActiveLevel::High),
-            PlatformSwitches {
-                lower: false,
-                upper: true
-            }
-        );
+        assert_eq!(PlatformSwitches::from_levels(false, true, ActiveLevel::Low), PlatformSwitches { lower: true, upper: false });
+        assert_eq!(PlatformSwitches::from_levels(false, true, ActiveLevel::High), PlatformSwitches { lower: false, upper: true });
     }
 
     #[test]
@@ -728,28 +639,17 @@ mod tests {
         let d = PlatformDriver::M542;
         assert_eq!(d.steps_to_um(40_000), 200_000);
         assert_eq!(d.steps_to_um(1), 5);
-        let odd = PlatformDriver {
-            steps_per_m: 266_667,
-            ..d
-        };
+        let odd = PlatformDriver { steps_per_m: 266_667, ..d };
         assert_eq!(odd.steps_to_um(800), 3000);
     }
 
     /// A platform between two switch zones, in steps: A reads active at or
     /// below `lower`, B at or above `upper`.
-    fn run(
-        start: i32,
-        lower: i32,
-        upper: Option<i32>,
-        limits: &TravelLimits,
-    ) -> (Result<TravelReport, TravelFault>, i32) {
+    fn run(start: i32, lower: i32, upper: Option<i32>, limits: &TravelLimits) -> (Result<TravelReport, TravelFault>, i32) {
         let mut position = start;
         let mut m = TravelMeasurement::new();
         for _ in 0..1_000_000 {
-            let switches = PlatformSwitches {
-                lower: position <= lower,
-                upper: upper.is_some_and(|u| position >= u),
-            };
+            let switches = PlatformSwitches { lower: position <= lower, upper: upper.is_some_and(|u| position >= u) };
             match m.tick(limits, switches) {
                 PlatformAction::Step(Vertical::Up) => position += 1,
                 PlatformAction::Step(Vertical::Down) => position -= 1,
@@ -765,54 +665,27 @@ mod tests {
     #[test]
     fn travel_is_counted_from_the_lower_to_the_upper_switch() {
         let (result, end) = run(5_000, 100, Some(40_100), &TravelLimits::DEFAULT);
-        assert_eq!(
-            result,
-            Ok(TravelReport {
-                steps: 40_000,
-                um: 200_000
-            })
-        );
+        assert_eq!(result, Ok(TravelReport { steps: 40_000, um: 200_000 }));
         assert_eq!(end, 40_100);
     }
 
     #[test]
     fn starting_on_the_lower_switch_gives_the_same_travel() {
         let (result, _) = run(-50, 100, Some(40_100), &TravelLimits::DEFAULT);
-        assert_eq!(
-            result,
-            Ok(TravelReport {
-                steps: 40_000,
-                um: 200_000
-            })
-        );
+        assert_eq!(result, Ok(TravelReport { steps: 40_000, um: 200_000 }));
     }
 
     #[test]
     fn a_missing_switch_is_a_fault_after_the_step_limit() {
-        let limits = TravelLimits {
-            max_steps: 50_000,
-            ..TravelLimits::DEFAULT
-        };
-        assert_eq!(
-            run(5_000, 100, None, &limits).0,
-            Err(TravelFault::UpperSwitchNotFound)
-        );
-        assert_eq!(
-            run(5_000, -100_000, Some(40_000), &limits).0,
-            Err(TravelFault::LowerSwitchNotFound)
-        );
-        assert_eq!(
-            run(5_000, 1_000_000, Some(2_000_000), &limits).0,
-            Err(TravelFault::LowerSwitchStuck)
-        );
+        let limits = TravelLimits { max_steps: 50_000, ..TravelLimits::DEFAULT };
+        assert_eq!(run(5_000, 100, None, &limits).0, Err(TravelFault::UpperSwitchNotFound));
+        assert_eq!(run(5_000, -100_000, Some(40_000), &limits).0, Err(TravelFault::LowerSwitchNotFound));
+        assert_eq!(run(5_000, 1_000_000, Some(2_000_000), &limits).0, Err(TravelFault::LowerSwitchStuck));
     }
 
     #[test]
     fn both_switches_active_is_a_fault() {
-        assert_eq!(
-            run(5_000, 10_000, Some(0), &TravelLimits::DEFAULT).0,
-            Err(TravelFault::BothSwitchesActive)
-        );
+        assert_eq!(run(5_000, 10_000, Some(0), &TravelLimits::DEFAULT).0, Err(TravelFault::BothSwitchesActive));
     }
 
     #[test]
@@ -820,10 +693,7 @@ mod tests {
         let limits = TravelLimits::DEFAULT;
         let mut m = TravelMeasurement::new();
         let off = PlatformSwitches::default();
-        let on = PlatformSwitches {
-            lower: true,
-            upper: false,
-        };
+        let on = PlatformSwitches { lower: true, upper: false };
         assert_eq!(m.tick(&limits, off), PlatformAction::Step(Vertical::Down));
         // one glitch: no step while it is pending, then stepping resumes
         assert_eq!(m.tick(&limits, on), PlatformAction::Wait);
@@ -841,27 +711,9 @@ mod tests {
     #[test]
     fn travel_reports_print_in_steps_and_mm() {
         let mut out = Out(String::new());
-        write_travel_report(
-            Platform::Feed,
-            Ok(TravelReport {
-                steps: 40_000,
-                um: 200_000,
-            }),
-            &mut out,
-        )
-        .unwrap();
-        write_travel_report(
-            Platform::Build,
-            Ok(TravelReport { steps: 7, um: 35 }),
-            &mut out,
-        )
-        .unwrap();
-        write_travel_report(
-            Platform::Build,
-            Err(TravelFault::UpperSwitchNotFound),
-            &mut out,
-        )
-        .unwrap();
+        write_travel_report(Platform::Feed, Ok(TravelReport { steps: 40_000, um: 200_000 }), &mut out).unwrap();
+        write_travel_report(Platform::Build, Ok(TravelReport { steps: 7, um: 35 }), &mut out).unwrap();
+        write_travel_report(Platform::Build, Err(TravelFault::UpperSwitchNotFound), &mut out).unwrap();
         assert_eq!(
             out.0,
             "echo:Feed platform travel 40000 steps 200.000 mm\n\
@@ -887,10 +739,7 @@ mod tests {
     }
 
     fn settings(suction: bool) -> LayerSettings {
-        LayerSettings {
-            thickness_um: 100,
-            suction_while_spreading: suction,
-        }
+        LayerSettings { thickness_um: 100, suction_while_spreading: suction }
     }
 
     fn answer(command: LayerCommand) -> LayerEvent {
@@ -915,26 +764,12 @@ mod tests {
             [
                 LayerCommand::Roller(true),
                 LayerCommand::Suction(true),
-                LayerCommand::MoveCarriage {
-                    to: CarriageEnd::Plus,
-                    print_pass: false
-                },
+                LayerCommand::MoveCarriage { to: CarriageEnd::Plus, print_pass: false },
                 LayerCommand::Roller(false),
                 LayerCommand::Suction(false),
-                LayerCommand::MoveCarriage {
-                    to: CarriageEnd::Minus,
-                    print_pass: true
-                },
-                LayerCommand::StepPlatform {
-                    platform: Platform::Feed,
-                    direction: Vertical::Up,
-                    steps: 20
-                },
-                LayerCommand::StepPlatform {
-                    platform: Platform::Build,
-                    direction: Vertical::Down,
-                    steps: 20
-                },
+                LayerCommand::MoveCarriage { to: CarriageEnd::Minus, print_pass: true },
+                LayerCommand::StepPlatform { platform: Platform::Feed, direction: Vertical::Up, steps: 20 },
+                LayerCommand::StepPlatform { platform: Platform::Build, direction: Vertical::Down, steps: 20 },
             ]
         );
         assert_eq!(command, LayerCommand::Finished { layer: 1 });
@@ -945,24 +780,9 @@ mod tests {
         let d = PlatformDriver::M542;
         let mut cycle = LayerCycle::new(settings(false));
         let first = cycle.start(&d, &d, None);
-        assert_eq!(
-            first,
-            LayerCommand::MoveCarriage {
-                to: CarriageEnd::Minus,
-                print_pass: false
-            }
-        );
-        assert_eq!(
-            cycle.on_event(LayerEvent::CarriageArrived(CarriageEnd::Minus)),
-            LayerCommand::Roller(true)
-        );
-        assert_eq!(
-            cycle.on_event(LayerEvent::Done),
-            LayerCommand::MoveCarriage {
-                to: CarriageEnd::Plus,
-                print_pass: false
-            }
-        );
+        assert_eq!(first, LayerCommand::MoveCarriage { to: CarriageEnd::Minus, print_pass: false });
+        assert_eq!(cycle.on_event(LayerEvent::CarriageArrived(CarriageEnd::Minus)), LayerCommand::Roller(true));
+        assert_eq!(cycle.on_event(LayerEvent::Done), LayerCommand::MoveCarriage { to: CarriageEnd::Plus, print_pass: false });
     }
 
     #[test]
@@ -971,10 +791,7 @@ mod tests {
         let mut cycle = LayerCycle::new(settings(false));
         cycle.start(&d, &d, Some(CarriageEnd::Minus));
         cycle.on_event(LayerEvent::Done);
-        assert_eq!(
-            cycle.on_event(LayerEvent::Failed),
-            LayerCommand::Aborted(LayerFault::StepFailed(LayerStep::Spread))
-        );
+        assert_eq!(cycle.on_event(LayerEvent::Failed), LayerCommand::Aborted(LayerFault::StepFailed(LayerStep::Spread)));
         assert!(!cycle.is_busy());
         let mut cycle = LayerCycle::new(settings(false));
         cycle.start(&d, &d, Some(CarriageEnd::Minus));

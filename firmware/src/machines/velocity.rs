@@ -58,16 +58,10 @@ pub struct GearRatio {
 }
 
 impl GearRatio {
-    pub const DIRECT: GearRatio = GearRatio {
-        motor_turns: 1,
-        output_turns: 1,
-    };
+    pub const DIRECT: GearRatio = GearRatio { motor_turns: 1, output_turns: 1 };
 
     pub const fn new(motor_turns: u16, output_turns: u16) -> Self {
-        Self {
-            motor_turns,
-            output_turns,
-        }
+        Self { motor_turns, output_turns }
     }
 }
 
@@ -83,33 +77,17 @@ pub struct DriveTrain {
 
 impl DriveTrain {
     /// SPEC §4's extruder: NEMA 23, 15:1, DRV8825 at 1/16 (3000 steps/rev).
-    pub const EXTRUDER_SCREW: DriveTrain = DriveTrain {
-        motor_full_steps: 200,
-        gear: GearRatio::new(15, 1),
-        microsteps: 16,
-    };
+    pub const EXTRUDER_SCREW: DriveTrain = DriveTrain { motor_full_steps: 200, gear: GearRatio::new(15, 1), microsteps: 16 };
     /// SPEC §4's puller as in the thesis' code: NEMA 17, 6:1, 1/32 (1200 steps/rev).
-    pub const PULLER_6_TO_1: DriveTrain = DriveTrain {
-        motor_full_steps: 200,
-        gear: GearRatio::new(6, 1),
-        microsteps: 32,
-    };
+    pub const PULLER_6_TO_1: DriveTrain = DriveTrain { motor_full_steps: 200, gear: GearRatio::new(6, 1), microsteps: 32 };
     /// The puller as in the thesis' table: 4:1 (800 steps/rev).
-    pub const PULLER_4_TO_1: DriveTrain = DriveTrain {
-        motor_full_steps: 200,
-        gear: GearRatio::new(4, 1),
-        microsteps: 32,
-    };
+    pub const PULLER_4_TO_1: DriveTrain = DriveTrain { motor_full_steps: 200, gear: GearRatio::new(4, 1), microsteps: 32 };
 
     /// Microsteps per output-shaft turn, as a fraction (numerator, denominator).
     const fn microsteps_per_rev(&self) -> (u64, u64) {
         (
             self.motor_full_steps as u64 * self.gear.motor_turns as u64 * self.microsteps as u64,
-            if self.gear.output_turns == 0 {
-                1
-            } else {
-                self.gear.output_turns as u64
-            },
+            if self.gear.output_turns == 0 { 1 } else { self.gear.output_turns as u64 },
         )
     }
 
@@ -288,39 +266,23 @@ pub struct VelocityStepper {
 
 impl VelocityStepper {
     pub const fn new() -> Self {
-        Self {
-            target_mrpm: 0,
-            current_mrpm: 0,
-            half_period_q8: 0,
-            steps: 0,
-            phase_q8: 0,
-            step_high: false,
-        }
+        Self { target_mrpm: 0, current_mrpm: 0, half_period_q8: 0, steps: 0, phase_q8: 0, step_high: false }
     }
 
     /// Ask for a speed (the ramp gets there). 0 stops with a ramp; a speed
     /// between 0 and the slowest the timer can time runs at that slowest.
     pub fn set_target(&mut self, config: &VelocityConfig, mrpm: u32) -> Result<(), SpeedError> {
         if mrpm > config.max_mrpm {
-            return Err(SpeedError::TooFast {
-                max_mrpm: config.max_mrpm,
-            });
+            return Err(SpeedError::TooFast { max_mrpm: config.max_mrpm });
         }
-        self.target_mrpm = if mrpm == 0 {
-            0
-        } else {
-            mrpm.max(config.min_mrpm)
-        };
+        self.target_mrpm = if mrpm == 0 { 0 } else { mrpm.max(config.min_mrpm) };
         Ok(())
     }
 
     /// Stop now, without a ramp (emergency, interlock, driver fault).
     pub fn halt(&mut self) -> TimerChange {
         let was_running = self.half_period_q8 != 0;
-        *self = Self {
-            steps: self.steps,
-            ..Self::new()
-        };
+        *self = Self { steps: self.steps, ..Self::new() };
         if was_running {
             TimerChange::Stop
         } else {
@@ -348,15 +310,12 @@ impl VelocityStepper {
         };
         let was_running = self.half_period_q8 != 0;
         self.current_mrpm = next;
-        self.half_period_q8 =
-            half_period_q8(config.edge_constant, next).min(MAX_HALF_PERIOD_TICKS << 8);
+        self.half_period_q8 = half_period_q8(config.edge_constant, next).min(MAX_HALF_PERIOD_TICKS << 8);
         match (was_running, self.half_period_q8 != 0) {
             (false, true) => {
                 self.phase_q8 = 0;
                 self.step_high = false;
-                TimerChange::Start {
-                    first_ticks: self.next_ticks(),
-                }
+                TimerChange::Start { first_ticks: self.next_ticks() }
             }
             (true, false) => {
                 self.step_high = false;
@@ -382,10 +341,7 @@ impl VelocityStepper {
         if self.step_high {
             self.steps = self.steps.wrapping_add(1);
         }
-        Some(Edge {
-            step_high: self.step_high,
-            next_ticks: self.next_ticks(),
-        })
+        Some(Edge { step_high: self.step_high, next_ticks: self.next_ticks() })
     }
 
     /// The speed the motor runs at now (milli-RPM).
@@ -424,25 +380,11 @@ mod tests {
     const RAMP_HZ: u16 = 50;
 
     fn extruder() -> VelocityConfig {
-        VelocityConfig::new(
-            DriveTrain::EXTRUDER_SCREW,
-            MEGA_STEP_TIMER_HZ,
-            20,
-            5,
-            RAMP_HZ,
-        )
-        .unwrap()
+        VelocityConfig::new(DriveTrain::EXTRUDER_SCREW, MEGA_STEP_TIMER_HZ, 20, 5, RAMP_HZ).unwrap()
     }
 
     fn puller() -> VelocityConfig {
-        VelocityConfig::new(
-            DriveTrain::PULLER_6_TO_1,
-            MEGA_STEP_TIMER_HZ,
-            15,
-            5,
-            RAMP_HZ,
-        )
-        .unwrap()
+        VelocityConfig::new(DriveTrain::PULLER_6_TO_1, MEGA_STEP_TIMER_HZ, 15, 5, RAMP_HZ).unwrap()
     }
 
     #[test]
@@ -455,28 +397,13 @@ mod tests {
     #[test]
     fn spec_half_periods_625_and_781_25_us_per_rpm() {
         // extruder: 625/RPM µs
-        assert_eq!(
-            half_period_ns(&DriveTrain::EXTRUDER_SCREW, 1_000),
-            Some(625_000)
-        );
-        assert_eq!(
-            half_period_ns(&DriveTrain::EXTRUDER_SCREW, 10_000),
-            Some(62_500)
-        );
+        assert_eq!(half_period_ns(&DriveTrain::EXTRUDER_SCREW, 1_000), Some(625_000));
+        assert_eq!(half_period_ns(&DriveTrain::EXTRUDER_SCREW, 10_000), Some(62_500));
         // puller (6:1): 781.25/RPM µs
-        assert_eq!(
-            half_period_ns(&DriveTrain::PULLER_6_TO_1, 1_000),
-            Some(781_250)
-        );
-        assert_eq!(
-            half_period_ns(&DriveTrain::PULLER_6_TO_1, 5_000),
-            Some(156_250)
-        );
+        assert_eq!(half_period_ns(&DriveTrain::PULLER_6_TO_1, 1_000), Some(781_250));
+        assert_eq!(half_period_ns(&DriveTrain::PULLER_6_TO_1, 5_000), Some(156_250));
         // puller (4:1): 1171.875/RPM µs
-        assert_eq!(
-            half_period_ns(&DriveTrain::PULLER_4_TO_1, 1_000),
-            Some(1_171_875)
-        );
+        assert_eq!(half_period_ns(&DriveTrain::PULLER_4_TO_1, 1_000), Some(1_171_875));
         assert_eq!(half_period_ns(&DriveTrain::EXTRUDER_SCREW, 0), None);
     }
 
@@ -501,25 +428,13 @@ mod tests {
         // Puller at 1 rpm: 781.25 µs = 1562.5 ticks.
         let k = edge_constant(&DriveTrain::PULLER_6_TO_1, MEGA_STEP_TIMER_HZ);
         assert_eq!(half_period_q8(k, 1_000), 1562 * 256 + 128);
-        let mut stepper = VelocityStepper {
-            target_mrpm: 1_000,
-            current_mrpm: 1_000,
-            half_period_q8: half_period_q8(k, 1_000),
-            ..VelocityStepper::new()
-        };
-        let ticks: std::vec::Vec<u16> = (0..4)
-            .map(|_| stepper.on_timer().unwrap().next_ticks)
-            .collect();
+        let mut stepper = VelocityStepper { target_mrpm: 1_000, current_mrpm: 1_000, half_period_q8: half_period_q8(k, 1_000), ..VelocityStepper::new() };
+        let ticks: std::vec::Vec<u16> = (0..4).map(|_| stepper.on_timer().unwrap().next_ticks).collect();
         assert_eq!(ticks, [1562, 1563, 1562, 1563]);
         // 4:1 puller at 1 rpm: 2343.75 ticks; four edges take exactly 9375.
         let k = edge_constant(&DriveTrain::PULLER_4_TO_1, MEGA_STEP_TIMER_HZ);
-        let mut stepper = VelocityStepper {
-            half_period_q8: half_period_q8(k, 1_000),
-            ..VelocityStepper::new()
-        };
-        let sum: u32 = (0..400)
-            .map(|_| u32::from(stepper.on_timer().unwrap().next_ticks))
-            .sum();
+        let mut stepper = VelocityStepper { half_period_q8: half_period_q8(k, 1_000), ..VelocityStepper::new() };
+        let sum: u32 = (0..400).map(|_| u32::from(stepper.on_timer().unwrap().next_ticks)).sum();
         assert_eq!(sum, 937_500);
     }
 
@@ -528,10 +443,7 @@ mod tests {
         let k = edge_constant(&DriveTrain::PULLER_6_TO_1, MEGA_STEP_TIMER_HZ);
         for mrpm in [1_000, 1_234, 3_878, 7_000, 15_000] {
             let period = half_period_q8(k, mrpm);
-            let mut stepper = VelocityStepper {
-                half_period_q8: period,
-                ..VelocityStepper::new()
-            };
+            let mut stepper = VelocityStepper { half_period_q8: period, ..VelocityStepper::new() };
             let mut total = 0u64;
             for _ in 0..10_000 {
                 let ticks = u32::from(stepper.on_timer().unwrap().next_ticks);
@@ -539,10 +451,7 @@ mod tests {
                 total += u64::from(ticks);
             }
             let ideal = 10_000.0 * k as f64 / mrpm as f64;
-            assert!(
-                (total as f64 - ideal).abs() < 10_000.0 / 256.0 + 1.0,
-                "{mrpm}: {total} vs {ideal}"
-            );
+            assert!((total as f64 - ideal).abs() < 10_000.0 / 256.0 + 1.0, "{mrpm}: {total} vs {ideal}");
         }
     }
 
@@ -552,9 +461,7 @@ mod tests {
         let mut stepper = VelocityStepper::new();
         stepper.set_target(&config, 10_000).unwrap();
         assert!(matches!(stepper.update(&config), TimerChange::Start { .. }));
-        let levels: std::vec::Vec<bool> = (0..4)
-            .map(|_| stepper.on_timer().unwrap().step_high)
-            .collect();
+        let levels: std::vec::Vec<bool> = (0..4).map(|_| stepper.on_timer().unwrap().step_high).collect();
         assert_eq!(levels, [true, false, true, false]);
         assert_eq!(stepper.steps(), 2);
     }
@@ -568,12 +475,7 @@ mod tests {
         stepper.set_target(&config, 10_000).unwrap();
         let change = stepper.update(&config);
         assert_eq!(stepper.current_mrpm(), 100);
-        assert_eq!(
-            change,
-            TimerChange::Start {
-                first_ticks: 12_500
-            }
-        );
+        assert_eq!(change, TimerChange::Start { first_ticks: 12_500 });
         let mut updates = 1;
         let mut previous = stepper.current_mrpm();
         while !stepper.at_speed() {
@@ -610,24 +512,15 @@ mod tests {
     fn set_speeds_above_the_configured_top_are_refused() {
         let config = puller();
         let mut stepper = VelocityStepper::new();
-        assert_eq!(
-            stepper.set_target(&config, 15_001),
-            Err(SpeedError::TooFast { max_mrpm: 15_000 })
-        );
+        assert_eq!(stepper.set_target(&config, 15_001), Err(SpeedError::TooFast { max_mrpm: 15_000 }));
         assert_eq!(stepper.target_mrpm(), 0);
     }
 
     #[test]
     fn configurations_that_the_timer_cannot_run_are_refused() {
         // 1 000 rpm at 1/16 with 15:1 would need 0.6 µs half periods.
-        assert_eq!(
-            VelocityConfig::new(DriveTrain::EXTRUDER_SCREW, MEGA_STEP_TIMER_HZ, 1000, 5, 50),
-            Err(VelocityConfigError::TooFast)
-        );
-        assert_eq!(
-            VelocityConfig::new(DriveTrain::EXTRUDER_SCREW, MEGA_STEP_TIMER_HZ, 10, 0, 50),
-            Err(VelocityConfigError::Ramp)
-        );
+        assert_eq!(VelocityConfig::new(DriveTrain::EXTRUDER_SCREW, MEGA_STEP_TIMER_HZ, 1000, 5, 50), Err(VelocityConfigError::TooFast));
+        assert_eq!(VelocityConfig::new(DriveTrain::EXTRUDER_SCREW, MEGA_STEP_TIMER_HZ, 10, 0, 50), Err(VelocityConfigError::Ramp));
     }
 
     #[test]
@@ -637,14 +530,7 @@ mod tests {
         stepper.set_target(&config, 10_000).unwrap();
         stepper.update(&config);
         assert_eq!(stepper.halt(), TimerChange::Stop);
-        assert_eq!(
-            (
-                stepper.current_mrpm(),
-                stepper.target_mrpm(),
-                stepper.on_timer()
-            ),
-            (0, 0, None)
-        );
+        assert_eq!((stepper.current_mrpm(), stepper.target_mrpm(), stepper.on_timer()), (0, 0, None));
     }
 
     #[test]

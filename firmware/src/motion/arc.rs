@@ -49,13 +49,7 @@ pub struct ArcCutter {
 
 impl ArcCutter {
     /// `G2`/`G3` with `I`/`J`: the centre is `start + offset`.
-    pub fn with_centre(
-        start: Point,
-        target: Point,
-        offset: [f32; 2],
-        clockwise: bool,
-        tolerance: f32,
-    ) -> Result<Self, ArcError> {
+    pub fn with_centre(start: Point, target: Point, offset: [f32; 2], clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
         let centre = [start[0] + offset[0], start[1] + offset[1]];
         let radius = sqrt(offset[0] * offset[0] + offset[1] * offset[1]);
         if !(radius > 0.0) {
@@ -66,20 +60,12 @@ impl ArcCutter {
         if mismatch > 0.5 || (mismatch > 0.005 && mismatch > 0.001 * radius) {
             return Err(ArcError::RadiusMismatch);
         }
-        Ok(Self::new(
-            start, target, centre, radius, clockwise, tolerance,
-        ))
+        Ok(Self::new(start, target, centre, radius, clockwise, tolerance))
     }
 
     /// `G2`/`G3` with `R`: the centre is where a circle of radius |R|
     /// passes through both points; R < 0 picks the arc over half a turn.
-    pub fn with_radius(
-        start: Point,
-        target: Point,
-        radius: f32,
-        clockwise: bool,
-        tolerance: f32,
-    ) -> Result<Self, ArcError> {
+    pub fn with_radius(start: Point, target: Point, radius: f32, clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
         let (dx, dy) = (target[0] - start[0], target[1] - start[1]);
         let chord = sqrt(dx * dx + dy * dy);
         let r = radius.abs();
@@ -96,21 +82,11 @@ impl ArcCutter {
         if radius < 0.0 {
             side = -side;
         }
-        let centre = [
-            start[0] + dx / 2.0 + side * rise * uy,
-            start[1] + dy / 2.0 - side * rise * ux,
-        ];
+        let centre = [start[0] + dx / 2.0 + side * rise * uy, start[1] + dy / 2.0 - side * rise * ux];
         Ok(Self::new(start, target, centre, r, clockwise, tolerance))
     }
 
-    fn new(
-        start: Point,
-        target: Point,
-        centre: [f32; 2],
-        radius: f32,
-        clockwise: bool,
-        tolerance: f32,
-    ) -> Self {
+    fn new(start: Point, target: Point, centre: [f32; 2], radius: f32, clockwise: bool, tolerance: f32) -> Self {
         let start_angle = atan2(start[1] - centre[1], start[0] - centre[0]);
         let end_angle = atan2(target[1] - centre[1], target[0] - centre[0]);
         let mut sweep = end_angle - start_angle;
@@ -127,16 +103,7 @@ impl ArcCutter {
         let chords = (sweep.abs() * radius / chord).max(1.0);
         // Round up, saturating far beyond any real arc.
         let chords = (chords.min(1.0e6) as u32 + 1).min(1_000_000);
-        Self {
-            centre,
-            radius,
-            start_angle,
-            sweep,
-            start,
-            target,
-            chords,
-            done: 0,
-        }
+        Self { centre, radius, start_angle, sweep, start, target, chords, done: 0 }
     }
 
     /// Chords in this arc.
@@ -192,14 +159,7 @@ mod tests {
     #[test]
     fn quarter_circle_clockwise_with_centre() {
         // (0,10) → (10,0) around the origin, clockwise: a quarter turn.
-        let arc = ArcCutter::with_centre(
-            [0.0, 10.0, 0.0, 0.0],
-            [10.0, 0.0, 2.0, 1.0],
-            [0.0, -10.0],
-            true,
-            0.002,
-        )
-        .unwrap();
+        let arc = ArcCutter::with_centre([0.0, 10.0, 0.0, 0.0], [10.0, 0.0, 2.0, 1.0], [0.0, -10.0], true, 0.002).unwrap();
         assert!((arc.sweep() + PI / 2.0).abs() < 1e-5);
         let chords = arc.chords();
         let points: Vec<Point> = arc.clone().collect();
@@ -209,12 +169,7 @@ mod tests {
         for p in &points {
             assert!(distance_to_circle(*p, [0.0, 0.0], 10.0) < 1e-4);
             // The chord's midpoint is within the tolerance of the circle.
-            let mid = [
-                (p[0] + previous[0]) / 2.0,
-                (p[1] + previous[1]) / 2.0,
-                0.0,
-                0.0,
-            ];
+            let mid = [(p[0] + previous[0]) / 2.0, (p[1] + previous[1]) / 2.0, 0.0, 0.0];
             assert!(distance_to_circle(mid, [0.0, 0.0], 10.0) <= 0.002 + 1e-4);
             assert!(p[0] >= previous[0] - 1e-5, "clockwise from the top goes +X");
             previous = *p;
@@ -225,21 +180,12 @@ mod tests {
 
     #[test]
     fn full_circle_when_end_equals_start() {
-        let arc = ArcCutter::with_centre(
-            [10.0, 0.0, 0.0, 0.0],
-            [10.0, 0.0, 0.0, 0.0],
-            [-10.0, 0.0],
-            false,
-            0.01,
-        )
-        .unwrap();
+        let arc = ArcCutter::with_centre([10.0, 0.0, 0.0, 0.0], [10.0, 0.0, 0.0, 0.0], [-10.0, 0.0], false, 0.01).unwrap();
         assert!((arc.sweep() - 2.0 * PI).abs() < 1e-5);
         let points: Vec<Point> = arc.collect();
         // Counter-clockwise from (10, 0): first points have y > 0.
         assert!(points[0][1] > 0.0);
-        assert!(points
-            .iter()
-            .all(|p| distance_to_circle(*p, [0.0, 0.0], 10.0) < 1e-4));
+        assert!(points.iter().all(|p| distance_to_circle(*p, [0.0, 0.0], 10.0) < 1e-4));
     }
 
     #[test]
@@ -261,31 +207,16 @@ mod tests {
         let ccw = ArcCutter::with_radius(start, target, 10.0, false, 0.002).unwrap();
         let mid = ccw.clone().nth(ccw.chords() as usize / 2).unwrap();
         assert!(mid[1] < 0.0);
-        assert_eq!(
-            ArcCutter::with_radius(start, target, 4.0, true, 0.002),
-            Err(ArcError::RadiusTooSmall)
-        );
-        assert_eq!(
-            ArcCutter::with_radius(start, start, 4.0, true, 0.002),
-            Err(ArcError::RadiusTooSmall)
-        );
+        assert_eq!(ArcCutter::with_radius(start, target, 4.0, true, 0.002), Err(ArcError::RadiusTooSmall));
+        assert_eq!(ArcCutter::with_radius(start, start, 4.0, true, 0.002), Err(ArcError::RadiusTooSmall));
     }
 
     #[test]
     fn mismatched_radii_and_zero_radius_are_refused() {
         let start = [0.0, 10.0, 0.0, 0.0];
-        assert_eq!(
-            ArcCutter::with_centre(start, [11.0, 0.0, 0.0, 0.0], [0.0, -10.0], true, 0.002),
-            Err(ArcError::RadiusMismatch)
-        );
-        assert_eq!(
-            ArcCutter::with_centre(start, [10.0, 0.0, 0.0, 0.0], [0.0, 0.0], true, 0.002),
-            Err(ArcError::ZeroRadius)
-        );
+        assert_eq!(ArcCutter::with_centre(start, [11.0, 0.0, 0.0, 0.0], [0.0, -10.0], true, 0.002), Err(ArcError::RadiusMismatch));
+        assert_eq!(ArcCutter::with_centre(start, [10.0, 0.0, 0.0, 0.0], [0.0, 0.0], true, 0.002), Err(ArcError::ZeroRadius));
         // Within 0.1 % of the radius is accepted (slicer rounding).
-        assert!(
-            ArcCutter::with_centre(start, [10.008, 0.0, 0.0, 0.0], [0.0, -10.0], true, 0.002)
-                .is_ok()
-        );
+        assert!(ArcCutter::with_centre(start, [10.008, 0.0, 0.0, 0.0], [0.0, -10.0], true, 0.002).is_ok());
     }
 }

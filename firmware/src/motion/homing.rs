@@ -42,13 +42,7 @@ pub struct AxisHoming {
 
 impl AxisHoming {
     /// Marlin-like bump homing from mm figures.
-    pub fn bump(
-        towards_max: bool,
-        steps_per_mm: f32,
-        feed_mm_s: f32,
-        travel_mm: f32,
-        backoff_mm: f32,
-    ) -> Self {
+    pub fn bump(towards_max: bool, steps_per_mm: f32, feed_mm_s: f32, travel_mm: f32, backoff_mm: f32) -> Self {
         Self {
             towards_max,
             fast_rate: feed_mm_s * steps_per_mm,
@@ -94,12 +88,7 @@ pub const fn endstops_triggered(levels: u8, active_high: u8, present: u8) -> u8 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum HomingStep {
     /// Queue this motor-space move, then call again once it has finished.
-    Move {
-        steps: [i32; MOTORS],
-        rate: f32,
-        watch: u8,
-        release: bool,
-    },
+    Move { steps: [i32; MOTORS], rate: f32, watch: u8, release: bool },
     /// Nothing yet (pausing); call again later.
     Wait,
     /// Set these motors to their home position, then call again.
@@ -138,22 +127,12 @@ impl Default for Homing {
 
 impl Homing {
     pub const fn new() -> Self {
-        Self {
-            requested: 0,
-            group_index: 0,
-            group: 0,
-            phase: Phase::NextGroup,
-            active: false,
-        }
+        Self { requested: 0, group_index: 0, group: 0, phase: Phase::NextGroup, active: false }
     }
 
     /// Begin homing these motors (a mask of motors 0–2).
     pub fn start(&mut self, motors: u8) {
-        *self = Self {
-            requested: motors & 0b111,
-            active: true,
-            ..Self::new()
-        };
+        *self = Self { requested: motors & 0b111, active: true, ..Self::new() };
     }
 
     pub fn is_active(&self) -> bool {
@@ -184,9 +163,7 @@ impl Homing {
                     return self.fail(group & !stopped);
                 }
                 if lead.pause_ms > 0 {
-                    self.phase = Phase::Pausing {
-                        until_ms: now_ms.wrapping_add(lead.pause_ms as u32),
-                    };
+                    self.phase = Phase::Pausing { until_ms: now_ms.wrapping_add(lead.pause_ms as u32) };
                     return HomingStep::Wait;
                 }
                 self.back_off(config)
@@ -199,13 +176,7 @@ impl Homing {
             }
             Phase::AfterBackoff => {
                 self.phase = Phase::AfterReapproach;
-                self.group_move(
-                    config,
-                    true,
-                    |axis| (axis.backoff_steps.saturating_mul(2), axis.slow_rate),
-                    true,
-                    false,
-                )
+                self.group_move(config, true, |axis| (axis.backoff_steps.saturating_mul(2), axis.slow_rate), true, false)
             }
             Phase::AfterReapproach | Phase::AfterRelease => {
                 if stopped & group != group {
@@ -224,13 +195,7 @@ impl Homing {
             if group != 0 {
                 self.group = group;
                 self.phase = Phase::AfterApproach;
-                return self.group_move(
-                    config,
-                    true,
-                    |axis| (axis.max_travel_steps, axis.fast_rate),
-                    true,
-                    false,
-                );
+                return self.group_move(config, true, |axis| (axis.max_travel_steps, axis.fast_rate), true, false);
             }
         }
         self.active = false;
@@ -242,22 +207,10 @@ impl Homing {
         let lead = config.axes[self.group.trailing_zeros().min(2) as usize];
         if lead.release {
             self.phase = Phase::AfterRelease;
-            self.group_move(
-                config,
-                false,
-                |axis| (axis.backoff_steps, axis.slow_rate),
-                true,
-                true,
-            )
+            self.group_move(config, false, |axis| (axis.backoff_steps, axis.slow_rate), true, true)
         } else {
             self.phase = Phase::AfterBackoff;
-            self.group_move(
-                config,
-                false,
-                |axis| (axis.backoff_steps, axis.fast_rate),
-                false,
-                false,
-            )
+            self.group_move(config, false, |axis| (axis.backoff_steps, axis.fast_rate), false, false)
         }
     }
 
@@ -287,12 +240,7 @@ impl Homing {
                 watch_bits |= endstop_bit(motor, axis.towards_max);
             }
         }
-        HomingStep::Move {
-            steps,
-            rate,
-            watch: watch_bits,
-            release,
-        }
+        HomingStep::Move { steps, rate, watch: watch_bits, release }
     }
 
     fn fail(&mut self, motors: u8) -> HomingStep {
@@ -315,11 +263,7 @@ mod tests {
             release: true,
             pause_ms: 500,
         };
-        HomingConfig {
-            sequence: [0b100, 0b010, 0b001],
-            axes: [joint(true), joint(true), joint(false)],
-            acceleration: 1000.0,
-        }
+        HomingConfig { sequence: [0b100, 0b010, 0b001], axes: [joint(true), joint(true), joint(false)], acceleration: 1000.0 }
     }
 
     #[test]
@@ -330,15 +274,7 @@ mod tests {
         let mut now = 0;
         for (motor, sign) in [(2_usize, -1), (1, 1), (0, 1)] {
             let bit = 1 << motor;
-            let HomingStep::Move {
-                steps,
-                rate,
-                watch,
-                release,
-            } = homing.next(&config, 0, now)
-            else {
-                panic!()
-            };
+            let HomingStep::Move { steps, rate, watch, release } = homing.next(&config, 0, now) else { panic!() };
             assert_eq!(steps[motor], sign * 20_000, "approach of motor {motor}");
             assert_eq!((rate, release), (200.0, false));
             assert_eq!(watch, endstop_bit(motor, sign > 0));
@@ -347,15 +283,7 @@ mod tests {
             now += 499;
             assert_eq!(homing.next(&config, bit, now), HomingStep::Wait);
             now += 1;
-            let HomingStep::Move {
-                steps,
-                rate,
-                release,
-                ..
-            } = homing.next(&config, bit, now)
-            else {
-                panic!()
-            };
+            let HomingStep::Move { steps, rate, release, .. } = homing.next(&config, bit, now) else { panic!() };
             assert_eq!((steps[motor], rate, release), (-sign * 2000, 20.0, true));
             assert_eq!(homing.next(&config, bit, now), HomingStep::SetHome(bit));
         }
@@ -375,27 +303,14 @@ mod tests {
     #[test]
     fn bump_homing_and_failure() {
         let axis = AxisHoming::bump(false, 100.0, 50.0, 200.0, 5.0);
-        let config = HomingConfig {
-            sequence: [0b001, 0b010, 0b100],
-            axes: [axis; 3],
-            acceleration: 100_000.0,
-        };
+        let config = HomingConfig { sequence: [0b001, 0b010, 0b100], axes: [axis; 3], acceleration: 100_000.0 };
         let mut homing = Homing::new();
         homing.start(0b001);
-        let HomingStep::Move { steps, .. } = homing.next(&config, 0, 0) else {
-            panic!()
-        };
+        let HomingStep::Move { steps, .. } = homing.next(&config, 0, 0) else { panic!() };
         assert_eq!(steps[0], -30_000);
-        let HomingStep::Move { steps, watch, .. } = homing.next(&config, 1, 0) else {
-            panic!()
-        };
+        let HomingStep::Move { steps, watch, .. } = homing.next(&config, 1, 0) else { panic!() };
         assert_eq!((steps[0], watch), (500, 0));
-        let HomingStep::Move {
-            steps, rate, watch, ..
-        } = homing.next(&config, 0, 0)
-        else {
-            panic!()
-        };
+        let HomingStep::Move { steps, rate, watch, .. } = homing.next(&config, 0, 0) else { panic!() };
         assert_eq!((steps[0], rate, watch), (-1000, 2500.0, 1));
         assert_eq!(homing.next(&config, 1, 0), HomingStep::SetHome(1));
         assert_eq!(homing.next(&config, 0, 0), HomingStep::Done);

@@ -104,8 +104,7 @@ pub fn sin_cos(angle: f32) -> (f32, f32) {
     let r2 = r * r;
     // Taylor series; at |r| = π/4 the first omitted terms are below 4·10⁻⁹.
     let sin_r = r * (1.0 - r2 / 6.0 * (1.0 - r2 / 20.0 * (1.0 - r2 / 42.0 * (1.0 - r2 / 72.0))));
-    let cos_r = 1.0
-        - r2 / 2.0 * (1.0 - r2 / 12.0 * (1.0 - r2 / 30.0 * (1.0 - r2 / 56.0 * (1.0 - r2 / 90.0))));
+    let cos_r = 1.0 - r2 / 2.0 * (1.0 - r2 / 12.0 * (1.0 - r2 / 30.0 * (1.0 - r2 / 56.0 * (1.0 - r2 / 90.0))));
     match quadrant & 3 {
         0 => (sin_r, cos_r),
         1 => (cos_r, -sin_r),
@@ -122,11 +121,7 @@ pub fn round_to_i32(value: f32) -> i32 {
     if value.is_nan() {
         return 0;
     }
-    let rounded = if value >= 0.0 {
-        value + 0.5
-    } else {
-        value - 0.5
-    };
+    let rounded = if value >= 0.0 { value + 0.5 } else { value - 0.5 };
     // `as` saturates and truncates towards zero.
     rounded as i32
 }
@@ -160,10 +155,7 @@ mod tests {
         while x < 1.0e12 {
             let exact = (x as f64).sqrt();
             let got = sqrt(x) as f64;
-            assert!(
-                ((got - exact) / exact).abs() < 2.5e-7,
-                "sqrt({x}) = {got}, want {exact}"
-            );
+            assert!(((got - exact) / exact).abs() < 2.5e-7, "sqrt({x}) = {got}, want {exact}");
             x *= 1.013;
         }
         assert_eq!(sqrt(0.0), 0.0);

@@ -108,16 +108,11 @@ mod tests;
 
 use arc::{ArcCutter, ArcError};
 use homing::{AxisHoming, Homing, HomingConfig, HomingStep};
-use kinematics::{
-    to_steps, Arm, Cartesian, Delta, Kinematics, KinematicsError, MachineKinematics, LINEAR_AXES,
-};
+use kinematics::{to_steps, Arm, Cartesian, Delta, Kinematics, KinematicsError, MachineKinematics, LINEAR_AXES};
 use math::{round_to_i32, sqrt};
 use planner::{MotorLimits, Planner, PlannerMove, MAX_BLOCK_STEPS};
 use prep::Prep;
-pub use stepper::{
-    StepFault, StepFeeder, StepGenerator, StepQueues, StepperConfig, StepperStatus, TimerAction,
-    MOTORS,
-};
+pub use stepper::{StepFault, StepFeeder, StepGenerator, StepQueues, StepperConfig, StepperStatus, TimerAction, MOTORS};
 
 use crate::settings::Settings;
 
@@ -194,10 +189,7 @@ impl MotionConfig {
             flow_factor: 1.0,
             arc_tolerance: 0.002,
             max_step_rate: 40_000.0,
-            soft_limits: Some(SoftLimits {
-                min: [0.0, 0.0, 0.0],
-                max: [200.0, 200.0, 180.0],
-            }),
+            soft_limits: Some(SoftLimits { min: [0.0, 0.0, 0.0], max: [200.0, 200.0, 180.0] }),
             homing: HomingConfig {
                 sequence: [0b001, 0b010, 0b100],
                 axes: [
@@ -209,11 +201,7 @@ impl MotionConfig {
             },
             home: HomePosition::Cartesian([0.0, 0.0, 0.0]),
             must_home: false,
-            stepper: StepperConfig {
-                dir_invert: 0b0010,
-                limit_endstops: 0,
-                ..StepperConfig::default()
-            },
+            stepper: StepperConfig { dir_invert: 0b0010, limit_endstops: 0, ..StepperConfig::default() },
         };
         config.apply_settings(&settings);
         config
@@ -231,11 +219,7 @@ impl MotionConfig {
             max_feed: [150.0, 150.0, 150.0, 25.0],
             max_accel: [3000.0, 3000.0, 3000.0, 10_000.0],
             soft_limits: None,
-            homing: HomingConfig {
-                sequence: [0b111, 0, 0],
-                axes: [tower; 3],
-                acceleration: 100_000.0,
-            },
+            homing: HomingConfig { sequence: [0b111, 0, 0], axes: [tower; 3], acceleration: 100_000.0 },
             home: HomePosition::DeltaTop,
             stepper: StepperConfig::default(),
             max_step_rate: 40_000.0,
@@ -276,10 +260,7 @@ impl MotionConfig {
             retract_accel: 500.0,
             travel_accel: 500.0,
             max_step_rate: if ppr > 200 { 100_000.0 } else { 20_000.0 },
-            soft_limits: Some(SoftLimits {
-                min: [-100.0, -110.0, -40.0],
-                max: [100.0, 110.0, 40.0],
-            }),
+            soft_limits: Some(SoftLimits { min: [-100.0, -110.0, -40.0], max: [100.0, 110.0, 40.0] }),
             homing: HomingConfig {
                 sequence: [0b100, 0b010, 0b001],
                 axes: [screw, joint(true), joint(false)],
@@ -287,10 +268,7 @@ impl MotionConfig {
             },
             home: HomePosition::Cartesian([-100.0, -107.0, 68.0]),
             must_home: true,
-            stepper: StepperConfig {
-                limit_endstops: 0b0111_0111,
-                ..StepperConfig::default()
-            },
+            stepper: StepperConfig { limit_endstops: 0b0111_0111, ..StepperConfig::default() },
             ..Self::prusa_i3()
         }
     }
@@ -318,21 +296,14 @@ impl MotionConfig {
 
     /// Steps per motor unit of every motor.
     pub fn steps_per_unit(&self) -> [f32; MOTORS] {
-        let linear = self.kinematics.motor_steps_per_unit([
-            self.steps_per_mm[0],
-            self.steps_per_mm[1],
-            self.steps_per_mm[2],
-        ]);
+        let linear = self.kinematics.motor_steps_per_unit([self.steps_per_mm[0], self.steps_per_mm[1], self.steps_per_mm[2]]);
         [linear[0], linear[1], linear[2], self.steps_per_mm[E]]
     }
 
     /// The planner's limits in steps.
     pub fn motor_limits(&self) -> MotorLimits {
         let spu = self.steps_per_unit();
-        let mut limits = MotorLimits {
-            max_rate: [0.0; MOTORS],
-            max_accel: [0.0; MOTORS],
-        };
+        let mut limits = MotorLimits { max_rate: [0.0; MOTORS], max_accel: [0.0; MOTORS] };
         for motor in 0..MOTORS {
             limits.max_rate[motor] = (self.max_feed[motor] * spu[motor]).min(self.max_step_rate);
             limits.max_accel[motor] = self.max_accel[motor] * spu[motor];
@@ -408,18 +379,11 @@ impl LineCut {
         let spu = config.steps_per_unit();
         let headroom = MAX_BLOCK_STEPS as f32 / 4.0;
         for axis in 0..LINEAR_AXES {
-            pieces = pieces
-                .max(math::abs(delta[axis]) * config.steps_per_mm[axis].max(spu[axis]) / headroom);
+            pieces = pieces.max(math::abs(delta[axis]) * config.steps_per_mm[axis].max(spu[axis]) / headroom);
         }
         pieces = pieces.max(math::abs(delta[E]) * spu[E] * config.flow_factor / headroom);
         let pieces = (pieces.min(1.0e7) as u32).saturating_add(1);
-        Self {
-            start,
-            delta,
-            target,
-            pieces,
-            done: 0,
-        }
+        Self { start, delta, target, pieces, done: 0 }
     }
 }
 
@@ -447,15 +411,8 @@ impl Iterator for LineCut {
 #[derive(Clone, Debug, PartialEq)]
 enum Pending {
     Nothing,
-    Line {
-        cut: LineCut,
-        feed: f32,
-    },
-    Arc {
-        arc: ArcCutter,
-        cut: Option<LineCut>,
-        feed: f32,
-    },
+    Line { cut: LineCut, feed: f32 },
+    Arc { arc: ArcCutter, cut: Option<LineCut>, feed: f32 },
 }
 
 /// The main loop's motion state.
@@ -529,11 +486,7 @@ impl<'q> Motion<'q> {
     pub fn set_position_mm(&mut self, position: [f32; MOTORS]) {
         self.position = position;
         let spu = self.config.steps_per_unit();
-        if let Ok(motors) = self
-            .config
-            .kinematics
-            .inverse([position[0], position[1], position[2]])
-        {
+        if let Ok(motors) = self.config.kinematics.inverse([position[0], position[1], position[2]]) {
             let steps = to_steps(motors, [spu[0], spu[1], spu[2]]);
             self.motor_steps[..LINEAR_AXES].copy_from_slice(&steps);
         }
@@ -552,9 +505,7 @@ impl<'q> Motion<'q> {
 
     /// Can a new motion command be accepted now?
     pub fn ready(&self) -> bool {
-        matches!(self.pending, Pending::Nothing)
-            && !self.homing.is_active()
-            && self.homing_requested.is_none()
+        matches!(self.pending, Pending::Nothing) && !self.homing.is_active() && self.homing_requested.is_none()
     }
 
     /// Everything accepted has been stepped out.
@@ -597,58 +548,31 @@ impl<'q> Motion<'q> {
     }
 
     /// `G0`/`G1` to a machine position (µm) at a feed rate (µm/s).
-    pub fn line_to(
-        &mut self,
-        target_um: [i32; MOTORS],
-        feed_um_per_s: i32,
-    ) -> Result<(), MotionError> {
+    pub fn line_to(&mut self, target_um: [i32; MOTORS], feed_um_per_s: i32) -> Result<(), MotionError> {
         let target = target_um.map(|um| um as f32 / 1000.0);
         self.check_accepting()?;
         self.check_target(target)?;
         let feed = feed_um_per_s as f32 / 1000.0 * self.config.feed_factor;
-        self.pending = Pending::Line {
-            cut: LineCut::new(self.position, target, &self.config),
-            feed,
-        };
+        self.pending = Pending::Line { cut: LineCut::new(self.position, target, &self.config), feed };
         self.feed_planner();
         Ok(())
     }
 
     /// `G2` (clockwise) / `G3` to a machine position (µm) around a centre.
-    pub fn arc_to(
-        &mut self,
-        target_um: [i32; MOTORS],
-        centre: ArcCentre,
-        clockwise: bool,
-        feed_um_per_s: i32,
-    ) -> Result<(), MotionError> {
+    pub fn arc_to(&mut self, target_um: [i32; MOTORS], centre: ArcCentre, clockwise: bool, feed_um_per_s: i32) -> Result<(), MotionError> {
         let target = target_um.map(|um| um as f32 / 1000.0);
         self.check_accepting()?;
         self.check_target(target)?;
         let tolerance = self.config.arc_tolerance;
         let arc = match centre {
-            ArcCentre::Offset([i, j]) => ArcCutter::with_centre(
-                self.position,
-                target,
-                [i as f32 / 1000.0, j as f32 / 1000.0],
-                clockwise,
-                tolerance,
-            ),
-            ArcCentre::Radius(r) => ArcCutter::with_radius(
-                self.position,
-                target,
-                r as f32 / 1000.0,
-                clockwise,
-                tolerance,
-            ),
+            ArcCentre::Offset([i, j]) => {
+                ArcCutter::with_centre(self.position, target, [i as f32 / 1000.0, j as f32 / 1000.0], clockwise, tolerance)
+            }
+            ArcCentre::Radius(r) => ArcCutter::with_radius(self.position, target, r as f32 / 1000.0, clockwise, tolerance),
         }
         .map_err(MotionError::Arc)?;
         let feed = feed_um_per_s as f32 / 1000.0 * self.config.feed_factor;
-        self.pending = Pending::Arc {
-            arc,
-            cut: None,
-            feed,
-        };
+        self.pending = Pending::Arc { arc, cut: None, feed };
         self.feed_planner();
         Ok(())
     }
@@ -659,17 +583,9 @@ impl<'q> Motion<'q> {
         if !self.ready() {
             return Err(MotionError::Busy);
         }
-        let motors = if motors & 0b111 == 0 {
-            0b111
-        } else {
-            motors & 0b111
-        };
+        let motors = if motors & 0b111 == 0 { 0b111 } else { motors & 0b111 };
         // A delta homes its towers together or not at all.
-        let motors = if matches!(self.config.kinematics, MachineKinematics::Delta(_)) {
-            0b111
-        } else {
-            motors
-        };
+        let motors = if matches!(self.config.kinematics, MachineKinematics::Delta(_)) { 0b111 } else { motors };
         self.homing_requested = Some(motors);
         Ok(())
     }
@@ -689,30 +605,19 @@ impl<'q> Motion<'q> {
         if let Some(limits) = self.config.soft_limits {
             // Limits bind once an axis knows where it is (Marlin): a machine
             // that must home refuses everything before, see check_accepting.
-            let bound = if self.config.must_home {
-                0b111
-            } else {
-                self.homed
-            };
+            let bound = if self.config.must_home { 0b111 } else { self.homed };
             let inside = (0..LINEAR_AXES).all(|axis| {
-                bound & (1 << axis) == 0
-                    || (point[axis] >= limits.min[axis] - 1e-4
-                        && point[axis] <= limits.max[axis] + 1e-4)
+                bound & (1 << axis) == 0 || (point[axis] >= limits.min[axis] - 1e-4 && point[axis] <= limits.max[axis] + 1e-4)
             });
             let at_home = match self.config.home {
-                HomePosition::Cartesian(home) => {
-                    (0..LINEAR_AXES).all(|axis| math::abs(point[axis] - home[axis]) < 1e-3)
-                }
+                HomePosition::Cartesian(home) => (0..LINEAR_AXES).all(|axis| math::abs(point[axis] - home[axis]) < 1e-3),
                 HomePosition::DeltaTop => false,
             };
             if !inside && !at_home {
                 return Err(MotionError::OutsideSoftLimits);
             }
         }
-        self.config
-            .kinematics
-            .inverse(point)
-            .map_err(MotionError::Unreachable)?;
+        self.config.kinematics.inverse(point).map_err(MotionError::Unreachable)?;
         Ok(())
     }
 
@@ -778,8 +683,7 @@ impl<'q> Motion<'q> {
                         Some(point) => (point, feed),
                         None => match arc.next() {
                             Some(chord_end) => {
-                                let mut chord =
-                                    LineCut::new(self.position, chord_end, &self.config);
+                                let mut chord = LineCut::new(self.position, chord_end, &self.config);
                                 let point = chord.next().unwrap_or(chord_end);
                                 *cut = Some(chord);
                                 (point, feed)
@@ -803,14 +707,9 @@ impl<'q> Motion<'q> {
     /// One straight piece to the planner (the planner has room).
     fn queue_piece(&mut self, target: [f32; MOTORS], feed: f32) -> Result<(), MotionError> {
         let spu = self.config.steps_per_unit();
-        let motors = self
-            .config
-            .kinematics
-            .inverse([target[0], target[1], target[2]])
-            .map_err(MotionError::Unreachable)?;
+        let motors = self.config.kinematics.inverse([target[0], target[1], target[2]]).map_err(MotionError::Unreachable)?;
         let linear = to_steps(motors, [spu[0], spu[1], spu[2]]);
-        let e_exact =
-            (target[E] - self.position[E]) * spu[E] * self.config.flow_factor + self.e_remainder;
+        let e_exact = (target[E] - self.position[E]) * spu[E] * self.config.flow_factor + self.e_remainder;
         let e_steps = round_to_i32(e_exact);
         let mut steps = [0; MOTORS];
         for motor in 0..LINEAR_AXES {
@@ -824,33 +723,13 @@ impl<'q> Motion<'q> {
         let xyz = sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]);
         let (millimetres, unit, acceleration) = if xyz > 1.0e-5 {
             let unit = [delta[0] / xyz, delta[1] / xyz, delta[2] / xyz, 0.0];
-            let acceleration = if e_steps != 0 {
-                self.config.print_accel
-            } else {
-                self.config.travel_accel
-            };
+            let acceleration = if e_steps != 0 { self.config.print_accel } else { self.config.travel_accel };
             (xyz, unit, acceleration)
         } else {
-            (
-                math::abs(delta[E]),
-                [0.0; MOTORS],
-                self.config.retract_accel,
-            )
+            (math::abs(delta[E]), [0.0; MOTORS], self.config.retract_accel)
         };
-        let motion = PlannerMove {
-            steps,
-            millimetres,
-            unit,
-            speed: feed,
-            acceleration,
-            watch: 0,
-            watch_release: false,
-        };
-        if self
-            .planner
-            .push(&motion, &self.config.motor_limits())
-            .is_err()
-        {
+        let motion = PlannerMove { steps, millimetres, unit, speed: feed, acceleration, watch: 0, watch_release: false };
+        if self.planner.push(&motion, &self.config.motor_limits()).is_err() {
             // The caller checked for room; never drop a piece silently.
             return Err(MotionError::Busy);
         }
@@ -876,10 +755,7 @@ impl<'q> Motion<'q> {
         }
         let mut stopped = 0;
         if let Some((expected_done, steps)) = self.homing_move {
-            let finished = status.blocks_done == expected_done
-                && !status.busy
-                && self.planner.is_empty()
-                && !self.prep.is_active();
+            let finished = status.blocks_done == expected_done && !status.busy && self.planner.is_empty() && !self.prep.is_active();
             if !finished {
                 return;
             }
@@ -887,21 +763,12 @@ impl<'q> Motion<'q> {
             stopped = status.stopped;
             for motor in 0..MOTORS {
                 let sign = if steps[motor] < 0 { -1 } else { 1 };
-                self.motor_steps[motor] += if stopped & (1 << motor) != 0 {
-                    sign * status.stopped_steps[motor] as i32
-                } else {
-                    steps[motor]
-                };
+                self.motor_steps[motor] += if stopped & (1 << motor) != 0 { sign * status.stopped_steps[motor] as i32 } else { steps[motor] };
             }
         }
         loop {
             match self.homing.next(&self.config.homing, stopped, now_ms) {
-                HomingStep::Move {
-                    steps,
-                    rate,
-                    watch,
-                    release,
-                } => {
+                HomingStep::Move { steps, rate, watch, release } => {
                     let dominant = steps.iter().map(|s| s.unsigned_abs()).max().unwrap_or(0);
                     let motion = PlannerMove {
                         steps,
@@ -912,12 +779,7 @@ impl<'q> Motion<'q> {
                         watch,
                         watch_release: release,
                     };
-                    if dominant == 0
-                        || self
-                            .planner
-                            .push(&motion, &self.config.motor_limits())
-                            .is_err()
-                    {
+                    if dominant == 0 || self.planner.push(&motion, &self.config.motor_limits()).is_err() {
                         self.error = Some(MotionError::HomingFailed(self.homing.group()));
                         self.homing.abort();
                         return;
@@ -945,9 +807,7 @@ impl<'q> Motion<'q> {
     fn set_home(&mut self, motors: u8) {
         let spu = self.config.steps_per_unit();
         let home = match (self.config.home, self.config.kinematics) {
-            (HomePosition::DeltaTop, MachineKinematics::Delta(delta)) => {
-                Ok(delta.homed_carriage_heights())
-            }
+            (HomePosition::DeltaTop, MachineKinematics::Delta(delta)) => Ok(delta.homed_carriage_heights()),
             (HomePosition::Cartesian(point), kinematics) => kinematics.inverse(point),
             (HomePosition::DeltaTop, kinematics) => kinematics.inverse([0.0; LINEAR_AXES]),
         };
@@ -968,11 +828,7 @@ impl<'q> Motion<'q> {
     fn finish_homing(&mut self) {
         let spu = self.config.steps_per_unit();
         let motors = kinematics::from_steps(
-            [
-                self.motor_steps[0],
-                self.motor_steps[1],
-                self.motor_steps[2],
-            ],
+            [self.motor_steps[0], self.motor_steps[1], self.motor_steps[2]],
             [spu[0], spu[1], spu[2]],
         );
         if let Ok(point) = self.config.kinematics.forward(motors) {

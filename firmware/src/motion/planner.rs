@@ -44,8 +44,8 @@
 //! Speeds and lengths are `f32`: this runs in the main loop only (Marlin
 //! does the same on the AVR). The step interrupt never reads a block.
 
-use super::math::sqrt;
 use super::stepper::MOTORS;
+use super::math::sqrt;
 
 /// Blocks in the ring (one stays empty: 23 usable). Look-ahead must hold
 /// the distance to stop from full speed, v²/(2a): 3.3 mm at 100 mm/s and
@@ -239,11 +239,7 @@ impl Planner {
         if self.is_full() {
             return Err(*motion);
         }
-        let mut block = Block {
-            watch: motion.watch,
-            watch_release: motion.watch_release,
-            ..Block::default()
-        };
+        let mut block = Block { watch: motion.watch, watch_release: motion.watch_release, ..Block::default() };
         let mut speed = motion.speed;
         let mut acceleration = motion.acceleration;
         for motor in 0..MOTORS {
@@ -262,11 +258,7 @@ impl Planner {
             speed = speed.min(limits.max_rate[motor] / steps_per_mm);
             acceleration = acceleration.min(limits.max_accel[motor] / steps_per_mm);
         }
-        if block.events == 0
-            || !(motion.millimetres > 0.0)
-            || !(speed > 0.0)
-            || !(acceleration > 0.0)
-        {
+        if block.events == 0 || !(motion.millimetres > 0.0) || !(speed > 0.0) || !(acceleration > 0.0) {
             return Ok(());
         }
         block.millimetres = motion.millimetres;
@@ -334,8 +326,7 @@ impl Planner {
             let current = self.blocks[index as usize];
             let block = &mut self.blocks[following as usize];
             if current.entry_speed_sqr < block.entry_speed_sqr {
-                let reachable =
-                    current.entry_speed_sqr + 2.0 * current.acceleration * current.millimetres;
+                let reachable = current.entry_speed_sqr + 2.0 * current.acceleration * current.millimetres;
                 if reachable < block.entry_speed_sqr {
                     // Full acceleration through `current`: nothing before
                     // `block` can improve any more.
@@ -355,10 +346,7 @@ impl Planner {
 mod tests {
     use super::*;
 
-    const LIMITS: MotorLimits = MotorLimits {
-        max_rate: [30_000.0; MOTORS],
-        max_accel: [300_000.0; MOTORS],
-    };
+    const LIMITS: MotorLimits = MotorLimits { max_rate: [30_000.0; MOTORS], max_accel: [300_000.0; MOTORS] };
 
     fn line(dx: f32, dy: f32, speed: f32) -> PlannerMove {
         let length = sqrt(dx * dx + dy * dy);
@@ -399,11 +387,7 @@ mod tests {
         // 90°: sin(45°) = 0.7071; v² = a·δ·s/(1 − s) = 1000·0.013·2.4142.
         let expected = 1000.0 * 0.013 * (0.707_106_77 / (1.0 - 0.707_106_77));
         let second = planner.blocks().nth(1).unwrap();
-        assert!(
-            (second.max_entry_speed_sqr - expected).abs() < 1e-3,
-            "{}",
-            second.max_entry_speed_sqr
-        );
+        assert!((second.max_entry_speed_sqr - expected).abs() < 1e-3, "{}", second.max_entry_speed_sqr);
         assert!((second.entry_speed_sqr - expected).abs() < 1e-3);
         // A reversal stops.
         let mut planner = Planner::new();
@@ -414,10 +398,7 @@ mod tests {
 
     #[test]
     fn per_motor_limits_cap_speed_and_acceleration() {
-        let limits = MotorLimits {
-            max_rate: [5_000.0, 30_000.0, 30_000.0, 30_000.0],
-            max_accel: [50_000.0, 300_000.0, 300_000.0, 300_000.0],
-        };
+        let limits = MotorLimits { max_rate: [5_000.0, 30_000.0, 30_000.0, 30_000.0], max_accel: [50_000.0, 300_000.0, 300_000.0, 300_000.0] };
         let mut planner = Planner::new();
         planner.push(&line(10.0, 0.0, 100.0), &limits).unwrap();
         let block = planner.current().unwrap();

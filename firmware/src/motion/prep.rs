@@ -104,13 +104,7 @@ impl Profile {
         let peak_sqr = ((two_a * distance + v0_sqr + exit_sqr) * 0.5).max(v0_sqr);
         let peak = sqrt(peak_sqr).max(start_speed);
         let accel_end = ((peak_sqr - v0_sqr) / two_a).clamp(0.0, distance);
-        Self {
-            start_speed,
-            accel,
-            peak,
-            accel_end,
-            decel_start: accel_end,
-        }
+        Self { start_speed, accel, peak, accel_end, decel_start: accel_end }
     }
 
     /// Speed after `e` events.
@@ -142,10 +136,7 @@ impl Profile {
         let v = self.start_speed;
         let (mut target, boundary) = if self.accel_end >= 0.5 {
             let faster = (v * SPEED_RATIO).min(self.peak);
-            (
-                (faster * faster - v * v) / (2.0 * self.accel),
-                self.accel_end,
-            )
+            ((faster * faster - v * v) / (2.0 * self.accel), self.accel_end)
         } else if self.decel_start >= 0.5 {
             (f32::MAX, self.decel_start)
         } else {
@@ -158,11 +149,7 @@ impl Profile {
         if target > boundary {
             target = boundary + 0.5;
         }
-        let events = if target >= left as f32 {
-            left
-        } else {
-            target as u16
-        };
+        let events = if target >= left as f32 { left } else { target as u16 };
         events.clamp(1, left.max(1))
     }
 }
@@ -205,9 +192,7 @@ impl Prep {
         loop {
             let starts_block = !self.active;
             if starts_block {
-                let Some(block) = planner.current() else {
-                    break;
-                };
+                let Some(block) = planner.current() else { break };
                 if !feeder.block_room() {
                     break;
                 }
@@ -228,15 +213,8 @@ impl Prep {
                 break;
             }
             let exit_sqr = planner.exit_speed_sqr();
-            let Some(block) = planner.current_mut() else {
-                break;
-            };
-            let segment = self.next_segment(
-                block.nominal_speed_sqr,
-                exit_sqr,
-                block.acceleration,
-                starts_block,
-            );
+            let Some(block) = planner.current_mut() else { break };
+            let segment = self.next_segment(block.nominal_speed_sqr, exit_sqr, block.acceleration, starts_block);
             feeder.push_segment(segment);
             queued += 1;
             block.millimetres = self.events_left as f32 / self.events_per_mm;
@@ -250,13 +228,7 @@ impl Prep {
         queued
     }
 
-    fn next_segment(
-        &mut self,
-        nominal_speed_sqr: f32,
-        exit_speed_sqr: f32,
-        acceleration: f32,
-        starts_block: bool,
-    ) -> Segment {
+    fn next_segment(&mut self, nominal_speed_sqr: f32, exit_speed_sqr: f32, acceleration: f32, starts_block: bool) -> Segment {
         let epm = self.events_per_mm;
         let profile = Profile::new(
             self.speed,
@@ -267,25 +239,12 @@ impl Prep {
         );
         let events = profile.segment_events(self.events_left);
         let duration = profile.time_at(events as f32);
-        let first = if events == 1 {
-            duration
-        } else {
-            profile.time_at(1.0)
-        };
-        let (interval, add, actual_q8) = self.fit(
-            events,
-            duration * Q8_PER_S - self.time_debt_q8,
-            first * Q8_PER_S,
-        );
+        let first = if events == 1 { duration } else { profile.time_at(1.0) };
+        let (interval, add, actual_q8) = self.fit(events, duration * Q8_PER_S - self.time_debt_q8, first * Q8_PER_S);
         self.time_debt_q8 += actual_q8 - duration * Q8_PER_S;
         self.speed = profile.speed_at(events as f32);
         self.events_left -= events;
-        Segment {
-            interval,
-            add,
-            events,
-            starts_block,
-        }
+        Segment { interval, add, events, starts_block }
     }
 
     /// Interval and add (Q24.8) for `events` events lasting `total_q8`,
@@ -339,14 +298,7 @@ mod tests {
         let mut left = 700_u16;
         let mut chunks = 0;
         while left > 0 {
-            let k = Profile::new(
-                p.speed_at((700 - left) as f32),
-                left as f32,
-                8000.0,
-                1000.0,
-                200_000.0,
-            )
-            .segment_events(left);
+            let k = Profile::new(p.speed_at((700 - left) as f32), left as f32, 8000.0, 1000.0, 200_000.0).segment_events(left);
             assert!(k >= 1 && k <= left);
             left -= k;
             chunks += 1;

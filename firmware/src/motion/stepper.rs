@@ -144,11 +144,7 @@ pub struct StepperConfig {
 impl Default for StepperConfig {
     fn default() -> Self {
         // 5 µs covers the TB6600 and the CL86T; A4988/DRV8825 need 0.2/0.65.
-        Self {
-            dir_invert: 0,
-            dir_setup_ticks: 10,
-            limit_endstops: 0,
-        }
+        Self { dir_invert: 0, dir_setup_ticks: 10, limit_endstops: 0 }
     }
 }
 
@@ -184,23 +180,14 @@ impl Default for StepQueues {
 
 impl StepQueues {
     pub const fn new() -> Self {
-        Self {
-            segments: Queue::new(),
-            blocks: Queue::new(),
-        }
+        Self { segments: Queue::new(), blocks: Queue::new() }
     }
 
     /// The main loop's end and the interrupt's end.
     pub fn split(&mut self, config: StepperConfig) -> (StepFeeder<'_>, StepGenerator<'_>) {
         let (segment_in, segment_out) = self.segments.split();
         let (block_in, block_out) = self.blocks.split();
-        (
-            StepFeeder {
-                segments: segment_in,
-                blocks: block_in,
-            },
-            StepGenerator::new(segment_out, block_out, config),
-        )
+        (StepFeeder { segments: segment_in, blocks: block_in }, StepGenerator::new(segment_out, block_out, config))
     }
 }
 
@@ -328,16 +315,8 @@ impl<'a> StepGenerator<'a> {
         }
         let step_mask = self.pending_mask & !self.stopped;
         let dir_mask = self.pending_dir ^ self.config.dir_invert;
-        let next_interval_ticks = if self.events_left != 0 {
-            self.next_event()
-        } else {
-            self.next_segment()
-        };
-        TimerAction {
-            step_mask,
-            dir_mask,
-            next_interval_ticks,
-        }
+        let next_interval_ticks = if self.events_left != 0 { self.next_event() } else { self.next_segment() };
+        TimerAction { step_mask, dir_mask, next_interval_ticks }
     }
 
     /// The hot path: one more event of the running segment.
@@ -392,17 +371,9 @@ impl<'a> StepGenerator<'a> {
     #[cold]
     #[inline(never)]
     fn wait_longer(&mut self) -> TimerAction {
-        let piece = if self.long_wait > 0xFFFF {
-            LONG_WAIT_PIECE
-        } else {
-            self.long_wait
-        };
+        let piece = if self.long_wait > 0xFFFF { LONG_WAIT_PIECE } else { self.long_wait };
         self.long_wait -= piece;
-        TimerAction {
-            step_mask: 0,
-            dir_mask: self.pending_dir ^ self.config.dir_invert,
-            next_interval_ticks: piece as u16,
-        }
+        TimerAction { step_mask: 0, dir_mask: self.pending_dir ^ self.config.dir_invert, next_interval_ticks: piece as u16 }
     }
 
     /// The running segment is used up: take the next one (and its block).
@@ -542,11 +513,7 @@ impl<'a> StepGenerator<'a> {
             return;
         }
         if self.watch != 0 {
-            let level = if self.watch_release {
-                !triggered
-            } else {
-                triggered
-            };
+            let level = if self.watch_release { !triggered } else { triggered };
             let hit = level & self.watch;
             let motors = (hit | (hit >> 4)) & 0x0F & !self.stopped;
             if motors != 0 {
@@ -626,10 +593,7 @@ impl<'a> StepGenerator<'a> {
     pub fn status(&self) -> StepperStatus {
         StepperStatus {
             blocks_done: self.blocks_done,
-            busy: self.in_block
-                || self.long_wait != 0
-                || self.pending_mask != 0
-                || self.segments.ready(),
+            busy: self.in_block || self.long_wait != 0 || self.pending_mask != 0 || self.segments.ready(),
             fault: self.fault,
             stopped: self.stopped,
             stopped_steps: self.stopped_steps,
@@ -661,10 +625,7 @@ mod tests {
             let action = generator.on_timer();
             if action.step_mask != 0 {
                 // Invariant 3: directions never change in an action with steps.
-                assert_eq!(
-                    action.dir_mask, last_dir,
-                    "direction changed with a step at {now}"
-                );
+                assert_eq!(action.dir_mask, last_dir, "direction changed with a step at {now}");
                 out.push((now, action.step_mask, action.dir_mask));
             }
             last_dir = action.dir_mask;
@@ -675,13 +636,7 @@ mod tests {
     }
 
     fn block(steps: [u16; MOTORS], direction: u8) -> StepBlock {
-        StepBlock {
-            steps,
-            events: *steps.iter().max().unwrap(),
-            direction,
-            watch: 0,
-            watch_release: false,
-        }
+        StepBlock { steps, events: *steps.iter().max().unwrap(), direction, watch: 0, watch_release: false }
     }
 
     #[test]
@@ -689,12 +644,7 @@ mod tests {
         let mut queues = StepQueues::new();
         let (mut feeder, mut generator) = queues.split(StepperConfig::default());
         assert!(feeder.push_block(block([1000, 500, 0, 3], 0b0011)));
-        assert!(feeder.push_segment(Segment {
-            interval: 200 << 8,
-            add: 0,
-            events: 1000,
-            starts_block: true
-        }));
+        assert!(feeder.push_segment(Segment { interval: 200 << 8, add: 0, events: 1000, starts_block: true }));
         let events = run(&mut generator, 400_000);
         let count = |motor: u8| events.iter().filter(|e| e.1 & (1 << motor) != 0).count();
         assert_eq!((count(0), count(1), count(2), count(3)), (1000, 500, 0, 3));
@@ -711,26 +661,12 @@ mod tests {
     #[test]
     fn direction_change_comes_before_the_step() {
         let mut queues = StepQueues::new();
-        let config = StepperConfig {
-            dir_invert: 0b0010,
-            dir_setup_ticks: 10,
-            limit_endstops: 0,
-        };
+        let config = StepperConfig { dir_invert: 0b0010, dir_setup_ticks: 10, limit_endstops: 0 };
         let (mut feeder, mut generator) = queues.split(config);
         feeder.push_block(block([3, 0, 0, 0], 0b0001));
-        feeder.push_segment(Segment {
-            interval: 100 << 8,
-            add: 0,
-            events: 3,
-            starts_block: true,
-        });
+        feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 3, starts_block: true });
         feeder.push_block(block([2, 0, 0, 0], 0b0000));
-        feeder.push_segment(Segment {
-            interval: 100 << 8,
-            add: 0,
-            events: 2,
-            starts_block: true,
-        });
+        feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 2, starts_block: true });
         let mut now = 0_u64;
         let mut trace = Vec::new();
         for _ in 0..12 {
@@ -746,10 +682,7 @@ mod tests {
         // The reversal keeps the 100-tick rhythm and shows the new direction
         // 10 ticks ahead, in an action without steps.
         assert_eq!(steps[3].0 - steps[2].0, 100);
-        let change = trace
-            .iter()
-            .position(|t| t.2 == 0b0010 && t.0 > steps[2].0)
-            .unwrap();
+        let change = trace.iter().position(|t| t.2 == 0b0010 && t.0 > steps[2].0).unwrap();
         assert_eq!(trace[change].1, 0);
         assert_eq!(steps[3].0 - trace[change].0, 10);
     }
@@ -760,12 +693,7 @@ mod tests {
         let (mut feeder, mut generator) = queues.split(StepperConfig::default());
         feeder.push_block(block([3, 0, 0, 0], 1));
         // 200 000 ticks = 0.1 s between steps: 10 steps/s.
-        feeder.push_segment(Segment {
-            interval: 200_000 << 8,
-            add: 0,
-            events: 3,
-            starts_block: true,
-        });
+        feeder.push_segment(Segment { interval: 200_000 << 8, add: 0, events: 3, starts_block: true });
         let events = run(&mut generator, 1_000_000);
         assert_eq!(events.len(), 3);
         assert_eq!(events[1].0 - events[0].0, 200_000);
@@ -778,12 +706,7 @@ mod tests {
         let (mut feeder, mut generator) = queues.split(StepperConfig::default());
         feeder.push_block(block([1000, 0, 0, 0], 1));
         // 33.3 ticks (8525/256): 1000 events take 33 300.78 ticks.
-        feeder.push_segment(Segment {
-            interval: 8525,
-            add: 0,
-            events: 1000,
-            starts_block: true,
-        });
+        feeder.push_segment(Segment { interval: 8525, add: 0, events: 1000, starts_block: true });
         let events = run(&mut generator, 100_000);
         let span = events.last().unwrap().0 - events[0].0;
         assert_eq!(span, (999 * 8525 + (8525 & 0xFF)) as u64 >> 8);
@@ -797,25 +720,10 @@ mod tests {
         let mut homing = block([1000, 1000, 1000, 0], 0b0111);
         homing.watch = 0b0111_0000;
         feeder.push_block(homing);
-        feeder.push_segment(Segment {
-            interval: 100 << 8,
-            add: 0,
-            events: 600,
-            starts_block: true,
-        });
-        feeder.push_segment(Segment {
-            interval: 100 << 8,
-            add: 0,
-            events: 400,
-            starts_block: false,
-        });
+        feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 600, starts_block: true });
+        feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 400, starts_block: false });
         feeder.push_block(block([5, 0, 0, 0], 0));
-        feeder.push_segment(Segment {
-            interval: 100 << 8,
-            add: 0,
-            events: 5,
-            starts_block: true,
-        });
+        feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 5, starts_block: true });
         let mut fired = [0_u32; MOTORS];
         let mut triggered = 0_u8;
         for _ in 0..5000 {
@@ -846,18 +754,10 @@ mod tests {
     #[test]
     fn hard_limit_halts_everything_until_cleared() {
         let mut queues = StepQueues::new();
-        let config = StepperConfig {
-            limit_endstops: 0b0000_0001,
-            ..StepperConfig::default()
-        };
+        let config = StepperConfig { limit_endstops: 0b0000_0001, ..StepperConfig::default() };
         let (mut feeder, mut generator) = queues.split(config);
         feeder.push_block(block([100, 0, 0, 0], 0)); // towards X min
-        feeder.push_segment(Segment {
-            interval: 50 << 8,
-            add: 0,
-            events: 100,
-            starts_block: true,
-        });
+        feeder.push_segment(Segment { interval: 50 << 8, add: 0, events: 100, starts_block: true });
         let mut fired = 0;
         for _ in 0..20 {
             let action = generator.on_timer();
@@ -873,12 +773,7 @@ mod tests {
         // Moving away from the same switch is allowed once cleared.
         generator.clear_fault();
         feeder.push_block(block([10, 0, 0, 0], 1));
-        feeder.push_segment(Segment {
-            interval: 50 << 8,
-            add: 0,
-            events: 10,
-            starts_block: true,
-        });
+        feeder.push_segment(Segment { interval: 50 << 8, add: 0, events: 10, starts_block: true });
         let events = run(&mut generator, 10_000);
         assert_eq!(events.len(), 10);
     }

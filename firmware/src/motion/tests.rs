@@ -73,10 +73,7 @@ impl Rig {
             }
             let result = match command {
                 Command::Line(target, feed) => self.motion.line_to(target.map(um), um(feed)),
-                Command::Arc(target, centre, clockwise, feed) => {
-                    self.motion
-                        .arc_to(target.map(um), centre, clockwise, um(feed))
-                }
+                Command::Arc(target, centre, clockwise, feed) => self.motion.arc_to(target.map(um), centre, clockwise, um(feed)),
                 Command::Home(mask) => self.motion.home(mask),
             };
             self.commands.pop_front();
@@ -112,10 +109,7 @@ impl Rig {
             if self.recorder.now >= self.next_main {
                 self.main_loop();
                 self.next_main += MAIN_LOOP_TICKS;
-                if self.commands.is_empty()
-                    && self.motion.is_idle()
-                    && !self.generator.status().busy
-                {
+                if self.commands.is_empty() && self.motion.is_idle() && !self.generator.status().busy {
                     return self;
                 }
             }
@@ -125,16 +119,9 @@ impl Rig {
                     self.generator.on_endstops(triggered);
                 }
                 let action = self.generator.on_timer();
-                self.recorder.record(
-                    action.step_mask,
-                    action.dir_mask,
-                    action.next_interval_ticks,
-                );
+                self.recorder.record(action.step_mask, action.dir_mask, action.next_interval_ticks);
             }
-            assert!(
-                self.recorder.now < limit,
-                "still moving after {max_seconds} s"
-            );
+            assert!(self.recorder.now < limit, "still moving after {max_seconds} s");
         }
     }
 
@@ -193,17 +180,10 @@ fn diagonal_axes_end_on_the_same_tick() {
         let mut rig = Rig::new(cartesian());
         rig.motion.set_position_mm([20.0, 20.0, 0.0, 0.0]);
         rig.line([20.0 + x, 20.0 + y, 0.0, 0.0], 80.0).run(5.0);
-        let expected = [
-            (x * 100.0_f32).round() as i64,
-            (y * 100.0_f32).round() as i64,
-        ];
+        let expected = [(x * 100.0_f32).round() as i64, (y * 100.0_f32).round() as i64];
         assert_eq!(&rig.recorder.positions()[..2], &expected, "{x},{y}");
         let motors = &rig.recorder.motors;
-        assert_eq!(
-            motors[0].last_step(),
-            motors[1].last_step(),
-            "{x},{y}: last steps apart"
-        );
+        assert_eq!(motors[0].last_step(), motors[1].last_step(), "{x},{y}: last steps apart");
         // The dominant axis starts the move.
         let dominant = if x.abs() >= y.abs() { 0 } else { 1 };
         assert!(motors[dominant].first_step() <= motors[1 - dominant].first_step());
@@ -231,28 +211,15 @@ fn trapezoid_timing_matches_the_analytic_profile() {
     let t_decel = time_of(10_000) - time_of(10_000 - accel_steps);
     assert!(within(t_decel, accel_time), "deceleration took {t_decel} s");
     let total = time_of(10_000) + (2.0 / 150_000.0_f64).sqrt();
-    assert!(
-        (total - (1.0 + accel_time)).abs() < 0.01 * (1.0 + accel_time),
-        "total {total} s"
-    );
+    assert!((total - (1.0 + accel_time)).abs() < 0.01 * (1.0 + accel_time), "total {total} s");
     // Cruise at 100 mm/s = 10 000 steps/s: every interval 200 ticks.
-    let cruise_intervals: Vec<u64> = x.steps[accel_steps + 20..10_000 - accel_steps - 20]
-        .windows(2)
-        .map(|w| w[1].0 - w[0].0)
-        .collect();
-    assert!(
-        cruise_intervals.iter().all(|&i| i == 200),
-        "cruise intervals vary"
-    );
+    let cruise_intervals: Vec<u64> = x.steps[accel_steps + 20..10_000 - accel_steps - 20].windows(2).map(|w| w[1].0 - w[0].0).collect();
+    assert!(cruise_intervals.iter().all(|&i| i == 200), "cruise intervals vary");
     // Acceleration measured over 2 ms windows stays within 10 % of 1500.
     let speeds = x.speeds(20, 2e6, 100_000);
     for pair in speeds.windows(2) {
         let accel = (pair[1].1 - pair[0].1) / (pair[1].0 - pair[0].0) / 100.0;
-        assert!(
-            accel.abs() <= 1500.0 * 1.1,
-            "measured {accel} mm/s² at {} s",
-            pair[0].0
-        );
+        assert!(accel.abs() <= 1500.0 * 1.1, "measured {accel} mm/s² at {} s", pair[0].0);
     }
 }
 
@@ -263,13 +230,9 @@ fn short_move_is_a_triangle() {
     rig.line([1.0, 0.0, 0.0, 0.0], 100.0).run(5.0);
     let x = &rig.recorder.motors[0];
     assert_eq!(x.steps.len(), 100);
-    let duration = rig.seconds(x.last_step().unwrap()) - rig.seconds(x.first_step().unwrap())
-        + (2.0 / 150_000.0_f64).sqrt();
+    let duration = rig.seconds(x.last_step().unwrap()) - rig.seconds(x.first_step().unwrap()) + (2.0 / 150_000.0_f64).sqrt();
     let analytic = 2.0 * (1.0_f64 / 1500.0).sqrt() * 1.0;
-    assert!(
-        (duration - analytic).abs() < 0.05 * analytic,
-        "{duration} vs {analytic}"
-    );
+    assert!((duration - analytic).abs() < 0.05 * analytic, "{duration} vs {analytic}");
     let fastest = x.min_interval().unwrap() as f64;
     let peak = 2e6 / fastest / 100.0;
     assert!((peak - 38.73).abs() < 0.1 * 38.73, "peak {peak} mm/s");
@@ -280,9 +243,7 @@ fn short_move_is_a_triangle() {
 #[test]
 fn corner_keeps_the_junction_deviation_speed() {
     let mut rig = Rig::new(cartesian());
-    rig.line([20.0, 0.0, 0.0, 0.0], 100.0)
-        .line([20.0, 20.0, 0.0, 0.0], 100.0)
-        .run(5.0);
+    rig.line([20.0, 0.0, 0.0, 0.0], 100.0).line([20.0, 20.0, 0.0, 0.0], 100.0).run(5.0);
     let s = core::f64::consts::FRAC_1_SQRT_2;
     let junction = (1500.0 * 0.013 * s / (1.0 - s)).sqrt();
     // The last X step covers 0.01 mm decelerating to the junction speed:
@@ -292,19 +253,13 @@ fn corner_keeps_the_junction_deviation_speed() {
     let x = &rig.recorder.motors[0];
     let n = x.steps.len();
     let last = rig.seconds(x.steps[n - 1].0 - x.steps[n - 2].0);
-    assert!(
-        (last - expected_last).abs() < 0.1 * expected_last,
-        "last X interval {last} s, want {expected_last}"
-    );
+    assert!((last - expected_last).abs() < 0.1 * expected_last, "last X interval {last} s, want {expected_last}");
     // Y starts right after X's last step, at the junction speed.
     let y = &rig.recorder.motors[1];
     let gap = rig.seconds(y.steps[0].0 - x.steps[n - 1].0);
     let v2 = (junction * junction + 2.0 * 1500.0 * 0.01).sqrt();
     let expected_first = 0.01 / ((v2 + junction) / 2.0);
-    assert!(
-        (gap - expected_first).abs() < 0.1 * expected_first,
-        "first Y step after {gap} s, want {expected_first}"
-    );
+    assert!((gap - expected_first).abs() < 0.1 * expected_first, "first Y step after {gap} s, want {expected_first}");
     assert_eq!(rig.recorder.positions(), [2000, 2000, 0, 0]);
 }
 
@@ -336,10 +291,7 @@ fn planner_never_exceeds_an_axis_acceleration() {
             let accel = ((pair[1].1 - pair[0].1) / (pair[1].0 - pair[0].0) / 100.0).abs();
             worst = worst.max(accel);
         }
-        assert!(
-            worst <= limit * 1.15 + 60.0,
-            "motor {motor}: {worst} mm/s² (limit {limit})"
-        );
+        assert!(worst <= limit * 1.15 + 60.0, "motor {motor}: {worst} mm/s² (limit {limit})");
     }
 }
 
@@ -351,15 +303,11 @@ fn circle_of_half_millimetre_segments_keeps_full_speed() {
     let sides = 1000;
     let radius = 0.5 / (2.0 * (core::f32::consts::PI / sides as f32).sin());
     let centre = [100.0, 100.0];
-    rig.motion
-        .set_position_mm([centre[0] + radius, centre[1], 0.0, 0.0]);
+    rig.motion.set_position_mm([centre[0] + radius, centre[1], 0.0, 0.0]);
     for i in 1..=sides {
         let angle = 2.0 * core::f32::consts::PI * i as f32 / sides as f32;
         let (s, c) = math::sin_cos(angle);
-        rig.line(
-            [centre[0] + radius * c, centre[1] + radius * s, 0.0, 0.0],
-            100.0,
-        );
+        rig.line([centre[0] + radius * c, centre[1] + radius * s, 0.0, 0.0], 100.0);
     }
     let start_steps = rig.motion.motor_steps();
     rig.run(20.0);
@@ -369,14 +317,8 @@ fn circle_of_half_millimetre_segments_keeps_full_speed() {
     assert_eq!(rig.motion.motor_steps(), start_steps);
     assert_eq!(rig.recorder.positions(), [0, 0, 0, 0]);
     // 500 mm at 100 mm/s plus one ramp: ≈ 5.07 s.
-    let start = rig.recorder.motors[0]
-        .first_step()
-        .unwrap()
-        .min(rig.recorder.motors[1].first_step().unwrap());
-    let end = rig.recorder.motors[0]
-        .last_step()
-        .unwrap()
-        .max(rig.recorder.motors[1].last_step().unwrap());
+    let start = rig.recorder.motors[0].first_step().unwrap().min(rig.recorder.motors[1].first_step().unwrap());
+    let end = rig.recorder.motors[0].last_step().unwrap().max(rig.recorder.motors[1].last_step().unwrap());
     let total = rig.seconds(end - start);
     assert!(total < 5.0 + 0.0667 + 0.05, "took {total} s");
     // Path speed sampled every 10 ms stays at 100 mm/s (± 3 %) between the
@@ -387,11 +329,7 @@ fn circle_of_half_millimetre_segments_keeps_full_speed() {
         let dx = (rig.position_at(0, t + sample) - rig.position_at(0, t)) as f64 / 100.0;
         let dy = (rig.position_at(1, t + sample) - rig.position_at(1, t)) as f64 / 100.0;
         let speed = (dx * dx + dy * dy).sqrt() / 0.01;
-        assert!(
-            (speed - 100.0).abs() < 3.0,
-            "path speed {speed} mm/s at {} s",
-            rig.seconds(t)
-        );
+        assert!((speed - 100.0).abs() < 3.0, "path speed {speed} mm/s at {} s", rig.seconds(t));
         t += sample;
     }
     // The planner always saw its blocks entered at full speed.
@@ -407,8 +345,7 @@ fn stream_of_fifth_millimetre_segments_keeps_full_speed() {
     let mut rig = Rig::new(cartesian());
     let radius = 60.0_f32;
     let step = 0.2 / radius;
-    rig.motion
-        .set_position_mm([100.0 + radius, 100.0, 0.0, 0.0]);
+    rig.motion.set_position_mm([100.0 + radius, 100.0, 0.0, 0.0]);
     for i in 1..=1500 {
         let (s, c) = math::sin_cos(step * i as f32);
         rig.line([100.0 + radius * c, 100.0 + radius * s, 0.0, 0.0], 100.0);
@@ -430,9 +367,7 @@ fn extrusion_follows_flow_and_retracts_use_their_acceleration() {
     let mut rig = Rig::new(config);
     rig.motion.set_position_mm([10.0, 10.0, 0.0, 0.0]);
     // 10 mm with 1 mm of filament at 93 steps/mm and 90 % flow: 83.7 → 84.
-    rig.line([20.0, 10.0, 0.0, 1.0], 50.0)
-        .line([20.0, 10.0, 0.0, -1.0], 30.0)
-        .run(5.0);
+    rig.line([20.0, 10.0, 0.0, 1.0], 50.0).line([20.0, 10.0, 0.0, -1.0], 30.0).run(5.0);
     let e = &rig.recorder.motors[3];
     assert_eq!(e.steps.iter().filter(|s| s.1 > 0).count(), 84);
     // Back to E −1: −83.7 → −84 steps (rounding carried, never lost).
@@ -459,18 +394,8 @@ fn arcs_land_exactly_and_stay_on_the_circle() {
     rig.motion.set_position_mm([50.0, 60.0, 0.0, 0.0]);
     // G2 X60 Y50 I0 J-10: a quarter circle around (50, 50), then G3 back
     // with R.
-    rig.commands.push_back(Command::Arc(
-        [60.0, 50.0, 0.0, 0.0],
-        ArcCentre::Offset([0, -10_000]),
-        true,
-        50.0,
-    ));
-    rig.commands.push_back(Command::Arc(
-        [50.0, 60.0, 0.0, 0.0],
-        ArcCentre::Radius(10_000),
-        false,
-        50.0,
-    ));
+    rig.commands.push_back(Command::Arc([60.0, 50.0, 0.0, 0.0], ArcCentre::Offset([0, -10_000]), true, 50.0));
+    rig.commands.push_back(Command::Arc([50.0, 60.0, 0.0, 0.0], ArcCentre::Radius(10_000), false, 50.0));
     rig.run(10.0);
     assert!(rig.errors.is_empty(), "{:?}", rig.errors);
     assert_eq!(&rig.recorder.positions()[..2], &[0, 0]);
@@ -489,12 +414,7 @@ fn arcs_land_exactly_and_stay_on_the_circle() {
     }
     // A bad arc is refused and nothing moves.
     let before = rig.recorder.positions();
-    rig.commands.push_back(Command::Arc(
-        [90.0, 60.0, 0.0, 0.0],
-        ArcCentre::Radius(5_000),
-        false,
-        50.0,
-    ));
+    rig.commands.push_back(Command::Arc([90.0, 60.0, 0.0, 0.0], ArcCentre::Radius(5_000), false, 50.0));
     rig.run(1.0);
     assert_eq!(rig.errors, [MotionError::Arc(ArcError::RadiusTooSmall)]);
     assert_eq!(rig.recorder.positions(), before);
@@ -504,11 +424,7 @@ fn arcs_land_exactly_and_stay_on_the_circle() {
 fn soft_limits_refuse_targets_of_homed_axes_and_nothing_moves() {
     let mut rig = Rig::new(MotionConfig::prusa_i3());
     // Switches exactly at the start: homing ends where it began.
-    rig.endstops = Box::new(|p: &[i64; 4]| {
-        (0..3)
-            .filter(|&m| p[m] <= 0)
-            .fold(0, |bits, m| bits | 1 << m)
-    });
+    rig.endstops = Box::new(|p: &[i64; 4]| (0..3).filter(|&m| p[m] <= 0).fold(0, |bits, m| bits | 1 << m));
     rig.commands.push_back(Command::Home(0));
     rig.run(60.0);
     assert_eq!(rig.motion.homed(), 0b111);
@@ -619,18 +535,12 @@ fn delta_homes_all_towers_up_and_applies_trim() {
     let expected = delta.forward(heights).unwrap();
     let p = rig.motion.position_um();
     for axis in 0..3 {
-        assert!(
-            (p[axis] - um(expected[axis])).abs() <= 2,
-            "{p:?} vs {expected:?}"
-        );
+        assert!((p[axis] - um(expected[axis])).abs() <= 2, "{p:?} vs {expected:?}");
     }
     // To the centre at Z 0.25, tower B goes down 3 mm = 240 steps less.
     rig.recorder.clear_steps();
     rig.line([0.0, 0.0, 0.25, 0.0], 100.0).run(20.0);
-    let moved: Vec<i64> = rig.recorder.motors[..3]
-        .iter()
-        .map(|m| m.steps.iter().map(|s| s.1 as i64).sum())
-        .collect();
+    let moved: Vec<i64> = rig.recorder.motors[..3].iter().map(|m| m.steps.iter().map(|s| s.1 as i64).sum()).collect();
     assert_eq!(moved[0], moved[2]);
     assert_eq!(moved[1], moved[0] + 240);
     // And every carriage is at the SPEC height 344.95 mm for (0, 0, 0.25)
@@ -657,10 +567,7 @@ fn delta_lands_on_the_spec_vectors() {
         for tower in 0..3 {
             let moved = rig.recorder.positions()[tower] as f64 / 80.0;
             let want = heights[tower] - 344.95;
-            assert!(
-                (moved - want).abs() <= 0.005 + 0.0125,
-                "tower {tower}: moved {moved} mm, want {want}"
-            );
+            assert!((moved - want).abs() <= 0.005 + 0.0125, "tower {tower}: moved {moved} mm, want {want}");
         }
     }
 }
@@ -678,10 +585,7 @@ fn delta_carriage_speed_is_limited() {
         let fastest = rig.recorder.motors[tower].min_interval().unwrap();
         // 100 mm/s × 80 steps/mm = 8000 steps/s = 250 ticks; one tick of
         // Bresenham jitter on the minor towers.
-        assert!(
-            fastest >= 249,
-            "tower {tower}: {fastest} ticks between steps"
-        );
+        assert!(fastest >= 249, "tower {tower}: {fastest} ticks between steps");
     }
     assert!(rig.errors.is_empty());
 }
@@ -690,10 +594,7 @@ fn delta_carriage_speed_is_limited() {
 fn delta_refuses_unreachable_targets() {
     let mut rig = Rig::new(MotionConfig::spec_delta(false));
     rig.line([140.0, 0.0, 0.0, 0.0], 60.0).run(1.0);
-    assert_eq!(
-        rig.errors,
-        [MotionError::Unreachable(KinematicsError::OutsidePrintable)]
-    );
+    assert_eq!(rig.errors, [MotionError::Unreachable(KinematicsError::OutsidePrintable)]);
 }
 
 fn homed_arm() -> Rig {
@@ -738,10 +639,7 @@ fn arm_homes_z_y_x_and_lands_on_its_home() {
     // Motor positions are the SPEC vector for (−107, 68): −4019, −909.
     assert_eq!(&rig.motion.motor_steps()[..3], &[-5000, -4019, -909]);
     let first = |m: usize| rig.recorder.motors[m].first_step().unwrap();
-    assert!(
-        first(2) < first(1) && first(1) < first(0),
-        "Z, then Y, then X"
-    );
+    assert!(first(2) < first(1) && first(1) < first(0), "Z, then Y, then X");
     // Approach at 200 steps/s: 10 000 ticks between steps once up to speed.
     assert_eq!(rig.recorder.motors[2].min_interval(), Some(10_000));
 }
@@ -755,13 +653,7 @@ fn arm_lands_on_the_spec_vectors() {
     rig.motion.config.soft_limits = None;
     let origin = rig.recorder.positions();
     let home_motors = rig.motion.motor_steps();
-    for (y, z, elbow, shoulder) in [
-        (0.0, 0.0, -5000, 0),
-        (50.0, 10.0, -5901, -97),
-        (0.0, 50.0, -6188, -1360),
-        (110.0, -40.0, -4781, 1747),
-        (-107.0, 40.0, 0, 0),
-    ] {
+    for (y, z, elbow, shoulder) in [(0.0, 0.0, -5000, 0), (50.0, 10.0, -5901, -97), (0.0, 50.0, -6188, -1360), (110.0, -40.0, -4781, 1747), (-107.0, 40.0, 0, 0)] {
         rig.line([-100.0, y, z, 0.0], 30.0).run(60.0);
         if (y, z) == (-107.0, 40.0) {
             continue;
@@ -769,11 +661,7 @@ fn arm_lands_on_the_spec_vectors() {
         assert!(rig.errors.is_empty(), "{:?}", rig.errors);
         let p = rig.recorder.positions();
         let motor = |m: usize| (p[m] - origin[m]) + home_motors[m] as i64;
-        assert_eq!(
-            (motor(1), motor(2)),
-            (elbow as i64, shoulder as i64),
-            "({y}, {z})"
-        );
+        assert_eq!((motor(1), motor(2)), (elbow as i64, shoulder as i64), "({y}, {z})");
     }
 }
 
@@ -789,15 +677,8 @@ fn arm_lines_pure_z_pure_x_and_no_overshoot() {
     rig.line([0.0, 0.0, 30.0, 0.0], 20.0).run(60.0);
     let ppd = arm.joint_steps_per_degree as f64;
     // Steps recorded since `clear_steps`, on top of the motor positions.
-    let joint =
-        |rig: &Rig, m: usize, t: u64| motors_before[m] as f64 + rig.position_at(m, t) as f64;
-    let (start, end) = (
-        rig.recorder.motors[1]
-            .first_step()
-            .unwrap_or(0)
-            .min(rig.recorder.motors[2].first_step().unwrap()),
-        rig.recorder.now,
-    );
+    let joint = |rig: &Rig, m: usize, t: u64| motors_before[m] as f64 + rig.position_at(m, t) as f64;
+    let (start, end) = (rig.recorder.motors[1].first_step().unwrap_or(0).min(rig.recorder.motors[2].first_step().unwrap()), rig.recorder.now);
     let mut last_z = -1.0;
     let mut t = start;
     while t <= end {
@@ -807,11 +688,7 @@ fn arm_lines_pure_z_pure_x_and_no_overshoot() {
         // One pulse of a joint is ≈ 0.07 mm at the tool, and Bresenham lets
         // the minor joint trail by up to one pulse.
         assert!(p[1].abs() < 0.2, "pure Z drifted to y = {}", p[1]);
-        assert!(
-            p[2] >= last_z - 0.15,
-            "Z went backwards: {} after {last_z}",
-            p[2]
-        );
+        assert!(p[2] >= last_z - 0.15, "Z went backwards: {} after {last_z}", p[2]);
         last_z = p[2];
         t += 20_000;
     }
@@ -824,21 +701,14 @@ fn arm_lines_pure_z_pure_x_and_no_overshoot() {
     let x = &rig.recorder.motors[0];
     assert_eq!(x.steps.len(), 40 * 50);
     assert!(x.steps.iter().all(|s| s.1 > 0), "X reversed: overshoot");
-    assert_eq!(
-        &rig.recorder.positions()[1..3],
-        &joints_before[1..3],
-        "joints moved on a pure X move"
-    );
+    assert_eq!(&rig.recorder.positions()[1..3], &joints_before[1..3], "joints moved on a pure X move");
 }
 
 #[test]
 fn arm_soft_limits_and_reach() {
     let mut rig = homed_arm();
     rig.line([0.0, -110.0, -40.0, 0.0], 10.0).run(1.0);
-    assert_eq!(
-        rig.errors,
-        [MotionError::Unreachable(KinematicsError::OutOfReach)]
-    );
+    assert_eq!(rig.errors, [MotionError::Unreachable(KinematicsError::OutOfReach)]);
     rig.errors.clear();
     rig.line([0.0, 0.0, 45.0, 0.0], 10.0).run(1.0);
     assert_eq!(rig.errors, [MotionError::OutsideSoftLimits]);
@@ -853,14 +723,7 @@ fn limit_switch_outside_homing_stops_and_requires_rehoming() {
     // The X switch trips 5 mm (250 steps) into the next move (towards max).
     rig.endstops = Box::new(move |p: &[i64; 4]| if p[0] >= at + 250 { 0x10 } else { 0 });
     rig.line([0.0, -107.0, 40.0, 0.0], 30.0).run(60.0);
-    assert!(
-        matches!(
-            rig.errors.as_slice(),
-            [MotionError::Fault(StepFault::LimitHit(0x10))]
-        ),
-        "{:?}",
-        rig.errors
-    );
+    assert!(matches!(rig.errors.as_slice(), [MotionError::Fault(StepFault::LimitHit(0x10))]), "{:?}", rig.errors);
     assert_eq!(rig.recorder.positions()[0], at + 250);
     assert_eq!(rig.motion.homed(), 0);
     rig.errors.clear();
@@ -879,22 +742,10 @@ fn endstop_layout_conversion() {
 fn ram_sizes_stay_small() {
     use core::mem::size_of;
     // Host sizes (f32 aligned to 4); the AVR packs tighter (align 1).
-    assert!(
-        size_of::<planner::Block>() <= 36,
-        "{}",
-        size_of::<planner::Block>()
-    );
+    assert!(size_of::<planner::Block>() <= 36, "{}", size_of::<planner::Block>());
     assert!(size_of::<Planner>() <= 36 * planner::PLANNER_SLOTS + 32);
-    assert!(
-        size_of::<StepQueues>() <= 16 * 12 + 16 * 14 + 48,
-        "{}",
-        size_of::<StepQueues>()
-    );
-    assert!(
-        size_of::<StepGenerator<'static>>() <= 96,
-        "{}",
-        size_of::<StepGenerator<'static>>()
-    );
+    assert!(size_of::<StepQueues>() <= 16 * 12 + 16 * 14 + 48, "{}", size_of::<StepQueues>());
+    assert!(size_of::<StepGenerator<'static>>() <= 96, "{}", size_of::<StepGenerator<'static>>());
     std::println!(
         "Block {} B, Planner {} B, StepQueues {} B, StepGenerator {} B, Prep {} B, Motion {} B",
         size_of::<planner::Block>(),

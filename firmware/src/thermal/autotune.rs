@@ -42,24 +42,14 @@ pub struct RelayGains {
 /// amplitude `a` (hundredths of °C) and period `Pu` (ms). `None` when `a`
 /// or `Pu` is zero, Ku exceeds 1677 or a gain does not fit [`Gains::MAX`].
 #[inline(never)]
-pub fn relay_gains(
-    relay_amplitude: u8,
-    oscillation: Celsius,
-    period_ms: u32,
-) -> Option<RelayGains> {
-    let a = u32::try_from(oscillation.0)
-        .ok()
-        .filter(|a| *a > 0 && *a <= u32::MAX / 104_348)?;
+pub fn relay_gains(relay_amplitude: u8, oscillation: Celsius, period_ms: u32) -> Option<RelayGains> {
+    let a = u32::try_from(oscillation.0).ok().filter(|a| *a > 0 && *a <= u32::MAX / 104_348)?;
     if period_ms == 0 || period_ms > u32::MAX / 256 {
         return None;
     }
     // (Bounds are compared, never `checked_mul`: see `math`.)
     // Ku·10⁴·256 = 4d·10⁴·100·256/(π·a_centi), π = 104348/33215.
-    let ku256 = mul_div_round(
-        4_000_000 * u32::from(relay_amplitude),
-        33_215 * 256,
-        a * 104_348,
-    )?;
+    let ku256 = mul_div_round(4_000_000 * u32::from(relay_amplitude), 33_215 * 256, a * 104_348)?;
     let gain = |m: u32, n: u32| mul_div_round(ku256, m, n).filter(|g| *g <= Gains::MAX);
     Some(RelayGains {
         ku: gain(1, 256)?,
@@ -92,14 +82,7 @@ pub struct TuneConfig {
 impl TuneConfig {
     /// Marlin-like defaults: 5 cycles, a 0.3 °C band, 20 min timeout.
     pub const fn new(target: Celsius, sample_period_ms: u16) -> Self {
-        Self {
-            target,
-            cycles: 5,
-            max_power: 255,
-            noise_band: 30,
-            sample_period_ms,
-            timeout_s: 1200,
-        }
+        Self { target, cycles: 5, max_power: 255, noise_band: 30, sample_period_ms, timeout_s: 1200 }
     }
 }
 
@@ -141,20 +124,10 @@ impl CycleReport {
     /// ` Kp: 19.91 Ki: 1.87 Kd: 53.00`.
     #[inline(never)]
     pub fn write<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(
-            out,
-            " bias: {} d: {} min: {} max: {}",
-            self.bias,
-            self.d,
-            self.min,
-            self.max
-        )?;
+        ufmt::uwrite!(out, " bias: {} d: {} min: {} max: {}", self.bias, self.d, self.min, self.max)?;
         match &self.result {
             Some(result) => {
-                let tu = crate::reply::Fixed {
-                    mantissa: (result.period_ms / 10) as i32,
-                    digits: 2,
-                };
+                let tu = crate::reply::Fixed { mantissa: (result.period_ms / 10) as i32, digits: 2 };
                 ufmt::uwrite!(out, " Ku: {} Tu: {}", Gain(result.ku), tu)?;
                 flash_str!("\n Classic PID \n").write_to(out)?;
                 ufmt::uwrite!(out, "{}\n", result.gains)
@@ -190,22 +163,14 @@ impl TuneResult {
     /// ```
     /// (`DEFAULT_bedKp`… for the bed, `DEFAULT_chamberKp`… for a chamber).
     #[inline(never)]
-    pub fn write_finished<W: ufmt::uWrite + ?Sized>(
-        &self,
-        heater: HeaterId,
-        out: &mut W,
-    ) -> Result<(), W::Error> {
+    pub fn write_finished<W: ufmt::uWrite + ?Sized>(&self, heater: HeaterId, out: &mut W) -> Result<(), W::Error> {
         flash_str!("PID Autotune finished! Put the last Kp, Ki and Kd constants from below into Configuration.h\n").write_to(out)?;
         let prefix = match heater {
             HeaterId::Hotend(_) => "",
             HeaterId::Bed => "bed",
             HeaterId::Chamber => "chamber",
         };
-        for (name, value) in [
-            ("Kp ", self.gains.kp),
-            ("Ki ", self.gains.ki),
-            ("Kd ", self.gains.kd),
-        ] {
+        for (name, value) in [("Kp ", self.gains.kp), ("Ki ", self.gains.ki), ("Kd ", self.gains.kd)] {
             flash_str!("#define DEFAULT_").write_to(out)?;
             ufmt::uwrite!(out, "{}{}{}\n", prefix, name, Gain(value))?;
         }
@@ -262,13 +227,7 @@ impl Autotune {
             t_high: 0,
             max: config.target,
             min: config.target,
-            last: CycleReport {
-                bias: half,
-                d: half,
-                min: config.target,
-                max: config.target,
-                result: None,
-            },
+            last: CycleReport { bias: half, d: half, min: config.target, max: config.target, result: None },
         }
     }
 
@@ -283,11 +242,7 @@ impl Autotune {
 
     fn power(&self) -> u8 {
         let (bias, d) = (u16::from(self.bias), u16::from(self.d));
-        let power = if self.heating {
-            bias + d
-        } else {
-            bias.saturating_sub(d)
-        };
+        let power = if self.heating { bias + d } else { bias.saturating_sub(d) };
         power.min(u16::from(self.config.max_power)) as u8
     }
 
@@ -299,13 +254,8 @@ impl Autotune {
         if measured.0 > target.saturating_add(3000) {
             return TuneStep::Failed(TuneError::TemperatureTooHigh);
         }
-        let last_switch = if self.heating {
-            self.heat_started
-        } else {
-            self.cool_started
-        };
-        let timeout = u32::from(self.config.timeout_s) * 1000
-            / u32::from(self.config.sample_period_ms.max(1));
+        let last_switch = if self.heating { self.heat_started } else { self.cool_started };
+        let timeout = u32::from(self.config.timeout_s) * 1000 / u32::from(self.config.sample_period_ms.max(1));
         if self.now.wrapping_sub(last_switch) > timeout {
             return TuneStep::Failed(TuneError::Timeout);
         }
@@ -349,50 +299,22 @@ impl Autotune {
         // The result of the cycle just measured uses the d it ran with.
         let measured_d = self.d;
         let shift = saturating_mul(i32::from(measured_d), t_high - t_low) / (t_high + t_low).max(1);
-        let bias = (i32::from(self.bias) + shift)
-            .clamp(20.min(max_power / 2), (max_power - 20).max(max_power / 2));
+        let bias = (i32::from(self.bias) + shift).clamp(20.min(max_power / 2), (max_power - 20).max(max_power / 2));
         self.bias = bias as u8;
-        self.d = (if bias > max_power / 2 {
-            max_power - 1 - bias
-        } else {
-            bias
-        }) as u8;
+        self.d = (if bias > max_power / 2 { max_power - 1 - bias } else { bias }) as u8;
         let previous = self.last.result;
-        self.last = CycleReport {
-            bias: self.bias,
-            d: self.d,
-            min: self.min,
-            max: self.max,
-            result: None,
-        };
+        self.last = CycleReport { bias: self.bias, d: self.d, min: self.min, max: self.max, result: None };
         if self.cycles <= 3 {
             return false;
         }
         let amplitude = self.max.0.saturating_sub(self.min.0) / 2;
-        let (total, period) = (
-            (t_high + t_low) as u32,
-            u32::from(self.config.sample_period_ms.max(1)),
-        );
-        let period_ms = if total > u32::MAX / period {
-            u32::MAX
-        } else {
-            total * period
-        };
+        let (total, period) = ((t_high + t_low) as u32, u32::from(self.config.sample_period_ms.max(1)));
+        let period_ms = if total > u32::MAX / period { u32::MAX } else { total * period };
         let Some(gains) = relay_gains(measured_d, Celsius(amplitude), period_ms) else {
             return false;
         };
-        let converged = previous.is_some_and(|p| {
-            within_5_percent(amplitude as u32, p.oscillation.0 as u32)
-                && within_5_percent(period_ms, p.period_ms)
-        });
-        self.last.result = Some(TuneResult {
-            relay_amplitude: measured_d,
-            oscillation: Celsius(amplitude),
-            period_ms,
-            ku: gains.ku,
-            gains: gains.gains,
-            converged,
-        });
+        let converged = previous.is_some_and(|p| within_5_percent(amplitude as u32, p.oscillation.0 as u32) && within_5_percent(period_ms, p.period_ms));
+        self.last.result = Some(TuneResult { relay_amplitude: measured_d, oscillation: Celsius(amplitude), period_ms, ku: gains.ku, gains: gains.gains, converged });
         converged || self.cycles > self.config.cycles.max(3)
     }
 }
@@ -414,28 +336,14 @@ mod tests {
     fn spec_section_5_vector_d127_a10_pu0_2() {
         let g = relay_gains(127, Celsius(1000), 200).unwrap();
         assert_eq!(g.ku, 161_701); // Ku 16.1701
-        assert_eq!(
-            g.gains,
-            Gains {
-                kp: 97_021,
-                ki: 970_209,
-                kd: 2_426
-            }
-        ); // 9.7021, 97.0209, 0.2426
+        assert_eq!(g.gains, Gains { kp: 97_021, ki: 970_209, kd: 2_426 }); // 9.7021, 97.0209, 0.2426
     }
 
     #[test]
     fn spec_section_5_vector_d100_a50_pu1() {
         let g = relay_gains(100, Celsius(5000), 1000).unwrap();
         assert_eq!(g.ku, 25_465); // Ku 2.5465
-        assert_eq!(
-            g.gains,
-            Gains {
-                kp: 15_279,
-                ki: 30_558,
-                kd: 1_910
-            }
-        ); // 1.5279, 3.0558, 0.1910
+        assert_eq!(g.gains, Gains { kp: 15_279, ki: 30_558, kd: 1_910 }); // 1.5279, 3.0558, 0.1910
     }
 
     #[test]
@@ -451,14 +359,7 @@ mod tests {
         // Kd 71.8898 (f64: 44.917062, 26.950237, 2.525795, 71.889757).
         let g = relay_gains(127, Celsius(360), 21_340).unwrap();
         assert_eq!(g.ku, 449_171);
-        assert_eq!(
-            g.gains,
-            Gains {
-                kp: 269_502,
-                ki: 25_258,
-                kd: 718_898
-            }
-        );
+        assert_eq!(g.gains, Gains { kp: 269_502, ki: 25_258, kd: 718_898 });
     }
 
     /// A first-order plant with dead time, sampled every second:
@@ -488,13 +389,8 @@ mod tests {
 
     #[test]
     fn relay_on_a_plant_converges_with_a_symmetric_oscillation() {
-        let (step, cycles) = relay_on_plant(TuneConfig {
-            sample_period_ms: 1000,
-            ..TuneConfig::new(Celsius(20_000), 1000)
-        });
-        let TuneStep::Done(result) = step else {
-            panic!("{step:?}")
-        };
+        let (step, cycles) = relay_on_plant(TuneConfig { sample_period_ms: 1000, ..TuneConfig::new(Celsius(20_000), 1000) });
+        let TuneStep::Done(result) = step else { panic!("{step:?}") };
         assert!(result.converged, "{result:?}");
         // Steady duty for 200 °C is (200 − 25)/1.8 = 97: the bias moves there.
         let last = cycles.last().unwrap();
@@ -507,10 +403,7 @@ mod tests {
     #[test]
     fn relay_stops_after_c_cycles_without_agreement() {
         // With C = 3, the third cycle is the last whatever it measured.
-        let (step, cycles) = relay_on_plant(TuneConfig {
-            cycles: 3,
-            ..TuneConfig::new(Celsius(20_000), 1000)
-        });
+        let (step, cycles) = relay_on_plant(TuneConfig { cycles: 3, ..TuneConfig::new(Celsius(20_000), 1000) });
         assert!(matches!(step, TuneStep::Done(_)), "{step:?}");
         assert_eq!(cycles.len(), 2); // cycles 1 and 2 printed; the third finished
     }
@@ -519,25 +412,16 @@ mod tests {
     fn relay_fails_when_30_degrees_above_target() {
         let mut tune = Autotune::new(TuneConfig::new(Celsius(20_000), 100));
         assert_eq!(tune.on_sample(Celsius(23_000)), TuneStep::Heat(0));
-        assert_eq!(
-            tune.on_sample(Celsius(23_001)),
-            TuneStep::Failed(TuneError::TemperatureTooHigh)
-        );
+        assert_eq!(tune.on_sample(Celsius(23_001)), TuneStep::Failed(TuneError::TemperatureTooHigh));
     }
 
     #[test]
     fn relay_fails_when_the_heat_up_exceeds_the_timeout() {
-        let mut tune = Autotune::new(TuneConfig {
-            timeout_s: 10,
-            ..TuneConfig::new(Celsius(20_000), 100)
-        });
+        let mut tune = Autotune::new(TuneConfig { timeout_s: 10, ..TuneConfig::new(Celsius(20_000), 100) });
         for _ in 0..100 {
             assert_eq!(tune.on_sample(Celsius(5_000)), TuneStep::Heat(254));
         }
-        assert_eq!(
-            tune.on_sample(Celsius(5_000)),
-            TuneStep::Failed(TuneError::Timeout)
-        );
+        assert_eq!(tune.on_sample(Celsius(5_000)), TuneStep::Failed(TuneError::Timeout));
     }
 
     #[test]
@@ -556,31 +440,14 @@ mod tests {
             oscillation: Celsius(360),
             period_ms: 21_340,
             ku: 449_171,
-            gains: Gains {
-                kp: 269_502,
-                ki: 25_258,
-                kd: 718_898,
-            },
+            gains: Gains { kp: 269_502, ki: 25_258, kd: 718_898 },
             converged: true,
         };
-        let report = CycleReport {
-            bias: 92,
-            d: 92,
-            min: Celsius(19_656),
-            max: Celsius(20_375),
-            result: Some(result),
-        };
+        let report = CycleReport { bias: 92, d: 92, min: Celsius(19_656), max: Celsius(20_375), result: Some(result) };
         let mut out = Text::default();
         report.write(&mut out).unwrap();
-        CycleReport {
-            result: None,
-            ..report
-        }
-        .write(&mut out)
-        .unwrap();
-        result
-            .write_finished(HeaterId::Hotend(0), &mut out)
-            .unwrap();
+        CycleReport { result: None, ..report }.write(&mut out).unwrap();
+        result.write_finished(HeaterId::Hotend(0), &mut out).unwrap();
         result.write_finished(HeaterId::Bed, &mut out).unwrap();
         TuneError::Timeout.write(&mut out).unwrap();
         assert_eq!(

@@ -86,8 +86,7 @@ impl HeaterConfig {
 
     /// The control law's period T, ms.
     pub fn control_period_ms(&self) -> u16 {
-        self.sample_period_ms
-            .saturating_mul(u16::from(self.control_every.max(1)))
+        self.sample_period_ms.saturating_mul(u16::from(self.control_every.max(1)))
     }
 
     /// The highest target [`HeaterChannel::set_target`] accepts.
@@ -107,10 +106,7 @@ pub static HOTEND_1: Flash<HeaterConfig> = Flash::new(HeaterConfig::hotend(1));
 pub static BED: Flash<HeaterConfig> = Flash::new(HeaterConfig::bed());
 /// [`HeaterConfig::bed`] with bang-bang control, in flash.
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-pub static BED_BANG_BANG: Flash<HeaterConfig> = Flash::new(HeaterConfig {
-    control: Control::BANG_BANG,
-    ..HeaterConfig::bed()
-});
+pub static BED_BANG_BANG: Flash<HeaterConfig> = Flash::new(HeaterConfig { control: Control::BANG_BANG, ..HeaterConfig::bed() });
 /// [`HeaterConfig::barrel`] in flash.
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
 pub static BARREL: Flash<HeaterConfig> = Flash::new(HeaterConfig::barrel());
@@ -212,11 +208,7 @@ impl HeaterChannel {
 
     /// A snapshot for the executor's `M105` (`Heater` as it has it).
     pub fn heater(&self) -> Heater {
-        Heater {
-            measured: self.measured,
-            target: self.target,
-            power: self.power_report(),
-        }
+        Heater { measured: self.measured, target: self.target, power: self.power_report() }
     }
 
     pub fn fault(&self) -> Option<ThermalFault> {
@@ -244,13 +236,8 @@ impl HeaterChannel {
         let target = Celsius(target.0.clamp(0, config.max_target().0.max(0)));
         if target != self.target {
             self.target = target;
-            let measured = if self.has_reading {
-                Some(self.measured)
-            } else {
-                None
-            };
-            self.guard
-                .on_target(&config.guard, config.sample_period_ms, target, measured);
+            let measured = if self.has_reading { Some(self.measured) } else { None };
+            self.guard.on_target(&config.guard, config.sample_period_ms, target, measured);
         }
         if target.0 == 0 {
             self.duty = 0;
@@ -275,20 +262,9 @@ impl HeaterChannel {
     }
 
     /// Judge a reading; `Ok(measured)` when the controller may run.
-    fn judge(
-        &mut self,
-        config: &HeaterConfig,
-        reading: Oversampled,
-        tuning: bool,
-    ) -> Result<Celsius, Option<ThermalFault>> {
+    fn judge(&mut self, config: &HeaterConfig, reading: Oversampled, tuning: bool) -> Result<Celsius, Option<ThermalFault>> {
         let converted = config.sensor.celsius(reading);
-        let verdict = self.guard.check(
-            &config.guard,
-            config.sample_period_ms,
-            converted,
-            self.target,
-            tuning,
-        );
+        let verdict = self.guard.check(&config.guard, config.sample_period_ms, converted, self.target, tuning);
         match verdict {
             Verdict::Run(measured) => Ok(measured),
             Verdict::Hold => Err(None),
@@ -307,11 +283,7 @@ impl HeaterChannel {
     }
 
     fn accept(&mut self, measured: Celsius) -> Celsius {
-        let previous = if self.has_reading {
-            self.measured
-        } else {
-            measured
-        };
+        let previous = if self.has_reading { self.measured } else { measured };
         self.measured = measured;
         self.has_reading = true;
         previous
@@ -335,18 +307,8 @@ impl HeaterChannel {
             self.countdown = 0;
             return None;
         }
-        if let Control::Pid {
-            derivative_filter_shift,
-            ..
-        } = c.control
-        {
-            self.pid.observe(
-                &self.gains,
-                derivative_filter_shift,
-                c.sample_period_ms,
-                measured,
-                previous,
-            );
+        if let Control::Pid { derivative_filter_shift, .. } = c.control {
+            self.pid.observe(&self.gains, derivative_filter_shift, c.sample_period_ms, measured, previous);
         }
         if self.countdown > 0 {
             self.countdown -= 1;
@@ -354,23 +316,10 @@ impl HeaterChannel {
         }
         self.countdown = c.control_every.max(1) - 1;
         self.duty = match c.control {
-            Control::Pid {
-                functional_range_c, ..
-            } => self.pid.control(
-                &self.gains,
-                functional_range_c,
-                c.control_period_ms(),
-                c.max_power,
-                self.target,
-                measured,
-            ),
-            Control::BangBang { hysteresis_tenths } => bang_bang(
-                hysteresis_tenths,
-                c.max_power,
-                self.target,
-                measured,
-                self.duty > 0,
-            ),
+            Control::Pid { functional_range_c, .. } => {
+                self.pid.control(&self.gains, functional_range_c, c.control_period_ms(), c.max_power, self.target, measured)
+            }
+            Control::BangBang { hysteresis_tenths } => bang_bang(hysteresis_tenths, c.max_power, self.target, measured, self.duty > 0),
         };
         None
     }
@@ -457,11 +406,7 @@ mod tests {
         assert_eq!(heater.on_sample(reading(25.0)), None);
         assert_eq!(heater.duty(), 255);
         assert_eq!(heater.power_report(), 127);
-        assert!(
-            (heater.measured().0 - 2_500).abs() <= 5,
-            "{:?}",
-            heater.measured()
-        );
+        assert!((heater.measured().0 - 2_500).abs() <= 5, "{:?}", heater.measured());
     }
 
     #[test]
@@ -499,16 +444,10 @@ mod tests {
         assert_eq!(heater.on_sample(open), None); // reported once
         assert_eq!(heater.on_sample(reading(100.0)), None);
         assert_eq!((heater.duty(), heater.target()), (0, Celsius(0)));
-        assert_eq!(
-            heater.set_target(Celsius(20_000)),
-            Err(ThermalFault::SensorOpen)
-        );
+        assert_eq!(heater.set_target(Celsius(20_000)), Err(ThermalFault::SensorOpen));
         let mut out = Text::default();
         heater.write_fault(&mut out).unwrap();
-        assert_eq!(
-            out.0,
-            "Error:MINTEMP triggered (thermistor open), system stopped! Heater_ID: 0\n"
-        );
+        assert_eq!(out.0, "Error:MINTEMP triggered (thermistor open), system stopped! Heater_ID: 0\n");
         heater.clear_fault();
         assert_eq!(heater.set_target(Celsius(20_000)), Ok(Celsius(20_000)));
     }
@@ -546,15 +485,9 @@ mod tests {
         let mut tune = Autotune::new(TuneConfig::new(Celsius(20_000), 100));
         heater.start_tuning(&tune).unwrap();
         assert_eq!(heater.target(), Celsius(20_000));
-        assert_eq!(
-            heater.on_tuning_sample(reading(25.0), &mut tune),
-            TuneProgress::Running
-        );
+        assert_eq!(heater.on_tuning_sample(reading(25.0), &mut tune), TuneProgress::Running);
         assert_eq!(heater.duty(), 254);
-        assert_eq!(
-            heater.on_tuning_sample(reading(240.0), &mut tune),
-            TuneProgress::Failed(TuneError::TemperatureTooHigh)
-        );
+        assert_eq!(heater.on_tuning_sample(reading(240.0), &mut tune), TuneProgress::Failed(TuneError::TemperatureTooHigh));
         assert_eq!((heater.duty(), heater.target()), (0, Celsius(0)));
     }
 
@@ -566,10 +499,7 @@ mod tests {
         let shorted = Oversampled::from_count(0);
         heater.on_tuning_sample(shorted, &mut tune);
         heater.on_tuning_sample(shorted, &mut tune);
-        assert_eq!(
-            heater.on_tuning_sample(shorted, &mut tune),
-            TuneProgress::Fault(ThermalFault::SensorShorted)
-        );
+        assert_eq!(heater.on_tuning_sample(shorted, &mut tune), TuneProgress::Fault(ThermalFault::SensorShorted));
         assert_eq!(heater.duty(), 0);
     }
 
@@ -597,10 +527,7 @@ mod tests {
     fn stock_configurations_read_back_from_flash() {
         assert_eq!(HOTEND_0.load(), HeaterConfig::hotend(0));
         assert_eq!(BARREL.load().control_period_ms(), 1000);
-        assert_eq!(
-            HeaterChannel::new(&BED, Gains::MARLIN_BED).id(),
-            HeaterId::Bed
-        );
+        assert_eq!(HeaterChannel::new(&BED, Gains::MARLIN_BED).id(), HeaterId::Bed);
         assert_eq!(HeaterConfig::hotend(0).max_target(), Celsius(26_000));
     }
 }

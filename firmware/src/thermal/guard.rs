@@ -28,8 +28,8 @@
 
 use super::{Celsius, HeaterId};
 use crate::flash_str;
-use crate::machines::extrusion_line::{ColdExtrusion, ColdExtrusionCheck};
 use crate::progmem::FlashStr;
+use crate::machines::extrusion_line::{ColdExtrusion, ColdExtrusionCheck};
 
 /// Why a heater was shut down.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -65,11 +65,7 @@ impl ThermalFault {
     /// `Error:Thermal Runaway, system stopped! Heater_ID: 0` (with the
     /// newline). The executor then halts (`Error:Printer halted. kill()
     /// called!`) and stops motion.
-    pub fn write<W: ufmt::uWrite + ?Sized>(
-        self,
-        heater: HeaterId,
-        out: &mut W,
-    ) -> Result<(), W::Error> {
+    pub fn write<W: ufmt::uWrite + ?Sized>(self, heater: HeaterId, out: &mut W) -> Result<(), W::Error> {
         flash_str!("Error:").write_to(out)?;
         self.message().write_to(out)?;
         flash_str!(", system stopped! Heater_ID: ").write_to(out)?;
@@ -211,14 +207,7 @@ fn samples(seconds: u16, period_ms: u16) -> u16 {
 
 impl HeaterGuard {
     pub const fn new() -> Self {
-        Self {
-            fault: None,
-            bad: 0,
-            runaway: Runaway::Off,
-            runaway_samples: 0,
-            watch_samples: 0,
-            watch_goal: Celsius(0),
-        }
+        Self { fault: None, bad: 0, runaway: Runaway::Off, runaway_samples: 0, watch_samples: 0, watch_goal: Celsius(0) }
     }
 
     /// The latched fault, if any.
@@ -236,13 +225,7 @@ impl HeaterGuard {
     /// `measured` is the latest good temperature, `None` before the first
     /// (the watch then arms at the first reading).
     #[inline(never)]
-    pub fn on_target(
-        &mut self,
-        config: &GuardConfig,
-        period_ms: u16,
-        target: Celsius,
-        measured: Option<Celsius>,
-    ) {
+    pub fn on_target(&mut self, config: &GuardConfig, period_ms: u16, target: Celsius, measured: Option<Celsius>) {
         self.runaway_samples = 0;
         self.watch_samples = 0;
         self.watch_goal = Celsius(0);
@@ -257,17 +240,9 @@ impl HeaterGuard {
         }
     }
 
-    fn arm_watch(
-        &mut self,
-        config: &GuardConfig,
-        period_ms: u16,
-        target: Celsius,
-        measured: Celsius,
-    ) {
+    fn arm_watch(&mut self, config: &GuardConfig, period_ms: u16, target: Celsius, measured: Celsius) {
         let increase = i32::from(config.watch_increase_c) * 100;
-        if config.watch_period_s > 0
-            && measured.0 < target.0.saturating_sub(increase + WATCH_ARM_MARGIN)
-        {
+        if config.watch_period_s > 0 && measured.0 < target.0.saturating_sub(increase + WATCH_ARM_MARGIN) {
             self.watch_samples = samples(config.watch_period_s, period_ms);
             self.watch_goal = Celsius(measured.0.saturating_add(increase));
         } else {
@@ -300,11 +275,7 @@ impl HeaterGuard {
             Ok(t) => t,
             Err(fault) => {
                 self.bad = self.bad.saturating_add(1);
-                return if self.bad >= config.bad_readings.max(1) {
-                    self.latch(fault)
-                } else {
-                    Verdict::Hold
-                };
+                return if self.bad >= config.bad_readings.max(1) { self.latch(fault) } else { Verdict::Hold };
             }
         };
         self.bad = 0;
@@ -336,9 +307,7 @@ impl HeaterGuard {
             self.runaway = Runaway::Holding;
         }
         if self.runaway == Runaway::Holding {
-            let floor = target
-                .0
-                .saturating_sub(i32::from(config.runaway_hysteresis_c) * 100);
+            let floor = target.0.saturating_sub(i32::from(config.runaway_hysteresis_c) * 100);
             if measured.0 >= floor {
                 self.runaway_samples = 0;
             } else {
@@ -373,14 +342,10 @@ impl ColdExtrusionGuard {
     /// Marlin's `EXTRUDE_MINTEMP` for a hot end.
     pub const HOTEND: ColdExtrusionGuard = ColdExtrusionGuard::new(Celsius::from_degrees(170));
     /// SPEC §4's extrusion line.
-    pub const EXTRUSION_LINE: ColdExtrusionGuard =
-        ColdExtrusionGuard::new(Celsius::from_degrees(175));
+    pub const EXTRUSION_LINE: ColdExtrusionGuard = ColdExtrusionGuard::new(Celsius::from_degrees(175));
 
     pub const fn new(min_temp: Celsius) -> Self {
-        Self {
-            min_temp,
-            allowed: false,
-        }
+        Self { min_temp, allowed: false }
     }
 
     pub fn min_temp(&self) -> Celsius {
@@ -410,10 +375,7 @@ impl ColdExtrusionGuard {
         if self.allowed || measured >= self.min_temp {
             Ok(())
         } else {
-            Err(ColdExtrusion {
-                measured,
-                minimum: self.min_temp,
-            })
+            Err(ColdExtrusion { measured, minimum: self.min_temp })
         }
     }
 
@@ -459,13 +421,7 @@ mod tests {
         Celsius::from_degrees(degrees)
     }
 
-    fn run(
-        guard: &mut HeaterGuard,
-        config: &GuardConfig,
-        reading: Result<Celsius, SensorFault>,
-        target: Celsius,
-        samples: u32,
-    ) -> Verdict {
+    fn run(guard: &mut HeaterGuard, config: &GuardConfig, reading: Result<Celsius, SensorFault>, target: Celsius, samples: u32) -> Verdict {
         let mut verdict = Verdict::Hold;
         for _ in 0..samples {
             verdict = guard.check(config, PERIOD, reading, target, false);
@@ -480,62 +436,32 @@ mod tests {
     fn an_open_sensor_latches_on_the_third_reading_and_holds_the_heater_off_before() {
         let mut guard = HeaterGuard::new();
         let open = Err(SensorFault::Open);
-        assert_eq!(
-            guard.check(&HOT, PERIOD, open, c(200), false),
-            Verdict::Hold
-        );
-        assert_eq!(
-            guard.check(&HOT, PERIOD, open, c(200), false),
-            Verdict::Hold
-        );
-        assert_eq!(
-            guard.check(&HOT, PERIOD, open, c(200), false),
-            Verdict::Latched(ThermalFault::SensorOpen)
-        );
-        assert_eq!(
-            guard.check(&HOT, PERIOD, Ok(c(25)), c(200), false),
-            Verdict::Faulted(Some(c(25)))
-        );
+        assert_eq!(guard.check(&HOT, PERIOD, open, c(200), false), Verdict::Hold);
+        assert_eq!(guard.check(&HOT, PERIOD, open, c(200), false), Verdict::Hold);
+        assert_eq!(guard.check(&HOT, PERIOD, open, c(200), false), Verdict::Latched(ThermalFault::SensorOpen));
+        assert_eq!(guard.check(&HOT, PERIOD, Ok(c(25)), c(200), false), Verdict::Faulted(Some(c(25))));
         assert_eq!(guard.fault(), Some(ThermalFault::SensorOpen));
     }
 
     #[test]
     fn a_shorted_sensor_latches_and_a_single_glitch_does_not() {
         let mut guard = HeaterGuard::new();
-        assert_eq!(
-            guard.check(&HOT, PERIOD, Err(SensorFault::Shorted), c(0), false),
-            Verdict::Hold
-        );
-        assert_eq!(
-            guard.check(&HOT, PERIOD, Ok(c(25)), c(0), false),
-            Verdict::Run(c(25))
-        );
-        assert_eq!(
-            run(&mut guard, &HOT, Err(SensorFault::Shorted), c(0), 3),
-            Verdict::Latched(ThermalFault::SensorShorted)
-        );
+        assert_eq!(guard.check(&HOT, PERIOD, Err(SensorFault::Shorted), c(0), false), Verdict::Hold);
+        assert_eq!(guard.check(&HOT, PERIOD, Ok(c(25)), c(0), false), Verdict::Run(c(25)));
+        assert_eq!(run(&mut guard, &HOT, Err(SensorFault::Shorted), c(0), 3), Verdict::Latched(ThermalFault::SensorShorted));
     }
 
     #[test]
     fn max_temp_latches_on_one_reading_above_the_limit() {
         let mut guard = HeaterGuard::new();
-        assert_eq!(
-            guard.check(&HOT, PERIOD, Ok(Celsius(27_500)), c(0), false),
-            Verdict::Run(Celsius(27_500))
-        );
-        assert_eq!(
-            guard.check(&HOT, PERIOD, Ok(Celsius(27_501)), c(0), false),
-            Verdict::Latched(ThermalFault::MaxTemp)
-        );
+        assert_eq!(guard.check(&HOT, PERIOD, Ok(Celsius(27_500)), c(0), false), Verdict::Run(Celsius(27_500)));
+        assert_eq!(guard.check(&HOT, PERIOD, Ok(Celsius(27_501)), c(0), false), Verdict::Latched(ThermalFault::MaxTemp));
     }
 
     #[test]
     fn min_temp_latches_after_consecutive_cold_readings_even_with_the_heater_off() {
         let mut guard = HeaterGuard::new();
-        assert_eq!(
-            run(&mut guard, &HOT, Ok(Celsius(499)), c(0), 3),
-            Verdict::Latched(ThermalFault::MinTemp)
-        );
+        assert_eq!(run(&mut guard, &HOT, Ok(Celsius(499)), c(0), 3), Verdict::Latched(ThermalFault::MinTemp));
     }
 
     #[test]
@@ -543,27 +469,12 @@ mod tests {
         let mut guard = HeaterGuard::new();
         guard.on_target(&HOT, PERIOD, c(210), Some(c(209)));
         // Approaching: a low reading is not runaway.
-        assert_eq!(
-            run(&mut guard, &HOT, Ok(c(200)), c(210), 1000),
-            Verdict::Run(c(200))
-        );
-        assert_eq!(
-            run(&mut guard, &HOT, Ok(c(210)), c(210), 1),
-            Verdict::Run(c(210))
-        );
+        assert_eq!(run(&mut guard, &HOT, Ok(c(200)), c(210), 1000), Verdict::Run(c(200)));
+        assert_eq!(run(&mut guard, &HOT, Ok(c(210)), c(210), 1), Verdict::Run(c(210)));
         // Holding: 4 °C below is still fine; below that for 40 s is not.
-        assert_eq!(
-            run(&mut guard, &HOT, Ok(c(206)), c(210), 1000),
-            Verdict::Run(c(206))
-        );
-        assert_eq!(
-            run(&mut guard, &HOT, Ok(Celsius(20_599)), c(210), 399),
-            Verdict::Run(Celsius(20_599))
-        );
-        assert_eq!(
-            run(&mut guard, &HOT, Ok(Celsius(20_599)), c(210), 1),
-            Verdict::Latched(ThermalFault::ThermalRunaway)
-        );
+        assert_eq!(run(&mut guard, &HOT, Ok(c(206)), c(210), 1000), Verdict::Run(c(206)));
+        assert_eq!(run(&mut guard, &HOT, Ok(Celsius(20_599)), c(210), 399), Verdict::Run(Celsius(20_599)));
+        assert_eq!(run(&mut guard, &HOT, Ok(Celsius(20_599)), c(210), 1), Verdict::Latched(ThermalFault::ThermalRunaway));
     }
 
     #[test]
@@ -571,14 +482,8 @@ mod tests {
         let mut guard = HeaterGuard::new();
         guard.on_target(&HOT, PERIOD, c(210), Some(c(210)));
         for _ in 0..10 {
-            assert_eq!(
-                run(&mut guard, &HOT, Ok(c(200)), c(210), 399),
-                Verdict::Run(c(200))
-            );
-            assert_eq!(
-                run(&mut guard, &HOT, Ok(c(208)), c(210), 1),
-                Verdict::Run(c(208))
-            );
+            assert_eq!(run(&mut guard, &HOT, Ok(c(200)), c(210), 399), Verdict::Run(c(200)));
+            assert_eq!(run(&mut guard, &HOT, Ok(c(208)), c(210), 1), Verdict::Run(c(208)));
         }
     }
 
@@ -586,24 +491,9 @@ mod tests {
     fn bed_runaway_uses_20_s_and_2_degrees() {
         let mut guard = HeaterGuard::new();
         guard.on_target(&GuardConfig::BED, PERIOD, c(60), Some(c(59)));
-        assert_eq!(
-            run(&mut guard, &GuardConfig::BED, Ok(c(60)), c(60), 1),
-            Verdict::Run(c(60))
-        );
-        assert_eq!(
-            run(&mut guard, &GuardConfig::BED, Ok(c(58)), c(60), 1000),
-            Verdict::Run(c(58))
-        );
-        assert_eq!(
-            run(
-                &mut guard,
-                &GuardConfig::BED,
-                Ok(Celsius(5_799)),
-                c(60),
-                200
-            ),
-            Verdict::Latched(ThermalFault::ThermalRunaway)
-        );
+        assert_eq!(run(&mut guard, &GuardConfig::BED, Ok(c(60)), c(60), 1), Verdict::Run(c(60)));
+        assert_eq!(run(&mut guard, &GuardConfig::BED, Ok(c(58)), c(60), 1000), Verdict::Run(c(58)));
+        assert_eq!(run(&mut guard, &GuardConfig::BED, Ok(Celsius(5_799)), c(60), 200), Verdict::Latched(ThermalFault::ThermalRunaway));
     }
 
     #[test]
@@ -614,24 +504,15 @@ mod tests {
         run(&mut guard, &HOT, Ok(c(200)), c(210), 399);
         // Raising the target starts over: approaching, no runaway.
         guard.on_target(&HOT, PERIOD, c(215), Some(c(200)));
-        assert_eq!(
-            run(&mut guard, &HOT, Ok(c(212)), c(215), 1000),
-            Verdict::Run(c(212))
-        );
+        assert_eq!(run(&mut guard, &HOT, Ok(c(212)), c(215), 1000), Verdict::Run(c(212)));
     }
 
     #[test]
     fn heating_that_gains_less_than_2_degrees_in_20_s_fails() {
         let mut guard = HeaterGuard::new();
         guard.on_target(&HOT, PERIOD, c(210), Some(c(25)));
-        assert_eq!(
-            run(&mut guard, &HOT, Ok(Celsius(2_699)), c(210), 199),
-            Verdict::Run(Celsius(2_699))
-        );
-        assert_eq!(
-            run(&mut guard, &HOT, Ok(Celsius(2_699)), c(210), 1),
-            Verdict::Latched(ThermalFault::HeatingFailed)
-        );
+        assert_eq!(run(&mut guard, &HOT, Ok(Celsius(2_699)), c(210), 199), Verdict::Run(Celsius(2_699)));
+        assert_eq!(run(&mut guard, &HOT, Ok(Celsius(2_699)), c(210), 1), Verdict::Latched(ThermalFault::HeatingFailed));
     }
 
     #[test]
@@ -642,22 +523,13 @@ mod tests {
         let mut t = 2_500;
         while t < 21_000 {
             t += 2;
-            assert!(
-                matches!(
-                    guard.check(&HOT, PERIOD, Ok(Celsius(t)), c(210), false),
-                    Verdict::Run(_)
-                ),
-                "{t}"
-            );
+            assert!(matches!(guard.check(&HOT, PERIOD, Ok(Celsius(t)), c(210), false), Verdict::Run(_)), "{t}");
         }
         // Within 6 °C of the target the watch is off: a stall there is the
         // runaway check's business, not the watch's.
         let mut guard = HeaterGuard::new();
         guard.on_target(&HOT, PERIOD, c(210), Some(c(205)));
-        assert_eq!(
-            run(&mut guard, &HOT, Ok(c(205)), c(210), 10_000),
-            Verdict::Run(c(205))
-        );
+        assert_eq!(run(&mut guard, &HOT, Ok(c(205)), c(210), 10_000), Verdict::Run(c(205)));
     }
 
     #[test]
@@ -666,13 +538,7 @@ mod tests {
         guard.on_target(&GuardConfig::BED, PERIOD, c(100), Some(c(24)));
         for sample in 0..15_000 {
             let t = Celsius(2_400 + sample * 7 / 10); // 0.07 °C/s at 10 samples/s
-            assert!(
-                matches!(
-                    guard.check(&GuardConfig::BED, PERIOD, Ok(t), c(100), false),
-                    Verdict::Run(_)
-                ),
-                "{t:?}"
-            );
+            assert!(matches!(guard.check(&GuardConfig::BED, PERIOD, Ok(t), c(100), false), Verdict::Run(_)), "{t:?}");
         }
     }
 
@@ -680,14 +546,8 @@ mod tests {
     fn a_target_set_before_the_first_reading_arms_the_watch_at_that_reading() {
         let mut guard = HeaterGuard::new();
         guard.on_target(&HOT, PERIOD, c(210), None);
-        assert_eq!(
-            run(&mut guard, &HOT, Ok(c(25)), c(210), 200),
-            Verdict::Run(c(25))
-        );
-        assert_eq!(
-            run(&mut guard, &HOT, Ok(c(25)), c(210), 1),
-            Verdict::Latched(ThermalFault::HeatingFailed)
-        );
+        assert_eq!(run(&mut guard, &HOT, Ok(c(25)), c(210), 200), Verdict::Run(c(25)));
+        assert_eq!(run(&mut guard, &HOT, Ok(c(25)), c(210), 1), Verdict::Latched(ThermalFault::HeatingFailed));
     }
 
     #[test]
@@ -695,15 +555,9 @@ mod tests {
         let mut guard = HeaterGuard::new();
         guard.on_target(&HOT, PERIOD, c(200), Some(c(200)));
         for _ in 0..1000 {
-            assert_eq!(
-                guard.check(&HOT, PERIOD, Ok(c(190)), c(200), true),
-                Verdict::Run(c(190))
-            );
+            assert_eq!(guard.check(&HOT, PERIOD, Ok(c(190)), c(200), true), Verdict::Run(c(190)));
         }
-        assert_eq!(
-            guard.check(&HOT, PERIOD, Ok(c(280)), c(200), true),
-            Verdict::Latched(ThermalFault::MaxTemp)
-        );
+        assert_eq!(guard.check(&HOT, PERIOD, Ok(c(280)), c(200), true), Verdict::Latched(ThermalFault::MaxTemp));
     }
 
     #[test]
@@ -711,45 +565,18 @@ mod tests {
         let mut guard = HeaterGuard::new();
         run(&mut guard, &HOT, Err(SensorFault::Open), c(0), 3);
         guard.clear();
-        assert_eq!(
-            guard.check(&HOT, PERIOD, Ok(c(25)), c(0), false),
-            Verdict::Run(c(25))
-        );
+        assert_eq!(guard.check(&HOT, PERIOD, Ok(c(25)), c(0), false), Verdict::Run(c(25)));
     }
 
     #[test]
     fn fault_messages_are_marlins() {
         let cases = [
-            (
-                ThermalFault::ThermalRunaway,
-                HeaterId::Hotend(0),
-                "Error:Thermal Runaway, system stopped! Heater_ID: 0\n",
-            ),
-            (
-                ThermalFault::MaxTemp,
-                HeaterId::Bed,
-                "Error:MAXTEMP triggered, system stopped! Heater_ID: bed\n",
-            ),
-            (
-                ThermalFault::HeatingFailed,
-                HeaterId::Hotend(0),
-                "Error:Heating failed, system stopped! Heater_ID: 0\n",
-            ),
-            (
-                ThermalFault::MinTemp,
-                HeaterId::Hotend(1),
-                "Error:MINTEMP triggered, system stopped! Heater_ID: 1\n",
-            ),
-            (
-                ThermalFault::SensorOpen,
-                HeaterId::Chamber,
-                "Error:MINTEMP triggered (thermistor open), system stopped! Heater_ID: chamber\n",
-            ),
-            (
-                ThermalFault::SensorShorted,
-                HeaterId::Bed,
-                "Error:MAXTEMP triggered (thermistor shorted), system stopped! Heater_ID: bed\n",
-            ),
+            (ThermalFault::ThermalRunaway, HeaterId::Hotend(0), "Error:Thermal Runaway, system stopped! Heater_ID: 0\n"),
+            (ThermalFault::MaxTemp, HeaterId::Bed, "Error:MAXTEMP triggered, system stopped! Heater_ID: bed\n"),
+            (ThermalFault::HeatingFailed, HeaterId::Hotend(0), "Error:Heating failed, system stopped! Heater_ID: 0\n"),
+            (ThermalFault::MinTemp, HeaterId::Hotend(1), "Error:MINTEMP triggered, system stopped! Heater_ID: 1\n"),
+            (ThermalFault::SensorOpen, HeaterId::Chamber, "Error:MINTEMP triggered (thermistor open), system stopped! Heater_ID: chamber\n"),
+            (ThermalFault::SensorShorted, HeaterId::Bed, "Error:MAXTEMP triggered (thermistor shorted), system stopped! Heater_ID: bed\n"),
         ];
         for (fault, heater, line) in cases {
             let mut out = Text::default();
@@ -761,24 +588,11 @@ mod tests {
     #[test]
     fn cold_extrusion_is_refused_below_170_on_a_hot_end_and_175_on_the_line() {
         let hot_end = ColdExtrusionGuard::HOTEND;
-        assert_eq!(
-            hot_end.check(Celsius(16_999)),
-            Err(ColdExtrusion {
-                measured: Celsius(16_999),
-                minimum: c(170)
-            })
-        );
+        assert_eq!(hot_end.check(Celsius(16_999)), Err(ColdExtrusion { measured: Celsius(16_999), minimum: c(170) }));
         assert_eq!(hot_end.check(c(170)), Ok(()));
         let line = ColdExtrusionGuard::EXTRUSION_LINE;
         assert!(line.check(c(174)).is_err());
-        assert_eq!(
-            ColdExtrusionReading {
-                guard: &line,
-                measured: c(175)
-            }
-            .check(),
-            Ok(())
-        );
+        assert_eq!(ColdExtrusionReading { guard: &line, measured: c(175) }.check(), Ok(()));
     }
 
     #[test]

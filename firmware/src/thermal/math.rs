@@ -80,22 +80,7 @@ mod tests {
 
     #[test]
     fn saturating_mul_matches_i64_or_saturates() {
-        let values = [
-            0,
-            1,
-            -1,
-            7,
-            -7,
-            46_340,
-            46_341,
-            -46_341,
-            65_536,
-            -65_536,
-            32_768,
-            i32::MAX,
-            i32::MIN,
-            i32::MIN + 1,
-        ];
+        let values = [0, 1, -1, 7, -7, 46_340, 46_341, -46_341, 65_536, -65_536, 32_768, i32::MAX, i32::MIN, i32::MIN + 1];
         for a in values {
             for b in values {
                 let exact = i64::from(a) * i64::from(b);
@@ -116,23 +101,11 @@ mod tests {
 
     #[test]
     fn mul_div_round_matches_u128_and_refuses_what_does_not_fit() {
-        let values = [
-            0u32,
-            1,
-            2,
-            3,
-            355,
-            0xFFFF,
-            0x1_0000,
-            104_348,
-            0xDEAD_BEEF,
-            u32::MAX,
-        ];
+        let values = [0u32, 1, 2, 3, 355, 0xFFFF, 0x1_0000, 104_348, 0xDEAD_BEEF, u32::MAX];
         for x in values {
             for m in values {
                 for n in values {
-                    let exact = (u128::from(x) * u128::from(m) + u128::from(n / 2))
-                        .checked_div(u128::from(n));
+                    let exact = (u128::from(x) * u128::from(m) + u128::from(n / 2)).checked_div(u128::from(n));
                     let expected = exact.and_then(|q| u32::try_from(q).ok());
                     assert_eq!(mul_div_round(x, m, n), expected, "{x} × {m} / {n}");
                 }

@@ -137,10 +137,7 @@ impl Celsius {
 }
 
 impl ufmt::uDisplay for Celsius {
-    fn fmt<W: ufmt::uWrite + ?Sized>(
-        &self,
-        f: &mut ufmt::Formatter<'_, W>,
-    ) -> Result<(), W::Error> {
+    fn fmt<W: ufmt::uWrite + ?Sized>(&self, f: &mut ufmt::Formatter<'_, W>) -> Result<(), W::Error> {
         crate::reply::write_fixed(f, self.0, 2)
     }
 }
@@ -156,10 +153,7 @@ pub enum HeaterId {
 }
 
 impl ufmt::uDisplay for HeaterId {
-    fn fmt<W: ufmt::uWrite + ?Sized>(
-        &self,
-        f: &mut ufmt::Formatter<'_, W>,
-    ) -> Result<(), W::Error> {
+    fn fmt<W: ufmt::uWrite + ?Sized>(&self, f: &mut ufmt::Formatter<'_, W>) -> Result<(), W::Error> {
         match self {
             Self::Hotend(n) => ufmt::uwrite!(f, "{}", n),
             Self::Bed => f.write_str("bed"),
@@ -179,10 +173,6 @@ pub struct Heater {
 
 impl Heater {
     pub const fn new() -> Self {
-        Self {
-            measured: Celsius(0),
-            target: Celsius(0),
-            power: 0,
-        }
+        Self { measured: Celsius(0), target: Celsius(0), power: 0 }
     }
 }

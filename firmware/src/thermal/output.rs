@@ -26,10 +26,7 @@ pub struct TimeProportioning {
 
 impl TimeProportioning {
     /// SPEC §4: 200 ms window, slots of at least 10 ms.
-    pub const SSR: TimeProportioning = TimeProportioning {
-        period_ms: 200,
-        min_slot_ms: 10,
-    };
+    pub const SSR: TimeProportioning = TimeProportioning { period_ms: 200, min_slot_ms: 10 };
 
     /// On-time in a window for `duty` (0–255).
     pub fn on_ms(&self, duty: u8) -> u16 {
@@ -72,11 +69,7 @@ impl Default for SlowPwm {
 
 impl SlowPwm {
     pub const fn new() -> Self {
-        Self {
-            window_start_ms: 0,
-            on_ms: 0,
-            running: false,
-        }
+        Self { window_start_ms: 0, on_ms: 0, running: false }
     }
 
     /// The pin level at `now_ms` (call at least every millisecond for
@@ -89,11 +82,7 @@ impl SlowPwm {
         if !self.running || elapsed >= period {
             // Windows follow each other back to back; after a stall (or
             // at the start) a new one starts now.
-            self.window_start_ms = if self.running && elapsed < 2 * period {
-                self.window_start_ms.wrapping_add(period)
-            } else {
-                now_ms
-            };
+            self.window_start_ms = if self.running && elapsed < 2 * period { self.window_start_ms.wrapping_add(period) } else { now_ms };
             self.on_ms = timing.on_ms(duty);
             self.running = true;
         }
@@ -118,7 +107,7 @@ mod tests {
         assert_eq!(SSR.on_ms(0), 0);
         assert_eq!(SSR.on_ms(12), 0);
         assert_eq!(SSR.on_ms(13), 10); // 10.2 ms
-                                       // 95 % of 255 is 242.25: 242 is below (189.8 ms on, 10.2 off), 243 is full.
+        // 95 % of 255 is 242.25: 242 is below (189.8 ms on, 10.2 off), 243 is full.
         assert_eq!(SSR.on_ms(242), 190);
         assert_eq!(SSR.on_ms(243), 200);
         assert_eq!(SSR.on_ms(255), 200);
@@ -129,10 +118,7 @@ mod tests {
     fn every_duty_gives_slots_of_at_least_ten_ms() {
         for duty in 0..=255u8 {
             let on = SSR.on_ms(duty);
-            assert!(
-                on == 0 || on == 200 || (10..=190).contains(&on),
-                "duty {duty}: {on} ms"
-            );
+            assert!(on == 0 || on == 200 || (10..=190).contains(&on), "duty {duty}: {on} ms");
         }
     }
 
@@ -154,22 +140,14 @@ mod tests {
 
     #[test]
     fn a_window_is_on_for_the_duty_then_off() {
-        assert_eq!(
-            slots(&[128, 128]),
-            [(true, 100), (false, 100), (true, 100), (false, 100)]
-        );
+        assert_eq!(slots(&[128, 128]), [(true, 100), (false, 100), (true, 100), (false, 100)]);
         assert_eq!(slots(&[13]), [(true, 10), (false, 190)]);
-        assert_eq!(
-            slots(&[12, 255, 243, 0]),
-            [(false, 200), (true, 400), (false, 200)]
-        );
+        assert_eq!(slots(&[12, 255, 243, 0]), [(false, 200), (true, 400), (false, 200)]);
     }
 
     #[test]
     fn any_sequence_of_duties_keeps_every_inner_slot_at_least_ten_ms() {
-        let duties: std::vec::Vec<u8> = (0..200u32)
-            .map(|i| ((i * 97 + i * i * 13) % 256) as u8)
-            .collect();
+        let duties: std::vec::Vec<u8> = (0..200u32).map(|i| ((i * 97 + i * i * 13) % 256) as u8).collect();
         let slots = slots(&duties);
         // The last slot may be cut by the end of the run.
         for (level, length) in &slots[..slots.len() - 1] {

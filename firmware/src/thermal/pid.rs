@@ -51,68 +51,31 @@ impl Gains {
     pub const MAX: u32 = 100_000_000;
 
     /// Marlin's stock hot end (E3D-like): Kp 22.2, Ki 1.08, Kd 114.
-    pub const MARLIN_HOTEND: Gains = Gains {
-        kp: 222_000,
-        ki: 10_800,
-        kd: 1_140_000,
-    };
+    pub const MARLIN_HOTEND: Gains = Gains { kp: 222_000, ki: 10_800, kd: 1_140_000 };
     /// Marlin's stock bed: Kp 10.00, Ki 0.023, Kd 305.4.
-    pub const MARLIN_BED: Gains = Gains {
-        kp: 100_000,
-        ki: 230,
-        kd: 3_054_000,
-    };
+    pub const MARLIN_BED: Gains = Gains { kp: 100_000, ki: 230, kd: 3_054_000 };
     /// SPEC §4 thesis PI (Kp 2.4 %/°C, Ki 0.008 %/(°C·s)) on the 0–255
     /// scale: Kp 6.12, Ki 0.0204, no D.
-    pub const THESIS_BARREL: Gains = Gains {
-        kp: 61_200,
-        ki: 204,
-        kd: 0,
-    };
+    pub const THESIS_BARREL: Gains = Gains { kp: 61_200, ki: 204, kd: 0 };
 
     /// Gains × 10⁴ (e.g. from `Decimal::to_scaled(4)`); `None` if one is
     /// negative or above [`Gains::MAX`].
     pub fn new(kp: i32, ki: i32, kd: i32) -> Option<Self> {
-        let check = |value: i32| {
-            if (0..=Self::MAX as i32).contains(&value) {
-                Some(value as u32)
-            } else {
-                None
-            }
-        };
-        Some(Self {
-            kp: check(kp)?,
-            ki: check(ki)?,
-            kd: check(kd)?,
-        })
+        let check = |value: i32| if (0..=Self::MAX as i32).contains(&value) { Some(value as u32) } else { None };
+        Some(Self { kp: check(kp)?, ki: check(ki)?, kd: check(kd)? })
     }
 
     /// `M301 P22.20 I1.08 D114.00` (no newline), the `M503` line.
     pub fn write_m301<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(
-            out,
-            "M301 P{} I{} D{}",
-            Gain(self.kp),
-            Gain(self.ki),
-            Gain(self.kd)
-        )
+        ufmt::uwrite!(out, "M301 P{} I{} D{}", Gain(self.kp), Gain(self.ki), Gain(self.kd))
     }
 }
 
 /// ` Kp: 22.20 Ki: 1.08 Kd: 114.00`, Marlin's line after `M303` cycles
 /// (the leading space is Marlin's).
 impl ufmt::uDisplay for Gains {
-    fn fmt<W: ufmt::uWrite + ?Sized>(
-        &self,
-        f: &mut ufmt::Formatter<'_, W>,
-    ) -> Result<(), W::Error> {
-        ufmt::uwrite!(
-            f,
-            " Kp: {} Ki: {} Kd: {}",
-            Gain(self.kp),
-            Gain(self.ki),
-            Gain(self.kd)
-        )
+    fn fmt<W: ufmt::uWrite + ?Sized>(&self, f: &mut ufmt::Formatter<'_, W>) -> Result<(), W::Error> {
+        ufmt::uwrite!(f, " Kp: {} Ki: {} Kd: {}", Gain(self.kp), Gain(self.ki), Gain(self.kd))
     }
 }
 
@@ -122,10 +85,7 @@ impl ufmt::uDisplay for Gains {
 pub struct Gain(pub u32);
 
 impl ufmt::uDisplay for Gain {
-    fn fmt<W: ufmt::uWrite + ?Sized>(
-        &self,
-        f: &mut ufmt::Formatter<'_, W>,
-    ) -> Result<(), W::Error> {
+    fn fmt<W: ufmt::uWrite + ?Sized>(&self, f: &mut ufmt::Formatter<'_, W>) -> Result<(), W::Error> {
         let (whole, fraction) = (self.0 / 10_000, self.0 % 10_000);
         ufmt::uwrite!(f, "{}.", whole)?;
         let digits = if fraction % 100 == 0 {
@@ -169,19 +129,11 @@ impl Control {
     /// of 15/16 per sample, close to Marlin's `PID_K1` 0.95 (at 100 ms
     /// samples a 1.5 s time constant: Kd 114 would otherwise turn 0.1 °C
     /// of reading noise into 100 counts of output noise).
-    pub const PID: Control = Control::Pid {
-        functional_range_c: 10,
-        derivative_filter_shift: 4,
-    };
+    pub const PID: Control = Control::Pid { functional_range_c: 10, derivative_filter_shift: 4 };
     /// A plain PID/PI with no functional range (SPEC §4's thesis PI).
-    pub const PLAIN_PID: Control = Control::Pid {
-        functional_range_c: 0,
-        derivative_filter_shift: 4,
-    };
+    pub const PLAIN_PID: Control = Control::Pid { functional_range_c: 0, derivative_filter_shift: 4 };
     /// Bang-bang with Marlin's 2 °C bed hysteresis.
-    pub const BANG_BANG: Control = Control::BangBang {
-        hysteresis_tenths: 20,
-    };
+    pub const BANG_BANG: Control = Control::BangBang { hysteresis_tenths: 20 };
 }
 
 /// The memory of the PID law: 8 bytes.
@@ -195,10 +147,7 @@ pub struct PidState {
 
 impl PidState {
     pub const fn new() -> Self {
-        Self {
-            integral: 0,
-            derivative: 0,
-        }
+        Self { integral: 0, derivative: 0 }
     }
 
     /// Forget the integral and the derivative (heater switched off).
@@ -226,35 +175,15 @@ impl PidState {
         measured: Celsius,
         previous: Celsius,
     ) -> u8 {
-        self.observe(
-            gains,
-            derivative_filter_shift,
-            period_ms,
-            measured,
-            previous,
-        );
-        self.control(
-            gains,
-            functional_range_c,
-            period_ms,
-            max_power,
-            target,
-            measured,
-        )
+        self.observe(gains, derivative_filter_shift, period_ms, measured, previous);
+        self.control(gains, functional_range_c, period_ms, max_power, target, measured)
     }
 
     /// Every sample: the derivative on the measurement (no kick when the
     /// target changes), a rate, so it may be sampled faster than the law
     /// runs.
     #[inline(never)]
-    pub fn observe(
-        &mut self,
-        gains: &Gains,
-        derivative_filter_shift: u8,
-        sample_period_ms: u16,
-        measured: Celsius,
-        previous: Celsius,
-    ) {
+    pub fn observe(&mut self, gains: &Gains, derivative_filter_shift: u8, sample_period_ms: u16, measured: Celsius, previous: Celsius) {
         let period = i32::from(sample_period_ms.max(1));
         // Temperatures are table values (−30..420 °C): no overflow.
         let rise = measured.0 - previous.0;
@@ -266,15 +195,7 @@ impl PidState {
 
     /// The law, every `control_period_ms`: the duty (0..=`max_power`).
     #[inline(never)]
-    pub fn control(
-        &mut self,
-        gains: &Gains,
-        functional_range_c: u8,
-        control_period_ms: u16,
-        max_power: u8,
-        target: Celsius,
-        measured: Celsius,
-    ) -> u8 {
+    pub fn control(&mut self, gains: &Gains, functional_range_c: u8, control_period_ms: u16, max_power: u8, target: Celsius, measured: Celsius) -> u8 {
         let period = i32::from(control_period_ms.max(1));
         let max = i32::from(max_power) * MICRO;
         let error = target.0 - measured.0;
@@ -309,13 +230,7 @@ fn bounded(value: i32) -> i32 {
 }
 
 /// Bang-bang with hysteresis: `on` is the heater's state before this sample.
-pub fn bang_bang(
-    hysteresis_tenths: u8,
-    max_power: u8,
-    target: Celsius,
-    measured: Celsius,
-    on: bool,
-) -> u8 {
+pub fn bang_bang(hysteresis_tenths: u8, max_power: u8, target: Celsius, measured: Celsius, on: bool) -> u8 {
     let band = i32::from(hysteresis_tenths) * 10;
     let on = if measured.0 <= target.0.saturating_sub(band) {
         true
@@ -352,27 +267,9 @@ mod tests {
     fn proportional_only_gives_kp_times_error() {
         // Kp 2.0 × 10 °C = 20 counts; Kp 2.0 × 0.25 °C = 0.5 → rounds to 1.
         let mut pid = PidState::new();
-        let out = pid.update(
-            &pi(20_000, 0),
-            0,
-            0,
-            T,
-            255,
-            Celsius(20_000),
-            Celsius(19_000),
-            Celsius(19_000),
-        );
+        let out = pid.update(&pi(20_000, 0), 0, 0, T, 255, Celsius(20_000), Celsius(19_000), Celsius(19_000));
         assert_eq!(out, 20);
-        let out = pid.update(
-            &pi(20_000, 0),
-            0,
-            0,
-            T,
-            255,
-            Celsius(20_000),
-            Celsius(19_975),
-            Celsius(19_975),
-        );
+        let out = pid.update(&pi(20_000, 0), 0, 0, T, 255, Celsius(20_000), Celsius(19_975), Celsius(19_975));
         assert_eq!(out, 1);
     }
 
@@ -382,30 +279,12 @@ mod tests {
         // 10 samples make the same count.
         let mut pid = PidState::new();
         for expected in 1..=5 {
-            pid.update(
-                &pi(0, 5_000),
-                0,
-                0,
-                1000,
-                255,
-                Celsius(20_200),
-                Celsius(20_000),
-                Celsius(20_000),
-            );
+            pid.update(&pi(0, 5_000), 0, 0, 1000, 255, Celsius(20_200), Celsius(20_000), Celsius(20_000));
             assert_eq!(pid.integral_counts(), expected);
         }
         let mut fast = PidState::new();
         for _ in 0..10 {
-            fast.update(
-                &pi(0, 5_000),
-                0,
-                0,
-                100,
-                255,
-                Celsius(20_200),
-                Celsius(20_000),
-                Celsius(20_000),
-            );
+            fast.update(&pi(0, 5_000), 0, 0, 100, 255, Celsius(20_200), Celsius(20_000), Celsius(20_000));
         }
         assert_eq!(fast.integral_counts(), 1);
     }
@@ -414,52 +293,15 @@ mod tests {
     fn derivative_acts_on_the_measurement_not_on_a_target_step() {
         // Kd 10 counts·s/°C, no filter: a 0.5 °C rise in 1 s takes 5 counts
         // off; a target step with a steady measurement takes nothing.
-        let gains = Gains {
-            kp: 0,
-            ki: 0,
-            kd: 100_000,
-        };
+        let gains = Gains { kp: 0, ki: 0, kd: 100_000 };
         let mut pid = PidState::new();
-        let base = pid.update(
-            &Gains {
-                kp: 100_000,
-                ..gains
-            },
-            0,
-            0,
-            T,
-            255,
-            Celsius(10_000),
-            Celsius(9_000),
-            Celsius(9_000),
-        );
+        let base = pid.update(&Gains { kp: 100_000, ..gains }, 0, 0, T, 255, Celsius(10_000), Celsius(9_000), Celsius(9_000));
         assert_eq!(base, 100);
-        let out = pid.update(
-            &Gains {
-                kp: 100_000,
-                ..gains
-            },
-            0,
-            0,
-            T,
-            255,
-            Celsius(10_000),
-            Celsius(9_050),
-            Celsius(9_000),
-        );
+        let out = pid.update(&Gains { kp: 100_000, ..gains }, 0, 0, T, 255, Celsius(10_000), Celsius(9_050), Celsius(9_000));
         // P = 10 × 9.5 = 95, D = 10 × 0.5 = 5.
         assert_eq!(out, 90);
         let mut pid = PidState::new();
-        let out = pid.update(
-            &Gains { kp: 0, ..gains },
-            0,
-            0,
-            T,
-            255,
-            Celsius(30_000),
-            Celsius(9_000),
-            Celsius(9_000),
-        );
+        let out = pid.update(&Gains { kp: 0, ..gains }, 0, 0, T, 255, Celsius(30_000), Celsius(9_000), Celsius(9_000));
         assert_eq!(out, 0);
     }
 
@@ -467,56 +309,21 @@ mod tests {
     fn derivative_scales_with_the_sample_period() {
         // The same 0.5 °C/s rise sampled every 100 ms (0.05 °C per sample)
         // is the same derivative: Kd 10 × 0.5 = 5 counts.
-        let gains = Gains {
-            kp: 100_000,
-            ki: 0,
-            kd: 100_000,
-        };
+        let gains = Gains { kp: 100_000, ki: 0, kd: 100_000 };
         let mut pid = PidState::new();
-        let out = pid.update(
-            &gains,
-            0,
-            0,
-            100,
-            255,
-            Celsius(10_000),
-            Celsius(9_005),
-            Celsius(9_000),
-        );
+        let out = pid.update(&gains, 0, 0, 100, 255, Celsius(10_000), Celsius(9_005), Celsius(9_000));
         // P = 10 × 9.95 = 99.5, D = 5 → 94.5 → 95 (rounding half up).
         assert_eq!(out, 95);
     }
 
     #[test]
     fn derivative_filter_moves_a_quarter_of_the_way_with_shift_two() {
-        let gains = Gains {
-            kp: 1_000_000,
-            ki: 0,
-            kd: 400_000,
-        }; // Kp 100, Kd 40
+        let gains = Gains { kp: 1_000_000, ki: 0, kd: 400_000 }; // Kp 100, Kd 40
         let mut pid = PidState::new();
         // Rise 1 °C in 1 s: raw D = 40; filtered: 10, then 17.5, ...
-        let out = pid.update(
-            &gains,
-            0,
-            2,
-            T,
-            255,
-            Celsius(10_000),
-            Celsius(9_900),
-            Celsius(9_800),
-        );
+        let out = pid.update(&gains, 0, 2, T, 255, Celsius(10_000), Celsius(9_900), Celsius(9_800));
         assert_eq!(out, 100 - 10);
-        let out = pid.update(
-            &gains,
-            0,
-            2,
-            T,
-            255,
-            Celsius(10_000),
-            Celsius(9_900),
-            Celsius(9_800),
-        );
+        let out = pid.update(&gains, 0, 2, T, 255, Celsius(10_000), Celsius(9_900), Celsius(9_800));
         assert_eq!(out, 83); // 100 − 17.5 = 82.5, rounded half up
     }
 
@@ -525,16 +332,7 @@ mod tests {
         // Kp 6.12 × 186 °C saturates: the integral must not grow at all.
         let mut pid = PidState::new();
         for _ in 0..1000 {
-            let out = pid.update(
-                &Gains::THESIS_BARREL,
-                0,
-                0,
-                T,
-                255,
-                Celsius(21_000),
-                Celsius(2_400),
-                Celsius(2_400),
-            );
+            let out = pid.update(&Gains::THESIS_BARREL, 0, 0, T, 255, Celsius(21_000), Celsius(2_400), Celsius(2_400));
             assert_eq!(out, 255);
         }
         assert_eq!(pid.integral_counts(), 0);
@@ -544,29 +342,11 @@ mod tests {
     fn integral_is_clamped_to_the_output_range_and_never_negative() {
         let mut pid = PidState::new();
         for _ in 0..100 {
-            pid.update(
-                &pi(0, 10_000_000),
-                0,
-                0,
-                T,
-                200,
-                Celsius(5_000),
-                Celsius(4_000),
-                Celsius(4_000),
-            );
+            pid.update(&pi(0, 10_000_000), 0, 0, T, 200, Celsius(5_000), Celsius(4_000), Celsius(4_000));
         }
         assert_eq!(pid.integral_counts(), 200);
         for _ in 0..100 {
-            pid.update(
-                &pi(0, 10_000_000),
-                0,
-                0,
-                T,
-                200,
-                Celsius(5_000),
-                Celsius(6_000),
-                Celsius(6_000),
-            );
+            pid.update(&pi(0, 10_000_000), 0, 0, T, 200, Celsius(5_000), Celsius(6_000), Celsius(6_000));
         }
         assert_eq!(pid.integral_counts(), 0);
     }
@@ -574,27 +354,9 @@ mod tests {
     #[test]
     fn output_is_limited_to_max_power() {
         let mut pid = PidState::new();
-        let out = pid.update(
-            &pi(1_000_000, 0),
-            0,
-            0,
-            T,
-            127,
-            Celsius(20_000),
-            Celsius(2_000),
-            Celsius(2_000),
-        );
+        let out = pid.update(&pi(1_000_000, 0), 0, 0, T, 127, Celsius(20_000), Celsius(2_000), Celsius(2_000));
         assert_eq!(out, 127);
-        let out = pid.update(
-            &pi(1_000_000, 0),
-            0,
-            0,
-            T,
-            127,
-            Celsius(2_000),
-            Celsius(20_000),
-            Celsius(20_000),
-        );
+        let out = pid.update(&pi(1_000_000, 0), 0, 0, T, 127, Celsius(2_000), Celsius(20_000), Celsius(20_000));
         assert_eq!(out, 0);
     }
 
@@ -602,85 +364,21 @@ mod tests {
     fn functional_range_gives_full_power_far_below_and_off_far_above() {
         let mut pid = PidState::new();
         let gains = Gains::MARLIN_HOTEND;
-        assert_eq!(
-            pid.update(
-                &gains,
-                10,
-                2,
-                100,
-                255,
-                Celsius(21_000),
-                Celsius(19_999),
-                Celsius(19_999)
-            ),
-            255
-        );
-        assert_eq!(
-            pid.update(
-                &gains,
-                10,
-                2,
-                100,
-                255,
-                Celsius(21_000),
-                Celsius(22_001),
-                Celsius(22_001)
-            ),
-            0
-        );
+        assert_eq!(pid.update(&gains, 10, 2, 100, 255, Celsius(21_000), Celsius(19_999), Celsius(19_999)), 255);
+        assert_eq!(pid.update(&gains, 10, 2, 100, 255, Celsius(21_000), Celsius(22_001), Celsius(22_001)), 0);
         assert_eq!(pid.integral_counts(), 0);
         // Within 10 °C the law runs: Kp 22.2 × 5 °C = 111 counts, plus the
         // first integral step Ki 1.08 × 5 °C × 0.1 s = 0.54 → 111.54 → 112.
         let mut pid = PidState::new();
-        assert_eq!(
-            pid.update(
-                &gains,
-                10,
-                2,
-                100,
-                255,
-                Celsius(21_000),
-                Celsius(20_500),
-                Celsius(20_500)
-            ),
-            112
-        );
+        assert_eq!(pid.update(&gains, 10, 2, 100, 255, Celsius(21_000), Celsius(20_500), Celsius(20_500)), 112);
     }
 
     #[test]
     fn huge_gains_and_errors_saturate_instead_of_wrapping() {
-        let gains = Gains {
-            kp: Gains::MAX,
-            ki: Gains::MAX,
-            kd: Gains::MAX,
-        };
+        let gains = Gains { kp: Gains::MAX, ki: Gains::MAX, kd: Gains::MAX };
         let mut pid = PidState::new();
-        assert_eq!(
-            pid.update(
-                &gains,
-                0,
-                0,
-                1,
-                255,
-                Celsius(100_000),
-                Celsius(-100_000),
-                Celsius(-100_000)
-            ),
-            255
-        );
-        assert_eq!(
-            pid.update(
-                &gains,
-                0,
-                0,
-                1,
-                255,
-                Celsius(-100_000),
-                Celsius(100_000),
-                Celsius(-100_000)
-            ),
-            0
-        );
+        assert_eq!(pid.update(&gains, 0, 0, 1, 255, Celsius(100_000), Celsius(-100_000), Celsius(-100_000)), 255);
+        assert_eq!(pid.update(&gains, 0, 0, 1, 255, Celsius(-100_000), Celsius(100_000), Celsius(-100_000)), 0);
     }
 
     #[test]
@@ -710,10 +408,7 @@ mod tests {
 
     #[test]
     fn gains_from_scaled_decimals_reject_negative_and_huge_values() {
-        assert_eq!(
-            Gains::new(222_000, 10_800, 1_140_000),
-            Some(Gains::MARLIN_HOTEND)
-        );
+        assert_eq!(Gains::new(222_000, 10_800, 1_140_000), Some(Gains::MARLIN_HOTEND));
         assert_eq!(Gains::new(-1, 0, 0), None);
         assert_eq!(Gains::new(0, 100_000_001, 0), None);
     }

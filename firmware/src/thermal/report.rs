@@ -7,11 +7,7 @@ use super::Celsius;
 /// `T:210.00 /210.00 B:60.00 /60.00 @:127 B@:64` (and the newline), Marlin's
 /// `M105` report; `@:` is the duty halved (0–127). Without a bed, `B:…`
 /// and `B@:…` are left out.
-pub fn write_temperatures<W: ufmt::uWrite + ?Sized>(
-    hotend: &HeaterChannel,
-    bed: Option<&HeaterChannel>,
-    out: &mut W,
-) -> Result<(), W::Error> {
+pub fn write_temperatures<W: ufmt::uWrite + ?Sized>(hotend: &HeaterChannel, bed: Option<&HeaterChannel>, out: &mut W) -> Result<(), W::Error> {
     ufmt::uwrite!(out, "T:{} /{}", hotend.measured(), hotend.target())?;
     if let Some(bed) = bed {
         ufmt::uwrite!(out, " B:{} /{}", bed.measured(), bed.target())?;
@@ -36,10 +32,7 @@ impl AutoReport {
     pub const MAX_INTERVAL_S: u8 = 60;
 
     pub const fn new() -> Self {
-        Self {
-            interval_s: 0,
-            next_ms: 0,
-        }
+        Self { interval_s: 0, next_ms: 0 }
     }
 
     pub fn interval_s(&self) -> u8 {
@@ -91,24 +84,10 @@ pub struct WaitConfig {
 impl WaitConfig {
     /// Marlin's hot end: 10 s within 1 °C (restart beyond 3 °C), cooling
     /// at least 1.5 °C per 60 s.
-    pub const HOTEND: WaitConfig = WaitConfig {
-        residency_s: 10,
-        window: 100,
-        hysteresis: 300,
-        min_cooling: 150,
-        cooling_check_s: 60,
-        timeout_s: 0,
-    };
+    pub const HOTEND: WaitConfig = WaitConfig { residency_s: 10, window: 100, hysteresis: 300, min_cooling: 150, cooling_check_s: 60, timeout_s: 0 };
     /// Marlin's bed: 10 s within 1 °C, restart beyond 3 °C, cooling at
     /// least 1 °C per 60 s.
-    pub const BED: WaitConfig = WaitConfig {
-        residency_s: 10,
-        window: 100,
-        hysteresis: 300,
-        min_cooling: 100,
-        cooling_check_s: 60,
-        timeout_s: 0,
-    };
+    pub const BED: WaitConfig = WaitConfig { residency_s: 10, window: 100, hysteresis: 300, min_cooling: 100, cooling_check_s: 60, timeout_s: 0 };
 }
 
 /// Where a wait stands.
@@ -147,15 +126,7 @@ impl TemperatureWait {
     /// Wait for `target`. `wait_for_cooling` is `M109 R`/`M190 R`; with `S`
     /// a heater that is hotter than the target does not wait at all.
     pub fn new(config: WaitConfig, target: Celsius, wait_for_cooling: bool, now_ms: u32) -> Self {
-        Self {
-            config,
-            target,
-            cooling: wait_for_cooling,
-            started_ms: now_ms,
-            residency_since: None,
-            cool_check: None,
-            wants_to_cool: None,
-        }
+        Self { config, target, cooling: wait_for_cooling, started_ms: now_ms, residency_since: None, cool_check: None, wants_to_cool: None }
     }
 
     pub fn target(&self) -> Celsius {
@@ -168,17 +139,13 @@ impl TemperatureWait {
         if self.target.0 <= 0 || (wants_to_cool && !self.cooling) {
             return WaitStatus::Reached;
         }
-        if self.config.timeout_s > 0
-            && now_ms.wrapping_sub(self.started_ms) >= u32::from(self.config.timeout_s) * 1000
-        {
+        if self.config.timeout_s > 0 && now_ms.wrapping_sub(self.started_ms) >= u32::from(self.config.timeout_s) * 1000 {
             return WaitStatus::TimedOut;
         }
         let distance = measured.0.abs_diff(self.target.0);
         match self.residency_since {
             None if distance < u32::from(self.config.window) => self.residency_since = Some(now_ms),
-            Some(_) if distance > u32::from(self.config.hysteresis) => {
-                self.residency_since = Some(now_ms)
-            }
+            Some(_) if distance > u32::from(self.config.hysteresis) => self.residency_since = Some(now_ms),
             _ => {}
         }
         if let Some(since) = self.residency_since {
@@ -226,19 +193,9 @@ mod tests {
         write_temperatures(&hotend, Some(&bed), &mut out).unwrap();
         let t = hotend.measured();
         let mut expected = Text::default();
-        ufmt::uwrite!(
-            expected,
-            "T:{} /210.00 B:{} /0.00 @:127 B@:0\n",
-            t,
-            bed.measured()
-        )
-        .unwrap();
+        ufmt::uwrite!(expected, "T:{} /210.00 B:{} /0.00 @:127 B@:0\n", t, bed.measured()).unwrap();
         assert_eq!(out.0, expected.0);
-        assert!(
-            out.0.starts_with("T:24.9") || out.0.starts_with("T:25.0"),
-            "{}",
-            out.0
-        );
+        assert!(out.0.starts_with("T:24.9") || out.0.starts_with("T:25.0"), "{}", out.0);
         let mut out = Text::default();
         write_temperatures(&hotend, None, &mut out).unwrap();
         assert!(out.0.ends_with(" /210.00 @:127\n"), "{}", out.0);
@@ -279,19 +236,10 @@ mod tests {
     fn m109_waits_until_the_temperature_held_within_a_degree_for_10_s() {
         let mut wait = TemperatureWait::new(WaitConfig::HOTEND, c(210), false, 0);
         assert_eq!(wait.poll(0, c(25)), WaitStatus::Waiting(None));
-        assert_eq!(
-            wait.poll(60_000, Celsius(20_901)),
-            WaitStatus::Waiting(Some(10))
-        );
-        assert_eq!(
-            wait.poll(61_000, Celsius(21_200)),
-            WaitStatus::Waiting(Some(9))
-        );
+        assert_eq!(wait.poll(60_000, Celsius(20_901)), WaitStatus::Waiting(Some(10)));
+        assert_eq!(wait.poll(61_000, Celsius(21_200)), WaitStatus::Waiting(Some(9)));
         // Strayed beyond 3 °C: the residency restarts.
-        assert_eq!(
-            wait.poll(62_000, Celsius(21_301)),
-            WaitStatus::Waiting(Some(10))
-        );
+        assert_eq!(wait.poll(62_000, Celsius(21_301)), WaitStatus::Waiting(Some(10)));
         assert_eq!(wait.poll(71_999, c(210)), WaitStatus::Waiting(Some(0)));
         assert_eq!(wait.poll(72_000, c(210)), WaitStatus::Reached);
     }
@@ -303,10 +251,7 @@ mod tests {
         let mut wait = TemperatureWait::new(WaitConfig::HOTEND, c(180), true, 0);
         assert_eq!(wait.poll(0, c(210)), WaitStatus::Waiting(None));
         assert_eq!(wait.poll(30_000, c(195)), WaitStatus::Waiting(None));
-        assert_eq!(
-            wait.poll(60_000, Celsius(18_050)),
-            WaitStatus::Waiting(Some(10))
-        );
+        assert_eq!(wait.poll(60_000, Celsius(18_050)), WaitStatus::Waiting(Some(10)));
         assert_eq!(wait.poll(70_000, c(180)), WaitStatus::Reached);
     }
 
@@ -315,18 +260,12 @@ mod tests {
         let mut wait = TemperatureWait::new(WaitConfig::HOTEND, c(30), true, 0);
         assert_eq!(wait.poll(0, c(60)), WaitStatus::Waiting(None));
         assert_eq!(wait.poll(60_000, Celsius(5_849)), WaitStatus::Waiting(None)); // 1.51 °C in 60 s
-        assert_eq!(
-            wait.poll(120_000, Celsius(5_700)),
-            WaitStatus::CoolingStalled
-        ); // 1.49 °C
+        assert_eq!(wait.poll(120_000, Celsius(5_700)), WaitStatus::CoolingStalled); // 1.49 °C
     }
 
     #[test]
     fn a_wait_with_a_timeout_gives_up() {
-        let config = WaitConfig {
-            timeout_s: 600,
-            ..WaitConfig::BED
-        };
+        let config = WaitConfig { timeout_s: 600, ..WaitConfig::BED };
         let mut wait = TemperatureWait::new(config, c(100), false, 1_000);
         assert_eq!(wait.poll(600_999, c(50)), WaitStatus::Waiting(None));
         assert_eq!(wait.poll(601_000, c(50)), WaitStatus::TimedOut);

@@ -82,10 +82,7 @@ pub fn celsius_from_adc<const N: usize>(table: Table<N>, adc: u16) -> Result<Cel
 /// Convert a reading in 1/16 counts with `table` (binary search for the
 /// row pair, then linear interpolation rounded half away from zero).
 #[inline(never)]
-pub fn celsius_from_oversampled<const N: usize>(
-    table: Table<N>,
-    reading: Oversampled,
-) -> Result<Celsius, SensorFault> {
+pub fn celsius_from_oversampled<const N: usize>(table: Table<N>, reading: Oversampled) -> Result<Celsius, SensorFault> {
     let row = |index: usize| row(table, index);
     let x16 = i32::from(reading.0);
     let sixteenths = |(adc, _): (u16, i32)| i32::from(adc) * 16;
@@ -155,12 +152,7 @@ impl SampleAverager {
         } else {
             samples
         };
-        Self {
-            sum: 0,
-            count: 0,
-            samples,
-            ready: None,
-        }
+        Self { sum: 0, count: 0, samples, ready: None }
     }
 
     /// Add one 10-bit conversion (clamped to 1023). Returns `true` when it
@@ -181,9 +173,7 @@ impl SampleAverager {
     pub fn take(&mut self) -> Option<Oversampled> {
         let sum = self.ready.take()?;
         let samples = u32::from(self.samples);
-        Some(Oversampled(
-            ((u32::from(sum) * 16 + samples / 2) / samples) as u16,
-        ))
+        Some(Oversampled(((u32::from(sum) * 16 + samples / 2) / samples) as u16))
     }
 }
 
@@ -208,14 +198,7 @@ mod tests {
     #[test]
     fn spec_section_4_vectors_hold_to_the_tables_error() {
         let tolerance = NTC100K_B3950_4K8_ERROR_CENTI + 1;
-        for (adc, centi) in [
-            (976, 2507),
-            (606, 10000),
-            (203, 17491),
-            (118, 21006),
-            (79, 23777),
-            (36, 29926),
-        ] {
+        for (adc, centi) in [(976, 2507), (606, 10000), (203, 17491), (118, 21006), (79, 23777), (36, 29926)] {
             let t = at(&NTC100K_B3950_4K8, adc);
             assert!((t - centi).abs() <= tolerance, "ADC {adc}: {t} vs {centi}");
         }
@@ -240,9 +223,7 @@ mod tests {
     fn temperature_falls_as_the_count_rises_at_every_sixteenth() {
         let mut previous = i32::MAX;
         for x16 in 12 * 16..=1020 * 16 {
-            let t = celsius_from_oversampled(&NTC100K_B3950_4K7, Oversampled(x16))
-                .unwrap()
-                .0;
+            let t = celsius_from_oversampled(&NTC100K_B3950_4K7, Oversampled(x16)).unwrap().0;
             assert!(t <= previous, "{x16}: {t} after {previous}");
             previous = t;
         }
@@ -253,9 +234,7 @@ mod tests {
         // 118 → 210.06 °C and 119 → ~209.7 °C; half-way reads half-way.
         let whole = at(&NTC100K_B3950_4K8, 118);
         let next = at(&NTC100K_B3950_4K8, 119);
-        let half = celsius_from_oversampled(&NTC100K_B3950_4K8, Oversampled(118 * 16 + 8))
-            .unwrap()
-            .0;
+        let half = celsius_from_oversampled(&NTC100K_B3950_4K8, Oversampled(118 * 16 + 8)).unwrap().0;
         assert!(next < half && half < whole, "{next} < {half} < {whole}");
     }
 
@@ -268,27 +247,15 @@ mod tests {
         assert!(celsius_from_adc(table, 1020).is_ok());
         assert_eq!(celsius_from_adc(table, 1021), Err(SensorFault::Open));
         assert_eq!(celsius_from_adc(table, 1023), Err(SensorFault::Open));
-        assert_eq!(
-            celsius_from_oversampled(table, Oversampled(1020 * 16 + 1)),
-            Err(SensorFault::Open)
-        );
-        assert_eq!(
-            celsius_from_oversampled(table, Oversampled(12 * 16 - 1)),
-            Err(SensorFault::Shorted)
-        );
+        assert_eq!(celsius_from_oversampled(table, Oversampled(1020 * 16 + 1)), Err(SensorFault::Open));
+        assert_eq!(celsius_from_oversampled(table, Oversampled(12 * 16 - 1)), Err(SensorFault::Shorted));
     }
 
     #[test]
     fn thermistor_names_select_their_tables() {
         let reading = Oversampled::from_count(606);
-        assert_eq!(
-            Thermistor::Ntc100kB3950Pullup4k8.celsius(reading),
-            celsius_from_adc(&NTC100K_B3950_4K8, 606)
-        );
-        assert_eq!(
-            Thermistor::Ntc100kB3950Pullup4k7.celsius(reading),
-            celsius_from_adc(&NTC100K_B3950_4K7, 606)
-        );
+        assert_eq!(Thermistor::Ntc100kB3950Pullup4k8.celsius(reading), celsius_from_adc(&NTC100K_B3950_4K8, 606));
+        assert_eq!(Thermistor::Ntc100kB3950Pullup4k7.celsius(reading), celsius_from_adc(&NTC100K_B3950_4K7, 606));
     }
 
     #[test]
