@@ -17,11 +17,13 @@ mod eeprom;
 mod pins;
 mod pwm;
 mod serial;
+mod stepping;
 mod watchdog;
 
 use avr_device::atmega2560::Peripherals;
 use firmware::host_link::HostLink;
 use firmware::machine::Machine;
+use firmware::motion::{Motion, MotionConfig, StepperRequest};
 use firmware::rx::{self, RxQueue};
 use firmware::thermal::thermistor::{celsius_from_adc, NTC100K_B3950_4K7};
 use firmware::thermal::Celsius;
@@ -43,6 +45,8 @@ fn main() -> ! {
     let queue = unsafe { &mut *core::ptr::addr_of_mut!(RX_QUEUE) };
     let (producer, consumer) = rx::split(queue);
     serial::init(&dp, producer);
+    let config = MotionConfig::prusa_i3();
+    let feeder = stepping::init(&dp, config.stepper());
     clock::init(&dp);
     adc::init(&dp);
     pwm::init(&dp);
@@ -51,7 +55,7 @@ fn main() -> ! {
 
     let mut tx = serial::Tx;
     let mut rx = serial::Rx { consumer };
-    let mut link = HostLink::new();
+    let mut link = HostLink::new(Machine::new(Motion::new(config, feeder)));
     // SAFETY: the EEPROM registers are used by this driver only.
     let mut eeprom = eeprom::Eeprom::new(unsafe { Peripherals::steal() }.EEPROM);
     for endstop in pins::ENDSTOPS {
@@ -60,6 +64,7 @@ fn main() -> ! {
     let _ = link.machine.write_banner(&mut tx);
     let _ = link.machine.load_settings(&mut eeprom, &mut tx);
     let mut next_thermal_ms = 0u32;
+    let mut drivers_enabled = None;
 
     // The loop never sleeps: QEMU's AVR machine does not wake from `sleep`
     // on its timer interrupt and avr-tester stops at the first `sleep`, and
@@ -67,6 +72,11 @@ fn main() -> ! {
     loop {
         watchdog::feed();
         let now = clock::millis();
+        match link.machine.poll_motion(&stepping::status(), now, &mut tx) {
+            Ok(StepperRequest::ClearFault) => stepping::clear_fault(),
+            Ok(StepperRequest::Halt) => stepping::halt(),
+            _ => {}
+        }
         let _ = link.service(&mut rx, &mut eeprom, now, &mut tx);
         if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
             next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
@@ -74,17 +84,24 @@ fn main() -> ! {
             link.machine.set_measured(read(pins::HOTEND_THERMISTOR_CHANNEL), read(pins::BED_THERMISTOR_CHANNEL));
             link.machine.set_endstop_levels(pins::endstop_levels(&dp));
         }
-        apply_outputs(&dp, &link.machine);
+        apply_outputs(&dp, &link.machine, &mut drivers_enabled);
     }
 }
 
-/// Drive the outputs the core decides: all off once halted.
-fn apply_outputs(dp: &Peripherals, machine: &Machine) {
+/// Drive the outputs the core decides: all off once halted. The driver
+/// enables are written only when they change (`enabled` remembers).
+fn apply_outputs(dp: &Peripherals, machine: &Machine, enabled: &mut Option<bool>) {
     if machine.is_halted() {
+        stepping::halt();
         pins::all_outputs_safe(dp);
+        *enabled = Some(false);
         return;
     }
-    pins::set_steppers_enabled(dp, machine.steppers_enabled());
+    let wanted = machine.steppers_enabled();
+    if *enabled != Some(wanted) {
+        pins::set_steppers_enabled(dp, wanted);
+        *enabled = Some(wanted);
+    }
     pwm::set(dp, pwm::Output::Fan, machine.fan_duty());
 }
 
@@ -93,6 +110,7 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
     avr_device::interrupt::disable();
     // SAFETY: interrupts are off; nothing else runs from here on.
     let dp = unsafe { Peripherals::steal() };
+    stepping::stop_timer(&dp);
     pins::all_outputs_safe(&dp);
     watchdog::stop(&dp);
     let mut tx = serial::Tx;

@@ -24,6 +24,7 @@ pub enum Port {
     H,
     J,
     K,
+    L,
 }
 
 #[derive(Clone, Copy)]
@@ -56,9 +57,27 @@ pub const HOTEND_THERMISTOR_CHANNEL: u8 = 13;
 /// The ADC channel of the bed thermistor.
 pub const BED_THERMISTOR_CHANNEL: u8 = 14;
 
+/// STEP and DIR pins of X, Y, Z and E0 (driven by [`crate::stepping`]).
+pub const STEP_DIR: [Pin; 8] = [
+    pin(Port::F, 0),
+    pin(Port::F, 1),
+    pin(Port::F, 6),
+    pin(Port::F, 7),
+    pin(Port::L, 3),
+    pin(Port::L, 1),
+    pin(Port::A, 4),
+    pin(Port::A, 6),
+];
+
 /// Drive `pin` as an output at `high`. The level is written before the
-/// direction so that the pin never glitches to the other level.
+/// direction so that the pin never glitches to the other level. Interrupts
+/// are held off during the read-modify-write: the step interrupt writes
+/// STEP/DIR bits of the same ports (F, L, A).
 pub fn make_output(dp: &Peripherals, pin: Pin, high: bool) {
+    avr_device::interrupt::free(|_| make_output_unguarded(dp, pin, high));
+}
+
+fn make_output_unguarded(dp: &Peripherals, pin: Pin, high: bool) {
     let mask = 1u8 << pin.bit;
     macro_rules! drive {
         ($port:ident, $out:ident, $ddr:ident) => {{
@@ -77,6 +96,7 @@ pub fn make_output(dp: &Peripherals, pin: Pin, high: bool) {
         Port::H => drive!(PORTH, porth, ddrh),
         Port::J => drive!(PORTJ, portj, ddrj),
         Port::K => drive!(PORTK, portk, ddrk),
+        Port::L => drive!(PORTL, portl, ddrl),
     }
 }
 
@@ -101,6 +121,7 @@ pub fn make_input_pulled_up(dp: &Peripherals, pin: Pin) {
         Port::H => input!(PORTH, porth, ddrh),
         Port::J => input!(PORTJ, portj, ddrj),
         Port::K => input!(PORTK, portk, ddrk),
+        Port::L => input!(PORTL, portl, ddrl),
     }
 }
 
@@ -116,6 +137,7 @@ pub fn read(dp: &Peripherals, pin: Pin) -> bool {
         Port::H => dp.PORTH.pinh.read().bits(),
         Port::J => dp.PORTJ.pinj.read().bits(),
         Port::K => dp.PORTK.pink.read().bits(),
+        Port::L => dp.PORTL.pinl.read().bits(),
     };
     bits & (1 << pin.bit) != 0
 }

@@ -78,7 +78,9 @@ fn USART0_RX() {
             // M112 acts here and now, whatever the main loop is doing.
             // SAFETY: the pin writes are single read-modify-writes of port
             // registers, and interrupts are off inside this handler.
-            crate::pins::all_outputs_safe(unsafe { &avr_device::atmega2560::Peripherals::steal() });
+            let dp = unsafe { avr_device::atmega2560::Peripherals::steal() };
+            crate::stepping::stop_timer(&dp);
+            crate::pins::all_outputs_safe(&dp);
         }
         let pending = EMERGENCIES.borrow(cs);
         pending.set(pending.get().with(emergency));

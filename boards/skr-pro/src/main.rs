@@ -14,7 +14,7 @@ use core::cell::UnsafeCell;
 use cortex_m_rt::{entry, exception};
 use firmware::host_link::HostLink;
 use firmware::machine::Machine;
-use firmware::motion::stepper::StepperConfig;
+use firmware::motion::{Motion, MotionConfig, StepperRequest};
 use firmware::rx::{self, RxQueue};
 use firmware::thermal::thermistor::{celsius_from_adc, NTC100K_B3950_4K7};
 use firmware::thermal::Celsius;
@@ -45,9 +45,8 @@ fn main() -> ! {
     serial::init(&dp.RCC, &dp.USART1, &clocks, producer);
     adc::init(&dp.RCC, &dp.ADC_COMMON, &dp.ADC3);
     pwm::init(&dp.RCC, &dp.TIM3);
-    // The planner will feed the step queues; until then the interrupt
-    // idles at its poll interval.
-    let _step_feeder = stepper::init(&dp.RCC, &dp.TIM5, &clocks, StepperConfig::default());
+    let config = MotionConfig::prusa_i3();
+    let feeder = stepper::init(&dp.RCC, &dp.TIM5, &clocks, config.stepper());
     // SAFETY: priorities are set before the lines are unmasked; everything
     // the handlers touch is initialised.
     unsafe {
@@ -61,7 +60,7 @@ fn main() -> ! {
 
     let mut tx = serial::Tx;
     let mut rx = serial::Rx { consumer };
-    let mut link = HostLink::new();
+    let mut link = HostLink::new(Machine::new(Motion::new(config, feeder)));
     let mut settings = storage::RamStorage::new();
     let _ = link.machine.write_banner(&mut tx);
     let _ = link.machine.load_settings(&mut settings, &mut tx);
@@ -70,6 +69,11 @@ fn main() -> ! {
     loop {
         watchdog::feed();
         let now = clock::millis();
+        match link.machine.poll_motion(&stepper::status(), now, &mut tx) {
+            Ok(StepperRequest::ClearFault) => stepper::clear_fault(),
+            Ok(StepperRequest::Halt) => stepper::halt(),
+            _ => {}
+        }
         let _ = link.service(&mut rx, &mut settings, now, &mut tx);
         if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
             next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
@@ -86,6 +90,7 @@ fn main() -> ! {
 /// Drive the outputs the core decides: all off once halted.
 fn apply_outputs(machine: &Machine) {
     if machine.is_halted() {
+        stepper::halt();
         pins::all_outputs_safe();
         return;
     }

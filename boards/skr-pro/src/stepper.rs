@@ -19,10 +19,13 @@
 //! to ≈ 500 k steps/s per motor.
 //!
 //! QEMU's netduinoplus2 models TIM2–5 but no compare interrupts: there the
-//! generator stays idle (the motion core does not feed it yet either).
+//! generator never runs, so moves queue up and never finish (the QEMU
+//! tests send no moves).
 
 use core::cell::UnsafeCell;
-use firmware::motion::stepper::{StepFeeder, StepGenerator, StepQueues, StepperConfig, IDLE_POLL_TICKS, TIMER_HZ};
+use firmware::motion::stepper::{
+    StepFault, StepFeeder, StepGenerator, StepQueues, StepperConfig, StepperStatus, IDLE_POLL_TICKS, TIMER_HZ,
+};
 use stm32f4::stm32f407 as pac;
 
 use crate::clock::Clocks;
@@ -129,4 +132,28 @@ pub fn on_interrupt() {
         // SAFETY: CC1G forces the compare event (sets CC1IF) now.
         timer.egr().write(|w| unsafe { w.bits(CC1G) });
     }
+}
+
+/// Run `f` on the generator with the step interrupt held off.
+fn with_generator<R: Default>(f: impl FnOnce(&mut StepGenerator<'static>) -> R) -> R {
+    cortex_m::interrupt::free(|_| {
+        // SAFETY: interrupts are off, so the step interrupt cannot run
+        // while the main loop holds the state.
+        let state = unsafe { &mut *STATE.0.get() };
+        state.generator.as_mut().map(f).unwrap_or_default()
+    })
+}
+
+/// The generator's status (a copy) for the main loop.
+pub fn status() -> StepperStatus {
+    with_generator(|g| g.status())
+}
+
+pub fn clear_fault() {
+    with_generator(|g| g.clear_fault());
+}
+
+/// Stop all motion now (M410, kill).
+pub fn halt() {
+    with_generator(|g| g.halt(StepFault::Stopped));
 }

@@ -359,7 +359,9 @@ impl Kinematics for Arm {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum MachineKinematics {
     Cartesian(Cartesian),
+    #[cfg(feature = "delta")]
     Delta(Delta),
+    #[cfg(feature = "arm")]
     Arm(Arm),
 }
 
@@ -367,28 +369,36 @@ impl Kinematics for MachineKinematics {
     fn inverse(&self, cartesian: Vector3) -> Result<Vector3, KinematicsError> {
         match self {
             Self::Cartesian(k) => k.inverse(cartesian),
+            #[cfg(feature = "delta")]
             Self::Delta(k) => k.inverse(cartesian),
+            #[cfg(feature = "arm")]
             Self::Arm(k) => k.inverse(cartesian),
         }
     }
     fn forward(&self, motors: Vector3) -> Result<Vector3, KinematicsError> {
         match self {
             Self::Cartesian(k) => k.forward(motors),
+            #[cfg(feature = "delta")]
             Self::Delta(k) => k.forward(motors),
+            #[cfg(feature = "arm")]
             Self::Arm(k) => k.forward(motors),
         }
     }
     fn segment_mm(&self) -> Option<f32> {
         match self {
             Self::Cartesian(k) => k.segment_mm(),
+            #[cfg(feature = "delta")]
             Self::Delta(k) => k.segment_mm(),
+            #[cfg(feature = "arm")]
             Self::Arm(k) => k.segment_mm(),
         }
     }
     fn motor_steps_per_unit(&self, steps_per_mm: Vector3) -> Vector3 {
         match self {
             Self::Cartesian(k) => k.motor_steps_per_unit(steps_per_mm),
+            #[cfg(feature = "delta")]
             Self::Delta(k) => k.motor_steps_per_unit(steps_per_mm),
+            #[cfg(feature = "arm")]
             Self::Arm(k) => k.motor_steps_per_unit(steps_per_mm),
         }
     }

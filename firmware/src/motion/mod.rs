@@ -108,7 +108,11 @@ mod tests;
 
 use arc::{ArcCutter, ArcError};
 use homing::{AxisHoming, Homing, HomingConfig, HomingStep};
-use kinematics::{to_steps, Arm, Cartesian, Delta, Kinematics, KinematicsError, MachineKinematics, LINEAR_AXES};
+#[cfg(feature = "arm")]
+use kinematics::Arm;
+#[cfg(feature = "delta")]
+use kinematics::Delta;
+use kinematics::{to_steps, Cartesian, Kinematics, KinematicsError, MachineKinematics, LINEAR_AXES};
 use math::{round_to_i32, sqrt};
 use planner::{MotorLimits, Planner, PlannerMove, MAX_BLOCK_STEPS};
 use prep::Prep;
@@ -209,6 +213,7 @@ impl MotionConfig {
 
     /// SPEC §2: the delta (80 steps/mm carriages, E 102), homing all
     /// towers up at once; each carriage at most 150 mm/s.
+    #[cfg(feature = "delta")]
     pub fn spec_delta(repetier_layout: bool) -> Self {
         let mut delta = Delta::spec_printer(repetier_layout);
         delta.homed_height = 300.0;
@@ -233,6 +238,7 @@ impl MotionConfig {
     /// 500 ms pause and a release back-off at 20 steps/s; home (x, y, z) =
     /// (−100, −107, 68), which the soft limits accept although Z 68 is
     /// outside ±40. NC limit switches are hard limits.
+    #[cfg(feature = "arm")]
     pub fn spec_arm(ppr: u16) -> Self {
         let arm = Arm::spec_arm(ppr);
         let joint = |towards_max| AxisHoming {
@@ -276,7 +282,10 @@ impl MotionConfig {
     /// Take the tunable values from the settings (`M92`, `M201`, `M203`,
     /// `M204`, `M205 J`, `M220`, `M221`), milli-units to floats.
     pub fn apply_settings(&mut self, settings: &Settings) {
+        #[cfg(feature = "arm")]
         let is_arm = matches!(self.kinematics, MachineKinematics::Arm(_));
+        #[cfg(not(feature = "arm"))]
+        let is_arm = false;
         for motor in 0..MOTORS {
             // The arm's joints have no steps/mm: pulses per degree come from
             // the gearbox and the driver.
@@ -585,6 +594,7 @@ impl<'q> Motion<'q> {
         }
         let motors = if motors & 0b111 == 0 { 0b111 } else { motors & 0b111 };
         // A delta homes its towers together or not at all.
+        #[cfg(feature = "delta")]
         let motors = if matches!(self.config.kinematics, MachineKinematics::Delta(_)) { 0b111 } else { motors };
         self.homing_requested = Some(motors);
         Ok(())
@@ -807,6 +817,7 @@ impl<'q> Motion<'q> {
     fn set_home(&mut self, motors: u8) {
         let spu = self.config.steps_per_unit();
         let home = match (self.config.home, self.config.kinematics) {
+            #[cfg(feature = "delta")]
             (HomePosition::DeltaTop, MachineKinematics::Delta(delta)) => Ok(delta.homed_carriage_heights()),
             (HomePosition::Cartesian(point), kinematics) => kinematics.inverse(point),
             (HomePosition::DeltaTop, kinematics) => kinematics.inverse([0.0; LINEAR_AXES]),

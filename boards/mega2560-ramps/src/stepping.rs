@@ -1,0 +1,171 @@
+//! The step interrupt: Timer1 compare A at 2 MHz drives the core's
+//! [`StepGenerator`] and puts its actions on the RAMPS STEP/DIR pins.
+//!
+//! Timer1 runs free (normal mode, clock / 8 = 2 MHz, 0.5 µs per tick); each
+//! interrupt schedules the next one by adding the generator's interval to
+//! OCR1A, so intervals are measured from the previous compare, not from
+//! whenever the handler got to run: a late interrupt does not stretch the
+//! step train. If a handler is so late that the next compare time has
+//! already passed, the compare is set a few ticks ahead instead of waiting
+//! for the counter to wrap (32 ms).
+//!
+//! Per interrupt, in order: endstops (only when the generator watches any),
+//! `on_timer()`, DIR pins (only when they change), STEP pins high, the next
+//! compare, then STEP pins low once [`STEP_PULSE_TICKS`] have passed. The
+//! generator presents a direction change in an action without steps and
+//! waits its set-up time before the next step, so DIR is always settled
+//! before STEP rises.
+//!
+//! | motor | STEP | DIR |
+//! |---|---|---|
+//! | X | PF0 | PF1 |
+//! | Y | PF6 | PF7 |
+//! | Z | PL3 | PL1 |
+//! | E0 | PA4 | PA6 |
+//!
+//! The main loop shares PORTF (Y enable, PF2) and PORTA (E0 enable, PA2)
+//! with this handler; it writes those ports only with interrupts off (see
+//! [`crate::pins::make_output`]), so neither side loses the other's bits.
+
+use avr_device::atmega2560::{Peripherals, TC1};
+use avr_device::interrupt::{self, CriticalSection};
+use core::ptr::addr_of_mut;
+use firmware::motion::{StepFault, StepFeeder, StepGenerator, StepQueues, StepperConfig, StepperStatus};
+
+/// Shortest STEP high time, timer ticks of 0.5 µs. 2 ticks = ≥ 1 µs, what
+/// the A4988 (1 µs) and DRV8825 (1.9 µs: use 4) need; a TB6600 or CL86T
+/// wants 5 µs or more (10 ticks). Ours: 4 ticks (2 µs), for the A4988 and
+/// DRV8825 of a RAMPS.
+pub const STEP_PULSE_TICKS: u16 = 4;
+
+/// Least distance from now to the next compare when a handler ran late.
+const MIN_AHEAD_TICKS: u16 = 16;
+
+static mut QUEUES: StepQueues = StepQueues::new();
+/// The generator, touched by the step interrupt and, inside critical
+/// sections, by the main loop.
+static mut GENERATOR: Option<StepGenerator<'static>> = None;
+/// Last DIR levels written (bit 0 X, 1 Y, 2 Z, 3 E0).
+static mut DIR_LEVELS: u8 = 0;
+
+/// Split the step queues (once, before interrupts are enabled), keep the
+/// generator for the interrupt and return the main loop's end. Starts
+/// Timer1.
+pub fn init(dp: &Peripherals, config: StepperConfig) -> StepFeeder<'static> {
+    // SAFETY: called once from main before interrupts are enabled; from
+    // here on the queues are used only through their two ends.
+    let queues = unsafe { &mut *addr_of_mut!(QUEUES) };
+    let (feeder, generator) = queues.split(config);
+    // SAFETY: interrupts are still disabled (see above).
+    unsafe { *addr_of_mut!(GENERATOR) = Some(generator) };
+    for pin in crate::pins::STEP_DIR {
+        crate::pins::make_output(dp, pin, false);
+    }
+    let timer = &dp.TC1;
+    // SAFETY: normal mode (WGM = 0), clock / 8 (CS11), compare A interrupt.
+    timer.tccr1a.write(|w| unsafe { w.bits(0) });
+    timer.tccr1b.write(|w| unsafe { w.bits(1 << 1) });
+    timer.ocr1a.write(|w| w.bits(timer.tcnt1.read().bits().wrapping_add(1000)));
+    timer.timsk1.write(|w| unsafe { w.bits(1 << 1) });
+    feeder
+}
+
+/// Stop the interrupt at once (kill, panic): no further STEP pulses.
+pub fn stop_timer(dp: &Peripherals) {
+    // SAFETY: clearing OCIE1A only.
+    dp.TC1.timsk1.write(|w| unsafe { w.bits(0) });
+}
+
+fn with_generator<R>(_cs: CriticalSection<'_>, f: impl FnOnce(&mut StepGenerator<'static>) -> R) -> Option<R> {
+    // SAFETY: the critical section keeps the step interrupt out, and the
+    // main loop is the only other user.
+    unsafe { (*addr_of_mut!(GENERATOR)).as_mut().map(f) }
+}
+
+/// The generator's status (a copy) for the main loop.
+pub fn status() -> StepperStatus {
+    interrupt::free(|cs| with_generator(cs, |g| g.status())).unwrap_or_default()
+}
+
+pub fn clear_fault() {
+    interrupt::free(|cs| with_generator(cs, |g| g.clear_fault()));
+}
+
+pub fn halt() {
+    interrupt::free(|cs| with_generator(cs, |g| g.halt(StepFault::Stopped)));
+}
+
+/// Endstops in the generator's layout (bit i motor i min, 4 + i max),
+/// 1 = triggered: RAMPS switches with pull-ups read high when pressed
+/// (Marlin's `*_ENDSTOP_INVERTING false`).
+#[inline(always)]
+fn endstops(dp: &Peripherals) -> u8 {
+    let e = dp.PORTE.pine.read().bits();
+    let j = dp.PORTJ.pinj.read().bits();
+    let d = dp.PORTD.pind.read().bits();
+    // X_MIN PE5, X_MAX PE4, Y_MIN PJ1, Y_MAX PJ0, Z_MIN PD3, Z_MAX PD2.
+    (e >> 5 & 1) | (j >> 1 & 1) << 1 | (d >> 3 & 1) << 2 | (e >> 4 & 1) << 4 | (j & 1) << 5 | (d >> 2 & 1) << 6
+}
+
+#[avr_device::interrupt(atmega2560)]
+fn TIMER1_COMPA() {
+    // SAFETY: interrupts are off in this handler, so it has the generator
+    // and DIR_LEVELS to itself; the main loop takes them only in critical
+    // sections. The port writes below touch STEP/DIR bits only, and the
+    // main loop writes these ports with interrupts off.
+    let dp = unsafe { Peripherals::steal() };
+    let Some(generator) = (unsafe { (*addr_of_mut!(GENERATOR)).as_mut() }) else { return };
+    if generator.endstop_mask() != 0 {
+        generator.on_endstops(endstops(&dp));
+    }
+    let action = generator.on_timer();
+    let dir_levels = unsafe { &mut *addr_of_mut!(DIR_LEVELS) };
+    if action.dir_mask != *dir_levels {
+        write_dirs(&dp, action.dir_mask);
+        *dir_levels = action.dir_mask;
+    }
+    let steps = action.step_mask;
+    if steps == 0 {
+        schedule_next(&dp.TC1, action.next_interval_ticks);
+        return;
+    }
+    let (f_steps, l_steps, a_steps) = (steps & 1 | (steps & 2) << 5, (steps & 4) << 1, (steps & 8) << 1);
+    // STEP high: X PF0, Y PF6, Z PL3, E0 PA4.
+    // SAFETY: any bit pattern is valid for these port registers.
+    dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | f_steps) });
+    dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() | l_steps) });
+    dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() | a_steps) });
+    let raised = schedule_next(&dp.TC1, action.next_interval_ticks);
+    // Bounded: the counter always runs.
+    while dp.TC1.tcnt1.read().bits().wrapping_sub(raised) < STEP_PULSE_TICKS {}
+    // SAFETY: as above.
+    dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !f_steps) });
+    dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() & !l_steps) });
+    dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() & !a_steps) });
+}
+
+/// OCR1A += interval, or a little ahead of now if that is already past.
+/// Returns the counter as read (the time the STEP pins went high, within a
+/// few cycles).
+#[inline(always)]
+fn schedule_next(timer: &TC1, interval: u16) -> u16 {
+    let now = timer.tcnt1.read().bits();
+    let mut next = timer.ocr1a.read().bits().wrapping_add(interval);
+    if (next.wrapping_sub(now) as i16) < MIN_AHEAD_TICKS as i16 {
+        next = now.wrapping_add(MIN_AHEAD_TICKS);
+    }
+    timer.ocr1a.write(|w| w.bits(next));
+    now
+}
+
+/// DIR levels: X PF1, Y PF7, Z PL1, E0 PA6.
+#[inline(always)]
+fn write_dirs(dp: &Peripherals, dir: u8) {
+    let f = (dir & 1) << 1 | (dir & 2) << 6;
+    let l = (dir & 4) >> 1;
+    let a = (dir & 8) << 3;
+    // SAFETY: any bit pattern is valid for these port registers.
+    dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !0b1000_0010 | f) });
+    dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() & !0b0000_0010 | l) });
+    dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() & !0b0100_0000 | a) });
+}
