@@ -33,6 +33,7 @@ impl<'q> HostLink<'q> {
     }
 
     /// One pass: emergencies first, then input, then execution.
+    #[inline(never)]
     pub fn service<W: uWrite + ?Sized>(
         &mut self,
         link: &mut impl SerialLink,

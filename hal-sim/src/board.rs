@@ -23,7 +23,7 @@ use crate::steps::StepRecorder;
 
 /// Endstops as a function of the motor positions (steps from boot): bit i
 /// motor i's min switch, bit 4 + i its max switch, 1 = triggered.
-pub type Endstops = Box<dyn Fn(&[i64; 4]) -> u8>;
+pub type Endstops = Box<dyn Fn(&[i64; 4]) -> u8 + Send>;
 
 /// The simulated EEPROM: 4 KiB like the ATmega2560's.
 pub type SimEeprom = MemoryStorage<4096>;

@@ -83,11 +83,13 @@ impl Command {
     }
 
     /// Whether `letter` appears, with or without a value.
+    #[inline(never)]
     pub fn has(&self, letter: u8) -> bool {
         self.words.iter().any(|w| w.letter == letter)
     }
 
     /// The value of `letter`: `Ok(None)` if absent, an error if it is a flag.
+    #[inline(never)]
     pub fn value(&self, letter: u8) -> Result<Option<Decimal>, ParseError> {
         match self.words.iter().find(|w| w.letter == letter) {
             None => Ok(None),

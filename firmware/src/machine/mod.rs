@@ -180,6 +180,7 @@ impl<'q> Machine<'q> {
 
     /// `M112` from the receive interrupt (or the queue): stop everything.
     /// The board has already forced its outputs off.
+    #[inline(never)]
     pub fn kill<W: uWrite + ?Sized>(&mut self, out: &mut W) -> Result<(), W::Error> {
         if self.halted {
             return Ok(());
@@ -211,6 +212,7 @@ impl<'q> Machine<'q> {
 
     /// Step 1: a complete line arrived. Refusals are answered now; accepted
     /// lines are queued (the caller checked [`Machine::can_accept_line`]).
+    #[inline(never)]
     pub fn receive_line<W: uWrite + ?Sized>(&mut self, line: Line<'_>, out: &mut W) -> Result<(), W::Error> {
         let body = match self.protocol.accept(line) {
             Ok(body) => body,
@@ -270,6 +272,7 @@ impl<'q> Machine<'q> {
         }
     }
 
+    #[inline(never)]
     fn save_settings<W: uWrite + ?Sized>(&self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
         match storage::save(storage, &self.settings) {
             Ok(stored) => ufmt::uwrite!(out, "echo:Settings Stored ({} bytes; crc {})\n", stored.bytes, stored.crc),
@@ -279,6 +282,7 @@ impl<'q> Machine<'q> {
 
     /// Step 2: run queued commands. `now_ms` is a free-running millisecond
     /// clock (wrapping); `storage` holds the settings for `M500`/`M501`.
+    #[inline(never)]
     pub fn poll<W: uWrite + ?Sized>(
         &mut self,
         now_ms: u32,
@@ -332,6 +336,7 @@ impl<'q> Machine<'q> {
         Ok(())
     }
 
+    #[inline(never)]
     fn execute<W: uWrite + ?Sized>(
         &mut self,
         text: &[u8],
@@ -435,6 +440,7 @@ impl<'q> Machine<'q> {
 
     /// Change settings all or nothing, then hand them to motion (they
     /// apply to the moves accepted from now on).
+    #[inline(never)]
     fn change_settings(&mut self, change: impl FnOnce(&mut Settings) -> Result<(), CommandError>) -> Result<(), CommandError> {
         let mut settings = self.settings.clone();
         change(&mut settings)?;
@@ -455,6 +461,7 @@ impl<'q> Machine<'q> {
         Ok(())
     }
 
+    #[inline(never)]
     fn set_auto_report(&mut self, command: &Command, now_ms: u32) -> Result<(), CommandError> {
         let seconds = match command.value(b'S')?.map(|v| v.to_int()) {
             None => 1,
@@ -481,6 +488,7 @@ impl<'q> Machine<'q> {
     }
 
     /// `M114`: `X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0`.
+    #[inline(never)]
     fn report_position<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         for (letter, um) in AXIS_LETTERS.iter().zip(self.modal.logical_position()) {
             ufmt::uwrite!(out, "{}:{} ", char::from(*letter), micrometres_as_mm(um))?;
@@ -504,6 +512,7 @@ impl<'q> Machine<'q> {
     }
 
     /// `M119`: Marlin's endstop report.
+    #[inline(never)]
     fn report_endstops<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         out.write_str("Reporting endstop status\n")?;
         for (bit, name) in ENDSTOP_NAMES.iter().enumerate() {

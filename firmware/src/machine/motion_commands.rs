@@ -56,6 +56,7 @@ impl<'q> Machine<'q> {
         self.motion.motor_steps()
     }
 
+    #[inline(never)]
     fn motion_failed<W: uWrite + ?Sized>(
         &mut self,
         error: MotionError,
@@ -99,6 +100,7 @@ impl<'q> Machine<'q> {
 
     /// Does a running command finish now? Moves the `G4` from "wait for
     /// motion" to "wait for the time".
+    #[inline(never)]
     pub(super) fn running_done<W: uWrite + ?Sized>(
         &mut self,
         now_ms: u32,
@@ -139,6 +141,7 @@ impl<'q> Machine<'q> {
     }
 
     /// `G0`/`G1` (or bare axis words): validate fully, then hand over.
+    #[inline(never)]
     pub(super) fn linear_move<W: uWrite + ?Sized>(
         &mut self,
         command: &Command,
@@ -168,6 +171,7 @@ impl<'q> Machine<'q> {
 
     /// `G2`/`G3`: an arc needs a centre (`I`/`J`, relative to the start) or
     /// a radius (`R`; negative for the arc over half a turn).
+    #[inline(never)]
     pub(super) fn arc_move<W: uWrite + ?Sized>(
         &mut self,
         command: &Command,
@@ -303,6 +307,7 @@ impl<'q> Machine<'q> {
     /// Homing ended (successfully: a failure halted the machine). The homed
     /// axes' logical positions restart from the home position: their `G92`
     /// offsets are cleared, as in Marlin.
+    #[inline(never)]
     fn homing_finished<W: uWrite + ?Sized>(&mut self, _out: &mut W) -> Result<(), W::Error> {
         let homed = self.motion.homed();
         let position = self.motion.position_um();

@@ -90,6 +90,10 @@
 //! - `M665`/`M666`: change `config.kinematics` (`Delta::set_geometry`,
 //!   `endstop_trim`) while idle, then re-home.
 
+//! **Flash.** Functions marked `#[inline(never)]` here and in
+//! `machine/` are cold (once per line or per block): inlined into the
+//! board's main loop they were duplicated, 8 KB more on the AVR.
+
 // Comparisons are written `!(x > 0.0)` on purpose: they reject NaN too.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 // Per-motor arrays read clearest indexed by motor number, as in the SPEC.
@@ -557,6 +561,7 @@ impl<'q> Motion<'q> {
     }
 
     /// `G0`/`G1` to a machine position (µm) at a feed rate (µm/s).
+    #[inline(never)]
     pub fn line_to(&mut self, target_um: [i32; MOTORS], feed_um_per_s: i32) -> Result<(), MotionError> {
         let target = target_um.map(|um| um as f32 / 1000.0);
         self.check_accepting()?;
@@ -568,6 +573,7 @@ impl<'q> Motion<'q> {
     }
 
     /// `G2` (clockwise) / `G3` to a machine position (µm) around a centre.
+    #[inline(never)]
     pub fn arc_to(&mut self, target_um: [i32; MOTORS], centre: ArcCentre, clockwise: bool, feed_um_per_s: i32) -> Result<(), MotionError> {
         let target = target_um.map(|um| um as f32 / 1000.0);
         self.check_accepting()?;
@@ -588,6 +594,7 @@ impl<'q> Motion<'q> {
 
     /// `G28`: home these motors (bit i: motor i; 0: all), once the queued
     /// motion has finished. Watch [`Self::is_homing`].
+    #[inline(never)]
     pub fn home(&mut self, motors: u8) -> Result<(), MotionError> {
         if !self.ready() {
             return Err(MotionError::Busy);
@@ -634,6 +641,7 @@ impl<'q> Motion<'q> {
     /// Every pass of the main loop: take in the interrupt's status, cut
     /// pending work into the planner, drive homing, and refill the step
     /// queues.
+    #[inline(never)]
     pub fn poll(&mut self, status: &StepperStatus, now_ms: u32) -> StepperRequest {
         self.status = *status;
         if let Some(fault) = status.fault {
@@ -715,6 +723,7 @@ impl<'q> Motion<'q> {
     }
 
     /// One straight piece to the planner (the planner has room).
+    #[inline(never)]
     fn queue_piece(&mut self, target: [f32; MOTORS], feed: f32) -> Result<(), MotionError> {
         let spu = self.config.steps_per_unit();
         let motors = self.config.kinematics.inverse([target[0], target[1], target[2]]).map_err(MotionError::Unreachable)?;
@@ -751,6 +760,7 @@ impl<'q> Motion<'q> {
     }
 
     /// Run the homing state machine as far as it goes without waiting.
+    #[inline(never)]
     fn drive_homing(&mut self, status: &StepperStatus, now_ms: u32) {
         if let Some(motors) = self.homing_requested {
             if !(self.planner.is_empty() && !self.prep.is_active() && !status.busy) {
@@ -814,6 +824,7 @@ impl<'q> Motion<'q> {
         }
     }
 
+    #[inline(never)]
     fn set_home(&mut self, motors: u8) {
         let spu = self.config.steps_per_unit();
         let home = match (self.config.home, self.config.kinematics) {
@@ -836,6 +847,7 @@ impl<'q> Motion<'q> {
     }
 
     /// Homing is over: the Cartesian position follows from the motors.
+    #[inline(never)]
     fn finish_homing(&mut self) {
         let spu = self.config.steps_per_unit();
         let motors = kinematics::from_steps(

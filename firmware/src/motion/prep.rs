@@ -43,6 +43,8 @@ use super::stepper::{Segment, StepBlock, StepFeeder, TIMER_HZ};
 pub const MAX_SEGMENT_S: f32 = 0.005;
 /// Largest ratio of speeds at the two ends of an accelerating segment.
 pub const SPEED_RATIO: f32 = 1.2;
+/// Most segments [`Prep::fill`] queues per call.
+const SEGMENTS_PER_FILL: usize = 16;
 /// Q24.8 ticks per second.
 const Q8_PER_S: f32 = TIMER_HZ as f32 * 256.0;
 
@@ -189,7 +191,10 @@ impl Prep {
     /// Returns the number of segments queued.
     pub fn fill(&mut self, planner: &mut Planner, feeder: &mut StepFeeder<'_>) -> usize {
         let mut queued = 0;
-        loop {
+        // At most a queue's worth per call: the main loop must come back to
+        // its other duties (and the watchdog) even if the interrupt drains
+        // the queue as fast as this fills it.
+        while queued < SEGMENTS_PER_FILL {
             let starts_block = !self.active;
             if starts_block {
                 let Some(block) = planner.current() else { break };

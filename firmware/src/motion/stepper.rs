@@ -547,7 +547,10 @@ impl<'a> StepGenerator<'a> {
     }
 
     /// Drop the rest of the running block: its queued segments, and the
-    /// ones still coming, up to the next block.
+    /// ones still coming, up to the next block. The block counts as done
+    /// at once: the main loop learns it from `blocks_done` and stops
+    /// preparing it. (Counting it only when its segments ran out let a main
+    /// loop that refills faster than this drains keep the block alive.)
     fn abandon_block(&mut self) {
         self.events_left = 0;
         self.pending_mask = 0;
@@ -560,6 +563,7 @@ impl<'a> StepGenerator<'a> {
             }
             self.segments.dequeue();
         }
+        self.finish_block();
     }
 
     /// Stop all motion at once (hard limit, `M410`, `M112`). Every queued
@@ -749,6 +753,33 @@ mod tests {
         let status = generator.status();
         assert_eq!(status.blocks_done, 2);
         assert!(!status.busy);
+    }
+
+    /// The main loop learns that a stopped homing block is over at once,
+    /// even while it keeps queueing that block's segments: otherwise a main
+    /// loop that refills as fast as the interrupt discards (the real board)
+    /// would prepare the abandoned block forever.
+    #[test]
+    fn an_abandoned_homing_block_counts_as_done_at_once() {
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        let mut homing = block([1000, 0, 0, 0], 0);
+        homing.watch = 0b0000_0001;
+        feeder.push_block(homing);
+        feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 10, starts_block: true });
+        for _ in 0..5 {
+            generator.on_timer();
+        }
+        generator.on_endstops(0b0000_0001);
+        assert_eq!(generator.status().blocks_done, 1);
+        // More of the dropped block keeps coming; it is skipped, and the
+        // count does not move again.
+        for _ in 0..50 {
+            feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 10, starts_block: false });
+            assert_eq!(generator.on_timer().step_mask, 0);
+        }
+        assert_eq!(generator.status().blocks_done, 1);
+        assert!(!generator.status().busy || feeder.queued_segments() > 0);
     }
 
     #[test]

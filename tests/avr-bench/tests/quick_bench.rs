@@ -607,3 +607,4 @@ fn a_trapezoid_played_on_the_step_pin_is_judged_on_time() {
         }
     }
 }
+
