@@ -10,8 +10,10 @@ use crate::machine::modal::{AXES, AXIS_LETTERS};
 use crate::reply::Fixed;
 use ufmt::uWrite;
 
-/// Every tunable value.
+/// Every tunable value. `repr(C)` and only 32-bit integer fields: the
+/// storage image is this struct's bytes (see `storage`).
 #[derive(Clone, Debug, PartialEq, Eq)]
+#[repr(C)]
 pub struct Settings {
     /// `M92`: steps per mm × 1000, per axis X Y Z E.
     pub steps_per_mm_milli: [i32; AXES],
