@@ -19,6 +19,9 @@ say "building the SKR Pro release firmware once: cargo arm"
 cargo arm
 "$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/llvm-size" "$arm_dir/skr-pro"
 
+say "fault-injection campaign: cargo faults"
+cargo faults
+
 say "running every test: cargo test (host crates, the emulated Mega 2560, the simavr bench)"
 FERROSTEP_ELF="$PWD/$elf" FERROSTEP_ARM_DIR="$PWD/$arm_dir" cargo test
 say "all tests passed"

@@ -117,6 +117,8 @@ pub struct Homing {
     group: u8,
     phase: Phase,
     active: bool,
+    /// Steps each motor made in the last move before its switch stopped it.
+    travel: [u16; MOTORS],
 }
 
 impl Default for Homing {
@@ -127,7 +129,7 @@ impl Default for Homing {
 
 impl Homing {
     pub const fn new() -> Self {
-        Self { requested: 0, group_index: 0, group: 0, phase: Phase::NextGroup, active: false }
+        Self { requested: 0, group_index: 0, group: 0, phase: Phase::NextGroup, active: false, travel: [0; MOTORS] }
     }
 
     /// Begin homing these motors (a mask of motors 0–2).
@@ -141,6 +143,12 @@ impl Homing {
 
     pub fn abort(&mut self) {
         self.active = false;
+    }
+
+    /// How far each stopped motor went in the last move (the generator's
+    /// `stopped_steps`), before [`Self::next`].
+    pub fn set_travel(&mut self, travel: [u16; MOTORS]) {
+        self.travel = travel;
     }
 
     /// The motors being homed right now.
@@ -181,6 +189,18 @@ impl Homing {
             Phase::AfterReapproach | Phase::AfterRelease => {
                 if stopped & group != group {
                     return self.fail(group & !stopped);
+                }
+                if self.phase == Phase::AfterReapproach {
+                    // The back-off must have released the switch: a
+                    // re-approach that stops within half of it means the
+                    // switch never let go (stuck, or shorted wiring; Marlin's
+                    // "Bad endstop"), and the home found would be wrong.
+                    let stuck = (0..3).filter(|&m| group & (1 << m) != 0).fold(0, |bits, m| {
+                        if u32::from(self.travel[m]) * 2 < config.axes[m].backoff_steps { bits | 1 << m } else { bits }
+                    });
+                    if stuck != 0 {
+                        return self.fail(stuck);
+                    }
                 }
                 self.phase = Phase::NextGroup;
                 HomingStep::SetHome(group)
@@ -312,8 +332,17 @@ mod tests {
         assert_eq!((steps[0], watch), (500, 0));
         let HomingStep::Move { steps, rate, watch, .. } = homing.next(&config, 0, 0) else { panic!() };
         assert_eq!((steps[0], rate, watch), (-1000, 2500.0, 1));
+        // The switch came back after 498 of the 500 steps backed off.
+        homing.set_travel([498, 0, 0, 0]);
         assert_eq!(homing.next(&config, 1, 0), HomingStep::SetHome(1));
         assert_eq!(homing.next(&config, 0, 0), HomingStep::Done);
+        // A switch stuck triggered: the re-approach stops at once.
+        homing.start(0b001);
+        homing.next(&config, 0, 0);
+        homing.next(&config, 1, 0);
+        homing.next(&config, 0, 0);
+        homing.set_travel([3, 0, 0, 0]);
+        assert_eq!(homing.next(&config, 1, 0), HomingStep::Failed(0b001));
         // A switch that never triggers.
         homing.start(0b010);
         homing.next(&config, 0, 0);

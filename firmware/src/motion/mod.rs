@@ -781,6 +781,7 @@ impl<'q> Motion<'q> {
             }
             self.homing_move = None;
             stopped = status.stopped;
+            self.homing.set_travel(status.stopped_steps);
             for motor in 0..MOTORS {
                 let sign = if steps[motor] < 0 { -1 } else { 1 };
                 self.motor_steps[motor] += if stopped & (1 << motor) != 0 { sign * status.stopped_steps[motor] as i32 } else { steps[motor] };
