@@ -10,8 +10,9 @@
 //! for the counter to wrap (32 ms).
 //!
 //! Per interrupt, in order: endstops (only when the generator watches any),
-//! `on_timer()`, DIR pins (only when they change), STEP pins high, the next
-//! compare, then STEP pins low once [`STEP_PULSE_TICKS`] have passed. The
+//! DIR pins (only when they change) and STEP pins high from
+//! `pins_now()` (the event computed last time), then `on_timer()` computes
+//! the next event, the next compare is set, and the STEP pins go low. The
 //! generator presents a direction change in an action without steps and
 //! waits its set-up time before the next step, so DIR is always settled
 //! before STEP rises.
@@ -32,11 +33,11 @@ use avr_device::interrupt::{self, CriticalSection};
 use core::ptr::addr_of_mut;
 use firmware::motion::{StepFault, StepFeeder, StepGenerator, StepQueues, StepperConfig, StepperStatus};
 
-/// Shortest STEP high time, timer ticks of 0.5 µs. 2 ticks = ≥ 1 µs, what
-/// the A4988 (1 µs) and DRV8825 (1.9 µs: use 4) need; a TB6600 or CL86T
-/// wants 5 µs or more (10 ticks). Ours: 4 ticks (2 µs), for the A4988 and
-/// DRV8825 of a RAMPS.
-pub const STEP_PULSE_TICKS: u16 = 4;
+/// Extra CPU cycles (16 MHz) the STEP pins stay high after `on_timer` and
+/// the compare update, which alone take ≥ 150 cycles (≈ 10 µs, measured by
+/// the bench's `min_step_pulse_cycles`): the A4988 needs 1 µs, the DRV8825
+/// 1.9 µs, a TB6600 or CL86T 5 µs; raise this for slower drivers.
+pub const STEP_PULSE_MIN_EXTRA_CYCLES: u32 = 0;
 
 /// Least distance from now to the next compare when a handler ran late.
 const MIN_AHEAD_TICKS: u16 = 16;
@@ -118,30 +119,35 @@ fn TIMER1_COMPA() {
     if generator.endstop_mask() != 0 {
         generator.on_endstops(endstops(&dp));
     }
-    let action = generator.on_timer();
+    // The pins first, the computation of the next event after: the edges
+    // keep their scheduled times whatever that computation costs.
+    let (steps, dir) = generator.pins_now();
     let dir_levels = unsafe { &mut *addr_of_mut!(DIR_LEVELS) };
-    if action.dir_mask != *dir_levels {
-        write_dirs(&dp, action.dir_mask);
-        *dir_levels = action.dir_mask;
-    }
-    let steps = action.step_mask;
-    if steps == 0 {
-        schedule_next(&dp.TC1, action.next_interval_ticks);
-        return;
+    if dir != *dir_levels {
+        write_dirs(&dp, dir);
+        *dir_levels = dir;
     }
     let (f_steps, l_steps, a_steps) = (steps & 1 | (steps & 2) << 5, (steps & 4) << 1, (steps & 8) << 1);
-    // STEP high: X PF0, Y PF6, Z PL3, E0 PA4.
-    // SAFETY: any bit pattern is valid for these port registers.
-    dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | f_steps) });
-    dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() | l_steps) });
-    dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() | a_steps) });
-    let raised = schedule_next(&dp.TC1, action.next_interval_ticks);
-    // Bounded: the counter always runs.
-    while dp.TC1.tcnt1.read().bits().wrapping_sub(raised) < STEP_PULSE_TICKS {}
-    // SAFETY: as above.
-    dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !f_steps) });
-    dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() & !l_steps) });
-    dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() & !a_steps) });
+    if steps != 0 {
+        // STEP high: X PF0, Y PF6, Z PL3, E0 PA4.
+        // SAFETY: any bit pattern is valid for these port registers.
+        dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | f_steps) });
+        dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() | l_steps) });
+        dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() | a_steps) });
+    }
+    let action = generator.on_timer();
+    schedule_next(&dp.TC1, action.next_interval_ticks);
+    if steps != 0 {
+        // `on_timer` and the scheduling took well over the pulse width;
+        // the delay only guarantees it.
+        if STEP_PULSE_MIN_EXTRA_CYCLES > 0 {
+            avr_device::asm::delay_cycles(STEP_PULSE_MIN_EXTRA_CYCLES);
+        }
+        // SAFETY: as above.
+        dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !f_steps) });
+        dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() & !l_steps) });
+        dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() & !a_steps) });
+    }
 }
 
 /// OCR1A += interval, or a little ahead of now if that is already past.

@@ -306,6 +306,20 @@ impl<'a> StepGenerator<'a> {
         }
     }
 
+    /// What the next [`Self::on_timer`] call fires (STEP mask, DIR levels),
+    /// without computing anything: the board puts these on the pins first
+    /// and only then calls `on_timer`, so the step edges keep their times
+    /// whatever the computation of the next event costs.
+    #[inline(always)]
+    pub fn pins_now(&self) -> (u8, u8) {
+        let dir_mask = self.pending_dir ^ self.config.dir_invert;
+        if self.long_wait != 0 {
+            (0, dir_mask)
+        } else {
+            (self.pending_mask & !self.stopped, dir_mask)
+        }
+    }
+
     /// The step-timer interrupt: fire the event computed last time, compute
     /// the next one.
     #[inline]
@@ -626,7 +640,10 @@ mod tests {
         let mut out = Vec::new();
         let mut last_dir = 0;
         while now < ticks {
+            let pins = generator.pins_now();
             let action = generator.on_timer();
+            // What the board wrote before computing is what was fired.
+            assert_eq!(pins, (action.step_mask, action.dir_mask));
             if action.step_mask != 0 {
                 // Invariant 3: directions never change in an action with steps.
                 assert_eq!(action.dir_mask, last_dir, "direction changed with a step at {now}");
