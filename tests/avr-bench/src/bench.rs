@@ -507,7 +507,7 @@ pub fn short_segments(count: usize) -> Vec<String> {
         "G90".to_string(),
         "M83".to_string(),
         "G92 X100 Y100 E0".to_string(),
-        "G1 F1800".to_string(),
+        "G1 F6000".to_string(),
     ];
     let (cx, cy) = (100.0f64, 100.0f64);
     for i in 0..count {
