@@ -323,10 +323,13 @@ impl Planner {
         let mut index = self.planned;
         while index != newest {
             let following = next(index);
-            let current = self.blocks[index as usize];
+            // Three fields, not a copy of the whole block (a memcpy on the AVR).
+            let current = &self.blocks[index as usize];
+            let (current_entry_sqr, current_acceleration, current_millimetres) =
+                (current.entry_speed_sqr, current.acceleration, current.millimetres);
             let block = &mut self.blocks[following as usize];
-            if current.entry_speed_sqr < block.entry_speed_sqr {
-                let reachable = current.entry_speed_sqr + 2.0 * current.acceleration * current.millimetres;
+            if current_entry_sqr < block.entry_speed_sqr {
+                let reachable = current_entry_sqr + 2.0 * current_acceleration * current_millimetres;
                 if reachable < block.entry_speed_sqr {
                     // Full acceleration through `current`: nothing before
                     // `block` can improve any more.

@@ -41,6 +41,9 @@ use super::stepper::{Segment, StepBlock, StepFeeder, TIMER_HZ};
 /// Longest segment, seconds: bounds the queued (committed) motion to
 /// ≈ 15 × 5 ms, so look-ahead can still change what follows.
 pub const MAX_SEGMENT_S: f32 = 0.005;
+/// Longest segment while cruising, seconds: the speed is constant, so a
+/// longer segment is still exact, and the main loop prepares half as many.
+pub const MAX_CRUISE_SEGMENT_S: f32 = 0.010;
 /// Largest ratio of speeds at the two ends of an accelerating segment.
 pub const SPEED_RATIO: f32 = 1.2;
 /// Most segments [`Prep::fill`] queues per call.
@@ -54,6 +57,10 @@ pub struct Prep {
     active: bool,
     events_left: u16,
     events_per_mm: f32,
+    /// The running block's nominal speed (events/s) and acceleration
+    /// (events/s²), fixed for the block: computed once, not per segment.
+    nominal: f32,
+    accel: f32,
     /// Speed at the end of the last queued segment, events/s.
     speed: f32,
     /// Queued time minus ideal time, 1/256 ticks.
@@ -122,15 +129,21 @@ impl Profile {
 
     /// Time from now to event `e`, seconds.
     fn time_at(&self, e: f32) -> f32 {
+        self.time_at_speed(e, self.speed_at(e))
+    }
+
+    /// [`Self::time_at`] when the speed at `e` is known already (one
+    /// square root fewer: each is hundreds of cycles on the AVR).
+    fn time_at_speed(&self, e: f32, speed: f32) -> f32 {
         if e <= self.accel_end {
-            return (self.speed_at(e) - self.start_speed) / self.accel;
+            return (speed - self.start_speed) / self.accel;
         }
         let accel_time = (self.peak - self.start_speed) / self.accel;
         if e <= self.decel_start {
             return accel_time + (e - self.accel_end) / self.peak;
         }
         let cruise_time = (self.decel_start - self.accel_end) / self.peak;
-        accel_time + cruise_time + (self.peak - self.speed_at(e)) / self.accel
+        accel_time + cruise_time + (self.peak - speed) / self.accel
     }
 
     /// Events in the next segment (≥ 1, ≤ `left`).
@@ -140,13 +153,16 @@ impl Profile {
             let faster = (v * SPEED_RATIO).min(self.peak);
             ((faster * faster - v * v) / (2.0 * self.accel), self.accel_end)
         } else if self.decel_start >= 0.5 {
-            (f32::MAX, self.decel_start)
+            // Cruising: constant speed up to the deceleration.
+            (v * MAX_CRUISE_SEGMENT_S, self.decel_start)
         } else {
             let slower = v / SPEED_RATIO;
             ((v * v - slower * slower) / (2.0 * self.accel), left as f32)
         };
         let within_time = v * MAX_SEGMENT_S + 0.5 * self.accel * MAX_SEGMENT_S * MAX_SEGMENT_S;
-        target = target.min(within_time);
+        if self.accel_end >= 0.5 || self.decel_start < 0.5 {
+            target = target.min(within_time);
+        }
         // End near the phase boundary rather than just past it.
         if target > boundary {
             target = boundary + 0.5;
@@ -162,6 +178,8 @@ impl Prep {
             active: false,
             events_left: 0,
             events_per_mm: 0.0,
+            nominal: 0.0,
+            accel: 0.0,
             speed: 0.0,
             time_debt_q8: 0.0,
             min_interval_q8: 8 << 8,
@@ -210,6 +228,8 @@ impl Prep {
                 };
                 self.events_per_mm = block.events as f32 / block.millimetres;
                 self.speed = sqrt(block.entry_speed_sqr) * self.events_per_mm;
+                self.nominal = sqrt(block.nominal_speed_sqr) * self.events_per_mm;
+                self.accel = block.acceleration * self.events_per_mm;
                 self.events_left = block.events;
                 self.active = true;
                 feeder.push_block(step_block);
@@ -219,7 +239,7 @@ impl Prep {
             }
             let exit_sqr = planner.exit_speed_sqr();
             let Some(block) = planner.current_mut() else { break };
-            let segment = self.next_segment(block.nominal_speed_sqr, exit_sqr, block.acceleration, starts_block);
+            let segment = self.next_segment(exit_sqr, starts_block);
             feeder.push_segment(segment);
             queued += 1;
             block.millimetres = self.events_left as f32 / self.events_per_mm;
@@ -233,21 +253,21 @@ impl Prep {
         queued
     }
 
-    fn next_segment(&mut self, nominal_speed_sqr: f32, exit_speed_sqr: f32, acceleration: f32, starts_block: bool) -> Segment {
-        let epm = self.events_per_mm;
+    fn next_segment(&mut self, exit_speed_sqr: f32, starts_block: bool) -> Segment {
         let profile = Profile::new(
             self.speed,
             self.events_left as f32,
-            sqrt(nominal_speed_sqr) * epm,
-            sqrt(exit_speed_sqr) * epm,
-            acceleration * epm,
+            self.nominal,
+            sqrt(exit_speed_sqr) * self.events_per_mm,
+            self.accel,
         );
         let events = profile.segment_events(self.events_left);
-        let duration = profile.time_at(events as f32);
+        let end_speed = profile.speed_at(events as f32);
+        let duration = profile.time_at_speed(events as f32, end_speed);
         let first = if events == 1 { duration } else { profile.time_at(1.0) };
         let (interval, add, actual_q8) = self.fit(events, duration * Q8_PER_S - self.time_debt_q8, first * Q8_PER_S);
         self.time_debt_q8 += actual_q8 - duration * Q8_PER_S;
-        self.speed = profile.speed_at(events as f32);
+        self.speed = end_speed;
         self.events_left -= events;
         Segment { interval, add, events, starts_block }
     }
