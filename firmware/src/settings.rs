@@ -48,6 +48,22 @@ impl Default for Settings {
 }
 
 impl Settings {
+    /// The defaults of a machine: its motion configuration's figures in
+    /// milli-units, the rest as on the Prusa i3.
+    pub fn for_machine(config: &crate::motion::MotionConfig) -> Self {
+        let milli = |value: f32| crate::motion::math::round_to_i32(value * 1000.0);
+        Self {
+            steps_per_mm_milli: config.steps_per_mm.map(milli),
+            max_feed_um_per_s: config.max_feed.map(milli),
+            max_accel_um_per_s2: config.max_accel.map(milli),
+            print_accel_um_per_s2: milli(config.print_accel),
+            retract_accel_um_per_s2: milli(config.retract_accel),
+            travel_accel_um_per_s2: milli(config.travel_accel),
+            junction_deviation_um: milli(config.junction_deviation),
+            ..Self::prusa_i3()
+        }
+    }
+
     /// SPEC §1: the Cartesian Prusa i3 on RAMPS (A4988 at 1/16, GT2 16-tooth
     /// pulleys: 100 steps/mm on X and Y; M8 Z rods: 400 steps/mm; E 93).
     pub const fn prusa_i3() -> Self {

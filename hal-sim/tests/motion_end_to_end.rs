@@ -196,3 +196,50 @@ fn busy_keepalives_go_out_while_homing_takes_long() {
     assert!(output.ends_with("ok\n"));
     assert_eq!(board.steps.positions()[0], -15_000);
 }
+
+/// SPEC §2's delta on the simulated board: towers home up to their max
+/// switches, the nozzle is then at (0, 0, 300); a move straight down moves
+/// the three carriages by the same exact amount.
+#[test]
+fn the_delta_homes_up_and_moves_its_three_carriages_together() {
+    use firmware::motion::MotionConfig;
+    use hal_sim::board::SimEeprom;
+    let mut board = SimBoard::with_machine(MotionConfig::spec_delta(false), SimEeprom::new());
+    board.take_output();
+    // Max switches 20 mm (1600 steps) above where the carriages start; at
+    // them each carriage is 300 + 64 + √(361² − 227²) = 644.7 mm up.
+    board.set_endstops(Box::new(|p: &[i64; 4]| (0..3).filter(|&m| p[m] >= 1600).fold(0, |b, m| b | 0x10 << m)));
+    let output = board.run_gcode("G28\nM114\n", 60_000);
+    assert!(output.ends_with("X:0.00 Y:0.00 Z:300.00 E:0.00 Count X:51576 Y:51576 Z:51576\nok\n"), "{output}");
+    let homed = board.steps.positions();
+    assert_eq!(homed[..3], [1600, 1600, 1600]);
+    board.run_gcode("G1 Z290 F3000\nM400\n", 10_000);
+    let down = board.steps.positions();
+    for tower in 0..3 {
+        assert_eq!(down[tower] - homed[tower], -800, "tower {tower}");
+    }
+    assert_eq!(board.run_gcode("M665\nM666\n", 1_000), "echo:  M665 L361.00 R227.00 H300.00\nok\necho:  M666 X0.00 Y0.00 Z0.00\nok\n");
+    // New trims need a new homing before anything moves.
+    let output = board.run_gcode("M666 X-0.5\nG1 Z280\n", 1_000);
+    assert!(output.ends_with("Error:Position unknown after a motion stop: home with G28 first\nok\n"), "{output}");
+}
+
+/// SPEC §3's arm: nothing moves before homing; G28 homes Z, Y, X and the
+/// arm is then at (−100, −107, 68).
+#[test]
+fn the_arm_refuses_moves_until_homed_then_homes_z_y_x() {
+    use firmware::motion::MotionConfig;
+    use hal_sim::board::SimEeprom;
+    let mut board = SimBoard::with_machine(MotionConfig::spec_arm(400), SimEeprom::new());
+    board.take_output();
+    assert_eq!(board.run_gcode("G1 X10\n", 1_000), "Error:Home XYZ first (G28)\nok\n");
+    assert_eq!(board.steps.positions(), [0, 0, 0, 0]);
+    // X max 400 steps up the screw, Y max 300 pulses, Z min −300 pulses.
+    board.set_endstops(Box::new(|p: &[i64; 4]| {
+        u8::from(p[0] >= 400) << 4 | u8::from(p[1] >= 300) << 5 | u8::from(p[2] <= -300) << 2
+    }));
+    let output = board.run_gcode("G28\nM114\n", 120_000);
+    assert!(output.contains("X:-100.00 Y:-107.00 Z:68.00"), "{output}");
+    let first = |m: usize| board.steps.motors[m].first_step().unwrap();
+    assert!(first(2) < first(1) && first(1) < first(0), "Z, then Y, then X");
+}

@@ -45,7 +45,7 @@ fn main() -> ! {
     let queue = unsafe { &mut *core::ptr::addr_of_mut!(RX_QUEUE) };
     let (producer, consumer) = rx::split(queue);
     serial::init(&dp, producer);
-    let config = MotionConfig::prusa_i3();
+    let config = machine_config();
     let feeder = stepping::init(&dp, config.stepper());
     clock::init(&dp);
     adc::init(&dp);
@@ -87,6 +87,19 @@ fn main() -> ! {
         apply_outputs(&dp, &link.machine, &mut drivers_enabled);
     }
 }
+
+/// The machine chosen at build time (cargo feature `machine-…`).
+fn machine_config() -> MotionConfig {
+    #[cfg(feature = "machine-delta")]
+    return MotionConfig::spec_delta(false);
+    #[cfg(feature = "machine-arm")]
+    return MotionConfig::spec_arm(400);
+    #[cfg(not(any(feature = "machine-delta", feature = "machine-arm")))]
+    MotionConfig::prusa_i3()
+}
+
+#[cfg(all(feature = "machine-delta", feature = "machine-arm"))]
+compile_error!("choose one machine: machine-delta or machine-arm");
 
 /// Drive the outputs the core decides: all off once halted. The driver
 /// enables are written only when they change (`enabled` remembers).

@@ -23,6 +23,9 @@ pub enum CommandError {
     Motion(MotionError),
     /// A motion fault lost the position: moves wait for `G28`.
     PositionLost,
+    /// The command belongs to another kind of machine (`M665` on a
+    /// Cartesian printer).
+    NotThisMachine,
 }
 
 impl From<ParseError> for CommandError {
@@ -43,6 +46,7 @@ impl CommandError {
             Self::Halted => crate::flash_str!("Printer halted. kill() called!").write_to(out),
             Self::Motion(error) => write_motion_error(error, out),
             Self::PositionLost => crate::flash_str!("Position unknown after a motion stop: home with G28 first").write_to(out),
+            Self::NotThisMachine => crate::flash_str!("Not available on this machine").write_to(out),
         }?;
         out.write_str("\n")
     }

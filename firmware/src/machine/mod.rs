@@ -92,6 +92,8 @@ pub struct Machine<'q> {
     /// A motion fault (limit switch, lost position) happened: moves are
     /// refused until `G28`.
     position_lost: bool,
+    /// The machine's own defaults (`M502`, and when no stored image loads).
+    defaults: Settings,
 }
 
 impl<'q> Machine<'q> {
@@ -99,13 +101,13 @@ impl<'q> Machine<'q> {
     /// The settings start as the machine's defaults, which `motion`
     /// receives.
     pub fn new(mut motion: Motion<'q>) -> Self {
-        let settings = Settings::prusa_i3();
+        let settings = Settings::for_machine(&motion.config);
         motion.apply_settings(&settings);
         Self {
             protocol: HostProtocol::new(),
             queue: heapless::Deque::new(),
             modal: ModalState::new(),
-            settings,
+            settings: settings.clone(),
             running: Running::Idle,
             wait_cancelled: false,
             last_busy_ms: 0,
@@ -122,6 +124,7 @@ impl<'q> Machine<'q> {
             bed: Heater::new(),
             motion,
             position_lost: false,
+            defaults: settings.clone(),
         }
     }
 
@@ -266,7 +269,7 @@ impl<'q> Machine<'q> {
                     )?,
                     LoadError::TooSmall => out.write_str("echo:EEPROM too small for the settings\n")?,
                 }
-                self.settings = Settings::default();
+                self.settings = self.defaults.clone();
                 out.write_str("echo:Hardcoded Default Settings Loaded\n")
             }
         }
@@ -388,6 +391,10 @@ impl<'q> Machine<'q> {
             Code::M(119) => self.report_endstops(out).map(Ok)?,
             Code::M(155) => self.set_auto_report(&command, now_ms),
             Code::M(400) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false })),
+            #[cfg(feature = "delta")]
+            Code::M(665) => self.delta_geometry(&command, out),
+            #[cfg(feature = "delta")]
+            Code::M(666) => self.delta_trim(&command, out),
             Code::M(92) => self.change_settings(|s| settings_axes(&command, &mut s.steps_per_mm_milli)),
             Code::M(201) => self.change_settings(|s| settings_axes(&command, &mut s.max_accel_um_per_s2)),
             Code::M(203) => self.change_settings(|s| settings_axes(&command, &mut s.max_feed_um_per_s)),
@@ -401,7 +408,7 @@ impl<'q> Machine<'q> {
                 Ok(())
             }
             Code::M(502) => {
-                self.settings = Settings::default();
+                self.settings = self.defaults.clone();
                 self.motion.apply_settings(&self.settings);
                 out.write_str("echo:Hardcoded Default Settings Loaded\n")?;
                 Ok(())

@@ -322,4 +322,80 @@ impl<'q> Machine<'q> {
         }
         Ok(())
     }
+
+    /// `M665 L<rod> R<radius> H<height>` (delta): new geometry, once the
+    /// moves are done; positions are lost, so `G28` must follow (Marlin
+    /// re-homes the same way). Bare `M665` reports the geometry.
+    #[cfg(feature = "delta")]
+    pub(super) fn delta_geometry<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
+        let MachineKinematics::Delta(mut delta) = self.motion.config.kinematics else {
+            return Err(CommandError::NotThisMachine);
+        };
+        let mm = |letter| -> Result<Option<f32>, CommandError> {
+            match command.value(letter)? {
+                None => Ok(None),
+                Some(value) => match value.to_scaled(3) {
+                    Some(um) if um > 0 => Ok(Some(um as f32 / 1000.0)),
+                    _ => Err(CommandError::OutOfRange(letter)),
+                },
+            }
+        };
+        let (rod, radius, height) = (mm(b'L')?, mm(b'R')?, mm(b'H')?);
+        if rod.is_none() && radius.is_none() && height.is_none() {
+            let _ = ufmt::uwrite!(
+                out,
+                "echo:  M665 L{} R{} H{}\n",
+                crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(delta.rod_length() * 100.0)),
+                crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(delta.radius() * 100.0)),
+                crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(delta.homed_height * 100.0))
+            );
+            return Ok(());
+        }
+        let (rod, radius) = (rod.unwrap_or(delta.rod_length()), radius.unwrap_or(delta.radius()));
+        if rod <= radius {
+            return Err(CommandError::OutOfRange(b'L'));
+        }
+        delta.set_geometry(rod, radius);
+        if let Some(height) = height {
+            delta.homed_height = height;
+        }
+        self.change_kinematics(MachineKinematics::Delta(delta))
+    }
+
+    /// `M666 X Y Z` (delta): endstop trims, mm (each tower's switch this
+    /// far above the nominal one). Bare `M666` reports them.
+    #[cfg(feature = "delta")]
+    pub(super) fn delta_trim<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
+        let MachineKinematics::Delta(mut delta) = self.motion.config.kinematics else {
+            return Err(CommandError::NotThisMachine);
+        };
+        let mut any = false;
+        for (tower, letter) in [b'X', b'Y', b'Z'].into_iter().enumerate() {
+            if let Some(value) = command.value(letter)? {
+                match value.to_scaled(3) {
+                    Some(um) if um.abs() <= 20_000 => delta.endstop_trim[tower] = um as f32 / 1000.0,
+                    _ => return Err(CommandError::OutOfRange(letter)),
+                }
+                any = true;
+            }
+        }
+        if !any {
+            let trim = delta.endstop_trim.map(|mm| crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(mm * 100.0)));
+            let _ = ufmt::uwrite!(out, "echo:  M666 X{} Y{} Z{}\n", trim[0], trim[1], trim[2]);
+            return Ok(());
+        }
+        self.change_kinematics(MachineKinematics::Delta(delta))
+    }
+
+    /// New kinematics take effect for the moves that follow; where the
+    /// carriages are in the new geometry is unknown until `G28`.
+    #[cfg(feature = "delta")]
+    fn change_kinematics(&mut self, kinematics: MachineKinematics) -> Result<(), CommandError> {
+        if !self.motion.is_idle() {
+            return Err(CommandError::Motion(MotionError::Busy));
+        }
+        self.motion.config.kinematics = kinematics;
+        self.position_lost = true;
+        Ok(())
+    }
 }

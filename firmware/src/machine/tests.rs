@@ -269,3 +269,15 @@ fn a_corrupt_image_at_boot_is_reported_and_the_defaults_stay() {
     assert!(out.0.ends_with("echo:Hardcoded Default Settings Loaded\n"), "{}", out.0);
     assert_eq!(machine.settings(), &Settings::default());
 }
+
+#[test]
+fn each_machine_starts_from_its_own_defaults_and_m502_restores_them() {
+    let queues: &'static mut StepQueues = Box::leak(Box::new(StepQueues::new()));
+    let config = MotionConfig::spec_delta(false);
+    let (feeder, _generator) = queues.split(config.stepper());
+    let mut machine = Machine::new(Motion::new(config, feeder));
+    assert_eq!(machine.settings().steps_per_mm_milli, [80_000, 80_000, 80_000, 102_000]);
+    assert_eq!(machine.settings().max_feed_um_per_s[0], 150_000);
+    assert_eq!(converse(&mut machine, 0, "M92 X100\nM502\n"), "ok\necho:Hardcoded Default Settings Loaded\nok\n");
+    assert_eq!(machine.settings().steps_per_mm_milli[0], 80_000);
+}
