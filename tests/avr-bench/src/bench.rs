@@ -28,6 +28,8 @@ pub struct PhaseLog {
     pub rx_overruns: u64,
     pub resets: u64,
     pub halted: Option<String>,
+    /// Longest main-loop pass (gap between two `wdr`), ms.
+    pub main_loop_max_ms: f64,
 }
 
 impl PhaseLog {
@@ -47,6 +49,7 @@ impl PhaseLog {
             rx_overruns: board.rx_overruns(),
             resets: stats.resets,
             halted: board.halted_reason().map(str::to_string),
+            main_loop_max_ms: stats.max_watchdog_gap as f64 * 1000.0 / f64::from(crate::board::CPU_HZ),
         }
     }
 }

@@ -230,6 +230,12 @@ pub struct CpuStats {
     pub min_sp_pc: u32,
     /// Times the CPU went back to the reset vector (watchdog, crash).
     pub resets: u64,
+    /// `wdr` instructions executed (the firmware feeds its watchdog once
+    /// per main-loop pass), the cycle of the last one, and the longest gap
+    /// between two: the worst main-loop period.
+    pub watchdog_feeds: u64,
+    pub last_watchdog_feed: u64,
+    pub max_watchdog_gap: u64,
 }
 
 /// Duty bookkeeping of one output pin.
@@ -645,6 +651,9 @@ impl Board {
                 let nesting = (*avr).interrupts.running_ptr;
                 let sleeping = (*avr).state == ffi::cpu_Sleeping as i32;
                 let pc_before = (*avr).pc;
+                // `wdr` is 0x95A8 (little endian in flash).
+                let is_wdr = *(*avr).flash.add(pc_before as usize) == 0xA8
+                    && *(*avr).flash.add(pc_before as usize + 1) == 0x95;
                 let state = ffi::avr_run(avr);
                 let after = (*avr).cycle;
                 let spent = after - cycle;
@@ -655,6 +664,13 @@ impl Board {
                 }
                 let stats = &mut (*shared).stats;
                 stats.instructions += 1;
+                if is_wdr {
+                    if stats.watchdog_feeds > 0 {
+                        stats.max_watchdog_gap = stats.max_watchdog_gap.max(cycle - stats.last_watchdog_feed);
+                    }
+                    stats.watchdog_feeds += 1;
+                    stats.last_watchdog_feed = cycle;
+                }
                 if sleeping {
                     stats.sleep_cycles += spent;
                 }

@@ -146,6 +146,15 @@ fn main() {
         ),
     });
 
+    // Liveness: the watchdog (2 s) against the longest main-loop pass.
+    let slowest = phases.iter().max_by(|a, b| a.main_loop_max_ms.total_cmp(&b.main_loop_max_ms));
+    rows.push(Row {
+        key: "main_loop_max_ms",
+        value: slowest.map(|p| p.main_loop_max_ms).ok_or_else(|| "no phase ran".to_string()),
+        shown: slowest.map_or(String::new(), |p| format!("{:.1} ms (longest pass between two watchdog feeds, in \"{}\")", p.main_loop_max_ms, p.name)),
+        anchor: "watchdog timeout 2000 ms".to_string(),
+    });
+
     let wire_250k = |bytes: f64| bytes * 640.0;
     rows.push(match &parse {
         Ok(p) => Row {
