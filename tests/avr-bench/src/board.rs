@@ -926,6 +926,19 @@ impl Board {
         }
     }
 
+    /// Make the CPU continue at flash byte address `addr` (as if the code
+    /// had jumped there): for driving the firmware into its panic handler.
+    pub fn jump_to(&mut self, addr: u32) {
+        // SAFETY: between instructions; the PC is a plain field.
+        unsafe { (*self.avr).pc = addr };
+    }
+
+    /// Read a data-space byte (I/O registers included) without side effects.
+    pub fn peek(&self, addr: u16) -> u8 {
+        // SAFETY: inside simavr's data array.
+        unsafe { *(*self.avr).data.add(usize::from(addr)) }
+    }
+
     /// Start (or stop and discard) the per-instruction cycle profile.
     pub fn profile(&mut self, on: bool) {
         self.shared.profile = on.then(|| vec![0; (crate::elf::FLASH_BYTES / 2) as usize]);

@@ -634,3 +634,42 @@ fn the_longest_main_loop_pass_stays_far_below_the_watchdog_timeout() {
     assert!(worst_ms < 500.0, "{worst_ms} ms");
     assert_eq!(stats.resets, 0);
 }
+
+/// A panic on the board (here: the CPU sent into the panic handler in the
+/// middle of a move with the fan on) turns the heater and fan outputs off,
+/// disables the drivers, stops the steps and says so over serial.
+#[test]
+fn a_panic_leaves_heaters_off_motors_disabled_and_says_so() {
+    let mut config = RampsConfig::stock(115_200);
+    config.host = HostConfig::raw(115_200);
+    config.endstops = bench::far_endstops();
+    let mut board = bench::boot(&mega2560_elf(), config).unwrap();
+    assert_eq!(replies(&mut board, &["M106 S255", "M17", "G1 X100 F3000"]), ["ok", "ok", "ok"]);
+    board.run_for_ms(300.0);
+    let moving = board.position(X);
+    assert!(moving > 0);
+    let handler = board.function_range("rust_begin_unwind").expect("the panic handler in the ELF");
+    board.jump_to(handler.start);
+    board.run_for_ms(50.0);
+    let text: Vec<String> = board.host().replies.iter().map(|r| r.text.clone()).collect();
+    assert!(text.iter().any(|t| t == "Error:Firmware panic: heaters off, motors disabled. Reset the board."), "{text:?}");
+    // PORTB bit 4 (hot end D10), PORTH bits 5, 6 (bed D8, fan D9) low;
+    // every driver enable (active low) high: X PD7, Y PF2, Z PK0, E0 PA2.
+    const PORTA: u16 = 0x22;
+    const PORTB: u16 = 0x25;
+    const PORTD: u16 = 0x2B;
+    const PORTF: u16 = 0x31;
+    const PORTH: u16 = 0x102;
+    const PORTK: u16 = 0x108;
+    assert_eq!(board.peek(PORTB) & 1 << 4, 0);
+    assert_eq!(board.peek(PORTH) & (1 << 5 | 1 << 6), 0);
+    for (port, bit) in [(PORTD, 7), (PORTF, 2), (PORTK, 0), (PORTA, 2)] {
+        assert_ne!(board.peek(port) & 1 << bit, 0, "enable {port:#x}.{bit}");
+    }
+    let stopped = board.position(X);
+    board.run_for_ms(200.0);
+    assert_eq!(board.position(X), stopped, "no step after the panic");
+    board.run_for_ms(300.0);
+    let fan = board.thermal_history().last().unwrap().fan_duty;
+    assert_eq!(fan, 0.0);
+}
