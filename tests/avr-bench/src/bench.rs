@@ -190,9 +190,7 @@ impl ParseResult {
 /// interrupt handler cycles inside the window are subtracted. The figure is
 /// median(G1 windows) − median(empty-line windows): checksum over the
 /// extra bytes, lexing, parsing and executing the G1 up to its first reply
-/// byte. Today a G1 is validated but not planned (the firmware answers
-/// "echo:Motion is not available yet…"); once motion lands the same
-/// window includes planning.
+/// byte, planning included (the `ok` follows the move into the planner).
 pub fn parse_cycles(elf: &Path, repeats: usize) -> Result<ParseResult, String> {
     let mut board = boot(elf, RampsConfig::stock(115_200))?;
     board.host_mut().config = HostConfig::raw(115_200);

@@ -169,7 +169,7 @@ fn main() {
                 p.lines
             ),
             anchor: format!(
-                "the line's own wire time at 250000 baud: {} cycles; measures lex+parse+protocol (G1 is not planned yet: {:?})",
+                "the line's own wire time at 250000 baud: {} cycles; measures lex+parse+protocol+planning (first reply: {:?})",
                 group(wire_250k(p.g1_bytes)),
                 p.first_g1_reply
             ),
