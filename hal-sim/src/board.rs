@@ -145,6 +145,7 @@ impl SimBoard {
             match self.link.machine.poll_motion(&status, self.now_ms, &mut out) {
                 Ok(StepperRequest::ClearFault) => self.generator.clear_fault(),
                 Ok(StepperRequest::Halt) => self.generator.halt(StepFault::Stopped),
+                Ok(StepperRequest::Configure(config)) => self.generator.set_config(config),
                 _ => {}
             }
             let _ = self.link.service(&mut self.rx, &mut self.eeprom, self.now_ms, &mut out);

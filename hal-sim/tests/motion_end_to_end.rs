@@ -243,3 +243,28 @@ fn the_arm_refuses_moves_until_homed_then_homes_z_y_x() {
     let first = |m: usize| board.steps.motors[m].first_step().unwrap();
     assert!(first(2) < first(1) && first(1) < first(0), "Z, then Y, then X");
 }
+
+/// `M120` (Marlin: endstops on during every move): a switch hit in the
+/// middle of a print stops everything, says so, and moves wait for `G28`;
+/// `M121` goes back to switches watched only while homing.
+#[test]
+fn with_m120_a_switch_hit_mid_move_stops_everything_until_homed() {
+    let mut board = homed();
+    board.run_gcode("G1 X50 F6000\nM400\n", 10_000);
+    // The X min switch now also trips 20 mm above its homing position (a
+    // misplaced clip, a crash): the move back to X10 runs into it.
+    board.set_endstops(Box::new(|p: &[i64; 4]| u8::from(p[0] <= 2000) | (1..3).filter(|&m| p[m] <= 0).fold(0, |b, m| b | 1 << m)));
+    let output = board.run_gcode("M120\nG1 X10\n", 10_000);
+    assert!(output.contains("Error:Endstop hit during a move (switches 1): motion stopped, home with G28\n"), "{output}");
+    let stopped = board.steps.positions()[0];
+    assert!((1995..=2000).contains(&stopped), "{stopped}");
+    let output = board.run_gcode("G1 X30\n", 1_000);
+    assert!(output.contains("Error:Position unknown"), "{output}");
+    assert_eq!(board.steps.positions()[0], stopped);
+    // M121: the same switch is ignored outside homing again.
+    board.set_endstops(Box::new(|p: &[i64; 4]| (0..3).filter(|&m| p[m] <= 0).fold(0, |b, m| b | 1 << m)));
+    board.run_gcode("G28\n", 60_000);
+    board.set_endstops(Box::new(|p: &[i64; 4]| u8::from(p[0] <= 2000) | (1..3).filter(|&m| p[m] <= 0).fold(0, |b, m| b | 1 << m)));
+    let output = board.run_gcode("M121\nG1 X50\nG1 X10\nM400\n", 10_000);
+    assert_eq!(output.replace("echo:busy: processing\n", ""), "ok\nok\nok\nok\n");
+}

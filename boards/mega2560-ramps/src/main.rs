@@ -75,6 +75,7 @@ fn main() -> ! {
         match link.machine.poll_motion(&stepping::status(), now, &mut tx) {
             Ok(StepperRequest::ClearFault) => stepping::clear_fault(),
             Ok(StepperRequest::Halt) => stepping::halt(),
+            Ok(StepperRequest::Configure(config)) => stepping::configure(config),
             _ => {}
         }
         let _ = link.service(&mut rx, &mut eeprom, now, &mut tx);

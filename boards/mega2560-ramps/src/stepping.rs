@@ -92,6 +92,11 @@ pub fn clear_fault() {
     interrupt::free(|cs| with_generator(cs, |g| g.clear_fault()));
 }
 
+/// New stepper configuration (`M120`/`M121`).
+pub fn configure(config: StepperConfig) {
+    interrupt::free(|cs| with_generator(cs, |g| g.set_config(config)));
+}
+
 pub fn halt() {
     interrupt::free(|cs| with_generator(cs, |g| g.halt(StepFault::Stopped)));
 }

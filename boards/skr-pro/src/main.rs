@@ -72,6 +72,7 @@ fn main() -> ! {
         match link.machine.poll_motion(&stepper::status(), now, &mut tx) {
             Ok(StepperRequest::ClearFault) => stepper::clear_fault(),
             Ok(StepperRequest::Halt) => stepper::halt(),
+            Ok(StepperRequest::Configure(config)) => stepper::configure(config),
             _ => {}
         }
         let _ = link.service(&mut rx, &mut settings, now, &mut tx);

@@ -153,6 +153,11 @@ pub fn clear_fault() {
     with_generator(|g| g.clear_fault());
 }
 
+/// New stepper configuration (`M120`/`M121`).
+pub fn configure(config: StepperConfig) {
+    with_generator(|g| g.set_config(config));
+}
+
 /// Stop all motion now (M410, kill).
 pub fn halt() {
     with_generator(|g| g.halt(StepFault::Stopped));

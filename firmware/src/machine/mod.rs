@@ -391,6 +391,8 @@ impl<'q> Machine<'q> {
             Code::M(119) => self.report_endstops(out).map(Ok)?,
             Code::M(155) => self.set_auto_report(&command, now_ms),
             Code::M(400) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false })),
+            Code::M(120) => Ok(self.motion.set_endstops_always(true)),
+            Code::M(121) => Ok(self.motion.set_endstops_always(false)),
             #[cfg(feature = "delta")]
             Code::M(665) => self.delta_geometry(&command, out),
             #[cfg(feature = "delta")]

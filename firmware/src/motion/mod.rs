@@ -58,6 +58,7 @@
 //!     StepperRequest::None => {}
 //!     StepperRequest::ClearFault => interrupt::free(|cs| generator.clear_fault()),
 //!     StepperRequest::Halt => interrupt::free(|cs| generator.halt(StepFault::Stopped)),
+//!     StepperRequest::Configure(c) => interrupt::free(|cs| generator.set_config(c)),
 //! }
 //! if let Some(error) = motion.take_error() { reply "Error:…" (and after a
 //!     fault: the position is lost, re-home) }
@@ -363,6 +364,9 @@ pub enum StepperRequest {
     ClearFault,
     /// Call `generator.halt(StepFault::Stopped)` (`M410`).
     Halt,
+    /// Call `generator.set_config(config)` (`M120`/`M121` changed which
+    /// endstops stop a move).
+    Configure(StepperConfig),
 }
 
 /// A straight line cut into pieces short enough for the kinematics (and
@@ -446,7 +450,11 @@ pub struct Motion<'q> {
     homing_move: Option<(u16, [i32; MOTORS])>,
     homed: u8,
     error: Option<MotionError>,
+    /// The configuration's own hard limits (`M121` goes back to them).
+    machine_limits: u8,
     stop_requested: bool,
+    /// The stepper configuration changed; the interrupt has the old one.
+    stepper_changed: bool,
     fault_seen: bool,
     status: StepperStatus,
 }
@@ -467,7 +475,9 @@ impl<'q> Motion<'q> {
             homing_move: None,
             homed: 0,
             error: None,
+            machine_limits: config.stepper.limit_endstops,
             stop_requested: false,
+            stepper_changed: false,
             fault_seen: false,
             status: StepperStatus::default(),
         };
@@ -553,6 +563,21 @@ impl<'q> Motion<'q> {
     /// Blocks in the planner (for reports and tests).
     pub fn planner(&self) -> &Planner {
         &self.planner
+    }
+
+    /// `M120` (on) / `M121` (off): the homing switches also stop any move
+    /// that runs into them, not only homing (Marlin's endstops "enabled
+    /// globally"). Off restores the machine's own hard limits (the arm's
+    /// NC switches stay on).
+    pub fn set_endstops_always(&mut self, on: bool) {
+        let homing_switches = (0..LINEAR_AXES).fold(0, |bits, motor| {
+            bits | homing::endstop_bit(motor, self.config.homing.axes[motor].towards_max)
+        });
+        let limits = if on { self.machine_limits | homing_switches } else { self.machine_limits };
+        if limits != self.config.stepper.limit_endstops {
+            self.config.stepper.limit_endstops = limits;
+            self.stepper_changed = true;
+        }
     }
 
     /// `M410`: stop now; the position is lost.
@@ -659,6 +684,10 @@ impl<'q> Motion<'q> {
             self.flush();
             self.homed = 0;
             return StepperRequest::Halt;
+        }
+        if self.stepper_changed {
+            self.stepper_changed = false;
+            return StepperRequest::Configure(self.config.stepper);
         }
         // A block the interrupt finished before it was fully prepared was
         // abandoned (a homing move stopped by its switches).

@@ -86,6 +86,7 @@ impl Rig {
             StepperRequest::None => {}
             StepperRequest::ClearFault => self.generator.clear_fault(),
             StepperRequest::Halt => self.generator.halt(StepFault::Stopped),
+            StepperRequest::Configure(config) => self.generator.set_config(config),
         }
         if let Some(error) = self.motion.take_error() {
             self.errors.push(error);

@@ -38,6 +38,7 @@ fn main() {
         power_loss_during_m500(),
         endstop_stuck_triggered(),
         endstop_never_triggers(),
+        endstop_hit_mid_print(),
         m112_during_a_fast_move(),
         encoder_disconnected(),
     ];
@@ -354,6 +355,39 @@ fn endstop_stuck_triggered() -> Outcome {
 
 fn endstop_never_triggers() -> Outcome {
     homing_fault("endstop wire broken", "X min never triggers", Box::new(|p: &[i64; 4]| (1..3).filter(|&m| p[m] <= 0).fold(0, |b, m| b | 1 << m)))
+}
+
+fn endstop_hit_mid_print() -> Outcome {
+    let mut board = homed();
+    board.run_gcode("M120\nG1 X50 F6000\nM400\n", 10_000);
+    board.take_output();
+    // The X switch trips 20 mm from home (a crash, a loose switch).
+    board.set_endstops(Box::new(|p: &[i64; 4]| u8::from(p[0] <= 2000) | (1..3).filter(|&m| p[m] <= 0).fold(0, |b, m| b | 1 << m)));
+    board.receive(b"G1 X10\n");
+    let safe = run_until(&mut board, 10_000, |b| b.steps.positions()[0] <= 2000).and_then(|hit| {
+        let at = positions(&board)[0];
+        run_until(&mut board, 100, |b| b.link.machine.motion_idle()).map(|idle| (hit, idle, at))
+    });
+    let output = board.take_output();
+    let after = positions(&board)[0];
+    let refused = board.run_gcode("G1 X40\n", 1_000).contains("Error:Position unknown");
+    let reported = output.contains("Error:Endstop hit");
+    let (observed, ms, passed) = match safe {
+        Some((_, idle, at)) => (
+            format!("{}, stopped {} step(s) past the switch, next move {}", if reported { "Error:Endstop hit" } else { "no error" }, at - after, if refused { "refused until G28" } else { "ACCEPTED" }),
+            Some(idle),
+            reported && refused && positions(&board)[0] == after,
+        ),
+        None => ("never reached the switch".to_string(), None, false),
+    };
+    Outcome {
+        fault: "endstop hit mid-print",
+        injected: "with M120, the X switch trips 20 mm from home during a move",
+        expected: "motion stops, Error: line, moves refused until G28",
+        observed,
+        safe_after_ms: ms,
+        passed,
+    }
 }
 
 fn m112_during_a_fast_move() -> Outcome {
