@@ -48,6 +48,8 @@ pub const MAX_CRUISE_SEGMENT_S: f32 = 0.010;
 pub const SPEED_RATIO: f32 = 1.2;
 /// Most segments [`Prep::fill`] queues per call.
 const SEGMENTS_PER_FILL: usize = 16;
+/// Segments queued ahead before [`Prep::fill`] goes one per call.
+const SEGMENTS_AHEAD: usize = 4;
 /// Q24.8 ticks per second.
 const Q8_PER_S: f32 = TIMER_HZ as f32 * 256.0;
 
@@ -212,7 +214,12 @@ impl Prep {
         // At most a queue's worth per call: the main loop must come back to
         // its other duties (and the watchdog) even if the interrupt drains
         // the queue as fast as this fills it.
-        while queued < SEGMENTS_PER_FILL {
+        // With a few segments already queued (≥ 10 ms of steps), one more
+        // per pass is enough: the main loop comes back to the serial port
+        // within one segment's preparation instead of after sixteen (a
+        // host waiting for `ok` waits that long).
+        let budget = if feeder.queued_segments() >= SEGMENTS_AHEAD { 1 } else { SEGMENTS_PER_FILL };
+        while queued < budget {
             let starts_block = !self.active;
             if starts_block {
                 let Some(block) = planner.current() else { break };

@@ -28,6 +28,7 @@ fn main() {
     config.host = HostConfig::raw(115_200);
     let mut board = bench::boot(&elf, config).unwrap_or_else(|e| panic!("{e}"));
     board.profile(true);
+    board.sample_pcs(2_000);
     let start = board.cycle();
     let isr_start = board.stats().isr_cycles;
     let lines: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -42,10 +43,15 @@ fn main() {
         board.stats().isr_cycles - isr_start
     );
     println!("(the main loop's idle polling is part of its own line)");
-    for (function, cycles) in board.profile_by_function().iter().take(25) {
+    for (function, cycles) in board.profile_by_function().iter().take(60) {
         println!(
             "{cycles:>10} {:5.1} %  {function}",
             *cycles as f64 * 100.0 / total as f64
         );
+    }
+    let (cycles, functions) = board.longest_pass_samples();
+    println!("longest main-loop pass: {cycles} cycles ({:.2} ms); PC samples every 2000 cycles in it:", cycles as f64 / 16_000.0);
+    for (function, samples) in functions.iter().take(15) {
+        println!("{samples:>6}  {function}");
     }
 }

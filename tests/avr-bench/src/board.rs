@@ -337,6 +337,12 @@ struct Shared {
     /// Bytes injected into the receiver: (start-bit cycle, byte).
     rx_log: Vec<(u64, u8)>,
     record_isr_intervals: bool,
+    /// (cycle, pc) every `pc_sample_every` cycles, when sampling.
+    pc_samples: Vec<(u64, u32)>,
+    pc_sample_every: u64,
+    next_pc_sample: u64,
+    /// Cycles of every `wdr` (main-loop pass boundaries), when sampling.
+    watchdog_feeds_at: Vec<u64>,
     isr_entered_at: u64,
     /// Outermost interrupt handler runs: [entry, after RETI).
     isr_intervals: Vec<(u64, u64)>,
@@ -458,6 +464,10 @@ impl Board {
                 tx_log: Vec::new(),
                 rx_log: Vec::new(),
                 record_isr_intervals: false,
+                pc_samples: Vec::new(),
+                pc_sample_every: 0,
+                next_pc_sample: 0,
+                watchdog_feeds_at: Vec::new(),
                 isr_entered_at: 0,
                 isr_intervals: Vec::new(),
                 profile: None,
@@ -660,6 +670,15 @@ impl Board {
                 if let Some(profile) = &mut (*shared).profile {
                     if let Some(slot) = profile.get_mut((pc_before / 2) as usize) {
                         *slot += spent;
+                    }
+                }
+                if (*shared).pc_sample_every != 0 {
+                    if cycle >= (*shared).next_pc_sample {
+                        (*shared).next_pc_sample = cycle + (*shared).pc_sample_every;
+                        (*shared).pc_samples.push((cycle, pc_before));
+                    }
+                    if is_wdr {
+                        (*shared).watchdog_feeds_at.push(cycle);
                     }
                 }
                 let stats = &mut (*shared).stats;
@@ -876,6 +895,33 @@ impl Board {
 
     /// Record every outermost interrupt handler run from now on (for
     /// [`Board::isr_cycles_between`]).
+    /// Sample the PC every `every` cycles (0: off) and note every
+    /// watchdog feed, to see what the longest main-loop pass did.
+    pub fn sample_pcs(&mut self, every: u64) {
+        self.shared.pc_sample_every = every;
+        self.shared.pc_samples.clear();
+        self.shared.watchdog_feeds_at.clear();
+    }
+
+    /// The PC samples taken during the longest main-loop pass: (its length
+    /// in cycles, function name → samples).
+    pub fn longest_pass_samples(&self) -> (u64, Vec<(String, usize)>) {
+        let feeds = &self.shared.watchdog_feeds_at;
+        let Some((start, end)) = feeds.windows(2).map(|w| (w[0], w[1])).max_by_key(|(a, b)| b - a) else {
+            return (0, Vec::new());
+        };
+        let mut counts: std::collections::BTreeMap<String, usize> = Default::default();
+        for &(cycle, pc) in &self.shared.pc_samples {
+            if cycle >= start && cycle < end {
+                let name = self.symbol_at(pc).map(demangle).unwrap_or_else(|| format!("{pc:#x}"));
+                *counts.entry(name).or_default() += 1;
+            }
+        }
+        let mut counts: Vec<_> = counts.into_iter().collect();
+        counts.sort_by(|a, b| b.1.cmp(&a.1));
+        (end - start, counts)
+    }
+
     pub fn record_isr_intervals(&mut self, on: bool) {
         self.shared.record_isr_intervals = on;
         if !on {
