@@ -64,7 +64,7 @@ fn main() -> ! {
     let _ = link.machine.write_banner(&mut tx);
     let _ = link.machine.load_settings(&mut eeprom, &mut tx);
     let mut next_thermal_ms = 0u32;
-    let mut drivers_enabled = None;
+    let mut outputs = Outputs::default();
 
     // The loop never sleeps: QEMU's AVR machine does not wake from `sleep`
     // on its timer interrupt and avr-tester stops at the first `sleep`, and
@@ -85,7 +85,7 @@ fn main() -> ! {
             link.machine.set_measured(read(pins::HOTEND_THERMISTOR_CHANNEL), read(pins::BED_THERMISTOR_CHANNEL));
             link.machine.set_endstop_levels(pins::endstop_levels(&dp));
         }
-        apply_outputs(&dp, &link.machine, &mut drivers_enabled);
+        apply_outputs(&dp, &link.machine, &mut outputs);
     }
 }
 
@@ -102,21 +102,33 @@ fn machine_config() -> MotionConfig {
 #[cfg(all(feature = "machine-delta", feature = "machine-arm"))]
 compile_error!("choose one machine: machine-delta or machine-arm");
 
-/// Drive the outputs the core decides: all off once halted. The driver
-/// enables are written only when they change (`enabled` remembers).
-fn apply_outputs(dp: &Peripherals, machine: &Machine, enabled: &mut Option<bool>) {
+/// What the outputs were last set to (`None`: not yet), so that the main
+/// loop writes a pin only when its value changes: each write holds the
+/// step interrupt off for a moment.
+#[derive(Default)]
+struct Outputs {
+    drivers_enabled: Option<bool>,
+    fan_duty: Option<u8>,
+}
+
+/// Drive the outputs the core decides: all off once halted.
+fn apply_outputs(dp: &Peripherals, machine: &Machine, last: &mut Outputs) {
     if machine.is_halted() {
         stepping::halt();
         pins::all_outputs_safe(dp);
-        *enabled = Some(false);
+        *last = Outputs { drivers_enabled: Some(false), fan_duty: Some(0) };
         return;
     }
-    let wanted = machine.steppers_enabled();
-    if *enabled != Some(wanted) {
-        pins::set_steppers_enabled(dp, wanted);
-        *enabled = Some(wanted);
+    let enabled = machine.steppers_enabled();
+    if last.drivers_enabled != Some(enabled) {
+        pins::set_steppers_enabled(dp, enabled);
+        last.drivers_enabled = Some(enabled);
     }
-    pwm::set(dp, pwm::Output::Fan, machine.fan_duty());
+    let fan = machine.fan_duty();
+    if last.fan_duty != Some(fan) {
+        pwm::set(dp, pwm::Output::Fan, fan);
+        last.fan_duty = Some(fan);
+    }
 }
 
 #[panic_handler]
