@@ -30,19 +30,22 @@
 //! feeder to `Motion::new(config, feeder)` (main loop) and put the
 //! generator where the step interrupt reaches it (an
 //! `avr_device::interrupt::Mutex<RefCell<Option<StepGenerator<'static>>>>`).
-//! Start Timer1 in CTC/compare mode at 2 MHz ([`stepper::TIMER_HZ`]).
+//! Start Timer1 free-running with compare interrupts at 2 MHz
+//! ([`stepper::TIMER_HZ`]).
 //!
 //! **Step-timer interrupt (TIMER1_COMPA), every compare:**
 //! ```text
 //! if generator.endstop_mask() != 0 {            // homing or hard limits
 //!     generator.on_endstops(endstop_bits());    // bit i: motor i min, bit 4+i: max;
 //! }                                             // 1 = triggered (polarity applied)
-//! let a = generator.on_timer();
-//! write DIR pins from a.dir_mask (bit 0 X, 1 Y, 2 Z, 3 E)   — first
-//! raise STEP pins of a.step_mask
+//! let (steps, dirs) = generator.pins_now();     // the event computed last time
+//! write DIR pins from dirs (bit 0 X, 1 Y, 2 Z, 3 E)   — first
+//! raise STEP pins of steps                      // edge time independent of the work below
+//! let a = generator.on_timer();                 // fires it, computes the next
 //! OCR1A = OCR1A + a.next_interval_ticks         // from the last compare, not from now
 //! lower the STEP pins after ≥ the driver's pulse width
 //! ```
+//! (`boards/mega2560-ramps/src/stepping.rs` is this, for Timer1.)
 //! The generator never presents a direction change together with a step;
 //! it gives the new directions `dir_setup_ticks` ahead (config).
 //! [`pairs_to_endstop_bits`] converts the executor's X_MIN, X_MAX, Y_MIN…
