@@ -39,6 +39,10 @@ pub struct Settings {
     pub feed_percent: i32,
     /// `M221 S`: flow (extrusion) override, percent.
     pub flow_percent: i32,
+    /// `M301 P I D` (hot end) and the bed's gains, Marlin's units × 10⁴
+    /// (see `thermal::Gains`); `M303 U1` sets them too.
+    pub hotend_pid: [i32; 3],
+    pub bed_pid: [i32; 3],
 }
 
 impl Default for Settings {
@@ -80,6 +84,9 @@ impl Settings {
             min_segment_time_us: 20_000,
             feed_percent: 100,
             flow_percent: 100,
+            // Marlin's DEFAULT_Kp/Ki/Kd and DEFAULT_bedKp/Ki/Kd.
+            hotend_pid: [222_000, 10_800, 1_140_000],
+            bed_pid: [100_000, 230, 3_054_000],
         }
     }
 
@@ -116,7 +123,13 @@ impl Settings {
             Fixed { mantissa: self.junction_deviation_um, digits: 3 }
         )?;
         crate::flash_str!("echo:; Feedrate and flow:\necho:  M220 S").write_to(out)?;
-        ufmt::uwrite!(out, "{}\necho:  M221 S{}\n", self.feed_percent, self.flow_percent)
+        ufmt::uwrite!(out, "{}\necho:  M221 S{}\n", self.feed_percent, self.flow_percent)?;
+        crate::flash_str!("echo:; Hotend PID:\necho:  ").write_to(out)?;
+        let [kp, ki, kd] = self.hotend_pid;
+        if let Some(gains) = crate::thermal::Gains::new(kp, ki, kd) {
+            gains.write_m301(out)?;
+        }
+        out.write_str("\n")
     }
 }
 

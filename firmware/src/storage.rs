@@ -27,11 +27,11 @@
 use crate::settings::Settings;
 
 /// Bump whenever the payload layout changes: older images are then refused.
-pub const LAYOUT_VERSION: u8 = 1;
+pub const LAYOUT_VERSION: u8 = 2;
 const MAGIC: u16 = 0xF5E7;
 const HEADER_LEN: usize = 9;
 /// Payload: 21 `i32` fields of [`Settings`].
-pub const PAYLOAD_LEN: usize = 21 * 4;
+pub const PAYLOAD_LEN: usize = 27 * 4;
 /// Bytes one slot occupies.
 pub const SLOT_LEN: usize = HEADER_LEN + PAYLOAD_LEN;
 /// Storage the two slots need.
@@ -267,7 +267,7 @@ mod tests {
         let (settings, loaded) = load(&mut eeprom).unwrap();
         assert_eq!(settings, custom());
         assert_eq!(stored, loaded);
-        assert_eq!(stored.bytes, 93);
+        assert_eq!(stored.bytes, 117);
     }
 
     #[test]

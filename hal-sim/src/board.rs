@@ -20,6 +20,20 @@ use firmware::rx::{self, RxConsumer, RxProducer, RxQueue};
 use firmware::storage::MemoryStorage;
 
 use crate::steps::StepRecorder;
+use crate::thermal_plant::{HeaterPlant, PlantModel, ThermistorCircuit, PLANT_STEP_MS};
+use firmware::thermal::Oversampled;
+
+/// What a thermistor input reads on the simulated board.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Thermistor {
+    /// The heater plant's temperature through the RAMPS divider.
+    Plant,
+    /// A fixed ADC count (0: shorted sensor, 1023: open sensor).
+    Count(u16),
+}
+
+/// A bed plant fast enough for tests: 120 °C at full power, τ 300 s.
+pub const TEST_BED: PlantModel = PlantModel { gain_c_per_percent: 1.2, time_constant_s: 300.0, dead_time_s: 5.0, ambient_c: 25.0 };
 
 /// Endstops as a function of the motor positions (steps from boot): bit i
 /// motor i's min switch, bit 4 + i its max switch, 1 = triggered.
@@ -38,6 +52,12 @@ pub struct SimBoard {
     /// Every step the generator made.
     pub steps: StepRecorder,
     endstops: Endstops,
+    /// The hot end (40 W, SPEC §4-like) and the bed, driven by the
+    /// firmware's heater duties.
+    pub hotend_plant: HeaterPlant,
+    pub bed_plant: HeaterPlant,
+    pub hotend_sensor: Thermistor,
+    pub bed_sensor: Thermistor,
     pub eeprom: SimEeprom,
     producer: RxProducer<'static>,
     /// Bytes sent by the host and still on the wire.
@@ -100,6 +120,10 @@ impl SimBoard {
             steps: StepRecorder::new(stepper::TIMER_HZ, config.stepper().dir_invert),
             // Min switches where the motors were at boot.
             endstops: Box::new(|p: &[i64; 4]| (0..3).filter(|&m| p[m] <= 0).fold(0, |bits, m| bits | 1 << m)),
+            hotend_plant: HeaterPlant::new(PlantModel::HOTEND_40W),
+            bed_plant: HeaterPlant::new(TEST_BED),
+            hotend_sensor: Thermistor::Plant,
+            bed_sensor: Thermistor::Plant,
             eeprom,
             producer,
             wire: std::collections::VecDeque::new(),
@@ -152,8 +176,31 @@ impl SimBoard {
             if self.link.machine.is_halted() {
                 self.generator.halt(StepFault::Stopped);
             }
+            self.run_heaters();
             self.now_ms = self.now_ms.wrapping_add(1);
             self.run_steps_until(u64::from(self.now_ms) * u64::from(stepper::TIMER_HZ / 1000));
+        }
+    }
+
+    /// The heater plants on the firmware's duties, and every 100 ms the
+    /// averaged thermistor readings into the firmware (as the Mega's main
+    /// loop does).
+    fn run_heaters(&mut self) {
+        if self.now_ms % PLANT_STEP_MS as u32 == 0 {
+            let (hotend, bed) = self.link.machine.heater_duties();
+            self.hotend_plant.step(f64::from(hotend) / 255.0);
+            self.bed_plant.step(f64::from(bed) / 255.0);
+        }
+        if self.now_ms % 100 == 0 {
+            let read = |sensor: Thermistor, plant: &HeaterPlant| {
+                Oversampled(match sensor {
+                    Thermistor::Plant => (ThermistorCircuit::RAMPS.adc(plant.temperature_c()) * 16.0).round() as u16,
+                    Thermistor::Count(count) => count.min(1023) * 16,
+                })
+            };
+            let hotend = read(self.hotend_sensor, &self.hotend_plant);
+            let bed = read(self.bed_sensor, &self.bed_plant);
+            let _ = self.link.machine.on_thermal_samples(Some(hotend), Some(bed), &mut Output(&mut self.output));
         }
     }
 
@@ -248,7 +295,7 @@ mod tests {
         board.receive(b"M92 E415\nM500\n");
         board.advance(10);
         let mut rebooted = SimBoard::with_eeprom(SimEeprom { bytes: board.eeprom.bytes, ..SimEeprom::new() });
-        assert!(rebooted.take_output().contains("echo:V1 stored settings retrieved"));
+        assert!(rebooted.take_output().contains("echo:V2 stored settings retrieved"));
         assert_eq!(rebooted.link.machine.settings().steps_per_mm_milli[3], 415_000);
     }
 

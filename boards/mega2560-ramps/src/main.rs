@@ -25,8 +25,7 @@ use firmware::host_link::HostLink;
 use firmware::machine::Machine;
 use firmware::motion::{Motion, MotionConfig, StepperRequest};
 use firmware::rx::{self, RxQueue};
-use firmware::thermal::thermistor::{celsius_from_adc, NTC100K_B3950_4K7};
-use firmware::thermal::Celsius;
+use firmware::thermal::SampleAverager;
 
 /// How often the thermistors are read, in milliseconds.
 const THERMAL_PERIOD_MS: u32 = 100;
@@ -64,6 +63,10 @@ fn main() -> ! {
     let _ = link.machine.write_banner(&mut tx);
     let _ = link.machine.load_settings(&mut eeprom, &mut tx);
     let mut next_thermal_ms = 0u32;
+    // Hot end and bed thermistors, 16 conversions averaged per reading.
+    let channels = [pins::HOTEND_THERMISTOR_CHANNEL, pins::BED_THERMISTOR_CHANNEL];
+    let mut averagers = [SampleAverager::new(16), SampleAverager::new(16)];
+    let mut sampler = adc::Sampler::new();
     let mut outputs = Outputs::default();
 
     // The loop never sleeps: QEMU's AVR machine does not wake from `sleep`
@@ -81,10 +84,11 @@ fn main() -> ! {
         let _ = link.service(&mut rx, &mut eeprom, now, &mut tx);
         if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
             next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
-            let read = |channel| celsius_from_adc(&NTC100K_B3950_4K7, adc::read(&dp, channel)).unwrap_or(Celsius(0));
-            link.machine.set_measured(read(pins::HOTEND_THERMISTOR_CHANNEL), read(pins::BED_THERMISTOR_CHANNEL));
+            let [hotend, bed] = &mut averagers;
+            let _ = link.machine.on_thermal_samples(hotend.take(), bed.take(), &mut tx);
             link.machine.set_endstop_levels(pins::endstop_levels(&dp));
         }
+        sampler.poll(&dp, &channels, &mut averagers);
         apply_outputs(&dp, &link.machine, &mut outputs);
     }
 }
@@ -109,6 +113,7 @@ compile_error!("choose one machine: machine-delta or machine-arm");
 struct Outputs {
     drivers_enabled: Option<bool>,
     fan_duty: Option<u8>,
+    heater_duties: Option<(u8, u8)>,
 }
 
 /// Drive the outputs the core decides: all off once halted.
@@ -116,7 +121,7 @@ fn apply_outputs(dp: &Peripherals, machine: &Machine, last: &mut Outputs) {
     if machine.is_halted() {
         stepping::halt();
         pins::all_outputs_safe(dp);
-        *last = Outputs { drivers_enabled: Some(false), fan_duty: Some(0) };
+        *last = Outputs { drivers_enabled: Some(false), fan_duty: Some(0), heater_duties: Some((0, 0)) };
         return;
     }
     let enabled = machine.steppers_enabled();
@@ -128,6 +133,12 @@ fn apply_outputs(dp: &Peripherals, machine: &Machine, last: &mut Outputs) {
     if last.fan_duty != Some(fan) {
         pwm::set(dp, pwm::Output::Fan, fan);
         last.fan_duty = Some(fan);
+    }
+    let heaters = machine.heater_duties();
+    if last.heater_duties != Some(heaters) {
+        pwm::set(dp, pwm::Output::Hotend, heaters.0);
+        pwm::set(dp, pwm::Output::Bed, heaters.1);
+        last.heater_duties = Some(heaters);
     }
 }
 

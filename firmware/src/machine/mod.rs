@@ -19,6 +19,7 @@
 pub mod error;
 pub mod modal;
 mod motion_commands;
+mod thermal;
 
 use crate::gcode::{self, Code, Command, ParseError};
 use crate::motion::Motion;
@@ -27,7 +28,9 @@ use crate::protocol::HostProtocol;
 use crate::reply::{Fixed, Printable};
 use crate::settings::Settings;
 use crate::storage::{self, LoadError, NonVolatile};
-use crate::thermal::{Celsius, Heater};
+use crate::thermal::channel::{BED, HOTEND_0};
+use crate::thermal::{AutoReport, Autotune, ColdExtrusionGuard, Gains, HeaterChannel, TemperatureWait, WaitConfig};
+use thermal::HeaterSlot;
 use error::CommandError;
 use modal::{Distance, ModalState, Units, AXES, AXIS_LETTERS};
 use ufmt::uWrite;
@@ -43,7 +46,7 @@ pub const EXTRUDERS: u16 = 1;
 type LineText = heapless::Vec<u8, MAX_LINE>;
 
 /// A command that has started and not yet finished.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug)]
 enum Running {
     Idle,
     /// `G4`: wait for queued motion to finish, then `ms` more.
@@ -55,6 +58,12 @@ enum Running {
     WaitForMotion { then_disable: bool },
     /// `G28`: homing runs in the main loop.
     Homing,
+    /// `M109`/`M190`: waiting for a heater.
+    HeatWait { slot: HeaterSlot, wait: TemperatureWait },
+    /// `M303`: the relay auto-tune runs on the samples.
+    Autotune { slot: HeaterSlot, apply: bool, tune: Autotune },
+    /// `M303` ended (its report is out): `ok` at the next poll.
+    AutotuneDone,
 }
 
 /// Raw endstop levels as the board reads them, one bit per switch:
@@ -74,9 +83,10 @@ pub struct Machine<'q> {
     /// `M108` arrived while a command waited: it finishes at the next poll.
     wait_cancelled: bool,
     last_busy_ms: u32,
-    /// `M155 S<n>`: seconds between temperature reports (0: off).
-    auto_report_s: u8,
-    last_auto_report_ms: u32,
+    /// `M155 S<n>`: automatic temperature reports.
+    auto_report: AutoReport,
+    /// Last temperature line of a heating wait.
+    last_report_ms: u32,
     /// `M112` (or a safety fault): outputs off until reset.
     halted: bool,
     steppers_enabled: bool,
@@ -85,8 +95,10 @@ pub struct Machine<'q> {
     /// Levels that mean "triggered" (bit set: high = triggered).
     endstop_trigger_levels: EndstopLevels,
     endstop_levels: EndstopLevels,
-    hotend: Heater,
-    bed: Heater,
+    hotend: HeaterChannel,
+    bed: HeaterChannel,
+    /// `M302`: the cold-extrusion interlock.
+    cold_extrusion: ColdExtrusionGuard,
     /// The planner and everything behind it, up to the step queues.
     motion: Motion<'q>,
     /// A motion fault (limit switch, lost position) happened: moves are
@@ -111,8 +123,8 @@ impl<'q> Machine<'q> {
             running: Running::Idle,
             wait_cancelled: false,
             last_busy_ms: 0,
-            auto_report_s: 0,
-            last_auto_report_ms: 0,
+            auto_report: AutoReport::new(),
+            last_report_ms: 0,
             halted: false,
             steppers_enabled: false,
             fan_duty: 0,
@@ -120,8 +132,9 @@ impl<'q> Machine<'q> {
             // (Marlin's *_ENDSTOP_INVERTING false).
             endstop_trigger_levels: 0b11_1111,
             endstop_levels: 0,
-            hotend: Heater::new(),
-            bed: Heater::new(),
+            hotend: HeaterChannel::new(&HOTEND_0, Gains::MARLIN_HOTEND),
+            bed: HeaterChannel::new(&BED, Gains::MARLIN_BED),
+            cold_extrusion: ColdExtrusionGuard::HOTEND,
             motion,
             position_lost: false,
             defaults: settings.clone(),
@@ -165,12 +178,6 @@ impl<'q> Machine<'q> {
 
     // --- what the board tells us -------------------------------------------
 
-    /// Latest measured temperatures (from the board's ADC conversion).
-    pub fn set_measured(&mut self, hotend: Celsius, bed: Celsius) {
-        self.hotend.measured = hotend;
-        self.bed.measured = bed;
-    }
-
     /// Latest raw endstop levels.
     pub fn set_endstop_levels(&mut self, levels: EndstopLevels) {
         self.endstop_levels = levels;
@@ -189,8 +196,8 @@ impl<'q> Machine<'q> {
             return Ok(());
         }
         self.halted = true;
-        self.hotend.target = Celsius(0);
-        self.bed.target = Celsius(0);
+        self.hotend.turn_off();
+        self.bed.turn_off();
         self.running = Running::Idle;
         self.queue.clear();
         self.motion.request_stop();
@@ -201,7 +208,7 @@ impl<'q> Machine<'q> {
     /// temperature or a dwell (motion waits and homing are not cut short:
     /// Marlin's `M108` only breaks heating waits and `M0`/`M1`).
     pub fn cancel_wait(&mut self) {
-        self.wait_cancelled = matches!(self.running, Running::Dwell { .. } | Running::DwellAfterMotion { .. });
+        self.wait_cancelled = matches!(self.running, Running::Dwell { .. } | Running::DwellAfterMotion { .. } | Running::HeatWait { .. });
     }
 
     /// `M410` from the receive interrupt: stop all motion now. The queued
@@ -237,6 +244,7 @@ impl<'q> Machine<'q> {
     pub fn load_settings<W: uWrite + ?Sized>(&mut self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
         let reported = self.report_loaded_settings(storage, out);
         self.motion.apply_settings(&self.settings);
+        self.apply_heater_settings();
         reported
     }
 
@@ -294,7 +302,7 @@ impl<'q> Machine<'q> {
     ) -> Result<(), W::Error> {
         self.auto_report(now_ms, out)?;
         loop {
-            if self.running != Running::Idle {
+            if !matches!(self.running, Running::Idle) {
                 if !self.running_done(now_ms, out)? {
                     if now_ms.wrapping_sub(self.last_busy_ms) >= BUSY_INTERVAL_MS {
                         self.last_busy_ms = now_ms;
@@ -328,11 +336,7 @@ impl<'q> Machine<'q> {
 
 
     fn auto_report<W: uWrite + ?Sized>(&mut self, now_ms: u32, out: &mut W) -> Result<(), W::Error> {
-        if self.auto_report_s == 0 {
-            return Ok(());
-        }
-        if now_ms.wrapping_sub(self.last_auto_report_ms) >= u32::from(self.auto_report_s) * 1000 {
-            self.last_auto_report_ms = now_ms;
+        if self.auto_report.due(now_ms) {
             out.write_str(" ")?;
             self.write_temperatures(out)?;
         }
@@ -352,7 +356,9 @@ impl<'q> Machine<'q> {
             Err(ParseError::Empty) => return Ok(Outcome::Done),
             Err(error) => return Ok(Outcome::Failed(error.into())),
         };
-        if self.halted {
+        // Halted, the machine still answers what only reports (hosts keep
+        // polling M105), and refuses everything that would act.
+        if self.halted && !matches!(command.code, Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410)) {
             return Ok(Outcome::Failed(CommandError::Halted));
         }
         let result = match command.code {
@@ -412,6 +418,7 @@ impl<'q> Machine<'q> {
             Code::M(502) => {
                 self.settings = self.defaults.clone();
                 self.motion.apply_settings(&self.settings);
+                self.apply_heater_settings();
                 out.write_str("echo:Hardcoded Default Settings Loaded\n")?;
                 Ok(())
             }
@@ -422,7 +429,14 @@ impl<'q> Machine<'q> {
                 Ok(())
             }
             // Parsed and acknowledged; their subsystems land with later work.
-            Code::G(10 | 11) | Code::M(104 | 109 | 140 | 190 | 301 | 302 | 303) => {
+            Code::M(104) => return self.set_temperature(&command, HeaterSlot::Hotend, None, now_ms, out),
+            Code::M(140) => return self.set_temperature(&command, HeaterSlot::Bed, None, now_ms, out),
+            Code::M(109) => return self.set_temperature(&command, HeaterSlot::Hotend, Some(WaitConfig::HOTEND), now_ms, out),
+            Code::M(190) => return self.set_temperature(&command, HeaterSlot::Bed, Some(WaitConfig::BED), now_ms, out),
+            Code::M(301) => self.set_pid(&command, out),
+            Code::M(302) => self.cold_extrusion_command(&command, out),
+            Code::M(303) => return self.autotune(&command, out),
+            Code::G(10 | 11) => {
                 self.not_yet_available(text, out)?;
                 Ok(())
             }
@@ -477,23 +491,8 @@ impl<'q> Machine<'q> {
             Some(Some(s @ 0..=60)) => s as u8,
             Some(_) => return Err(CommandError::OutOfRange(b'S')),
         };
-        self.auto_report_s = seconds;
-        self.last_auto_report_ms = now_ms;
+        self.auto_report.set_interval(seconds, now_ms);
         Ok(())
-    }
-
-    /// ` T:… /… B:… /… @:… B@:…` (used by M105 and auto-reports).
-    pub fn write_temperatures<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(
-            out,
-            "T:{} /{} B:{} /{} @:{} B@:{}\n",
-            self.hotend.measured,
-            self.hotend.target,
-            self.bed.measured,
-            self.bed.target,
-            self.hotend.power,
-            self.bed.power
-        )
     }
 
     /// `M114`: `X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0`.
@@ -674,7 +673,7 @@ Cap:HOST_ACTION_COMMANDS:0
 Cap:PROMPT_SUPPORT:0
 Cap:SDCARD:0
 Cap:AUTOREPORT_SD_STATUS:0
-Cap:THERMAL_PROTECTION:0
+Cap:THERMAL_PROTECTION:1
 Cap:MOTION_MODES:0
 Cap:ARCS:1
 Cap:BABYSTEPPING:0

@@ -137,6 +137,9 @@ impl<'q> Machine<'q> {
                     true
                 }
             }
+            Running::HeatWait { .. } => return self.heat_wait_done(now_ms, out),
+            Running::Autotune { .. } => false,
+            Running::AutotuneDone => true,
         })
     }
 
@@ -259,12 +262,6 @@ impl<'q> Machine<'q> {
             }
             Err(error) => Err(CommandError::Motion(error)),
         }
-    }
-
-    /// Whether the hot end may push filament (above the cold-extrusion
-    /// limit, Marlin's 170 °C).
-    pub fn extrusion_allowed(&self) -> bool {
-        self.hotend.measured.0 >= 170
     }
 
     /// `G4 P<ms>` or `G4 S<s>`: first the queued moves finish (Marlin's

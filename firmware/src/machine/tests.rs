@@ -249,9 +249,9 @@ fn m500_saves_and_m501_restores_over_later_changes() {
         machine.poll(0, &mut eeprom, out).unwrap();
     };
     send(&mut machine, "M92 X80\nM500\n", &mut out);
-    assert!(out.0.starts_with("ok\necho:Settings Stored (93 bytes; crc "), "{}", out.0);
+    assert!(out.0.starts_with("ok\necho:Settings Stored (117 bytes; crc "), "{}", out.0);
     send(&mut machine, "M92 X90\nM501\n", &mut out);
-    assert!(out.0.contains("echo:V1 stored settings retrieved (93 bytes; crc "), "{}", out.0);
+    assert!(out.0.contains("echo:V2 stored settings retrieved (117 bytes; crc "), "{}", out.0);
     assert_eq!(machine.settings().steps_per_mm_milli[0], 80_000);
 }
 

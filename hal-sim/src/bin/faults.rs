@@ -312,7 +312,7 @@ fn power_loss_during_m500() -> Outcome {
     }
     Outcome {
         fault: "power loss during M500",
-        injected: "the save cut after each of its 93 byte writes",
+        injected: "the save cut after each of its 117 byte writes",
         expected: "old or new settings at the next boot, never a mix",
         observed: format!("{writes} cuts, {mixes} mixed or lost"),
         safe_after_ms: Some(0),

@@ -1,0 +1,283 @@
+//! The executor's heaters: `M104`/`M109`, `M140`/`M190`, `M105`, `M155`,
+//! `M301`, `M302`, `M303`, and the boards' sample hook
+//! ([`Machine::on_thermal_samples`]).
+//!
+//! The thermal core (`crate::thermal`) decides; this file only routes
+//! G-code to it and its verdicts back to the host, in Marlin's words:
+//! - a latched fault prints its `Error:… Heater_ID: …` line and halts the
+//!   machine (`kill`): heaters off, motion stopped, moves and heating
+//!   refused until reset;
+//! - `M109`/`M190` wait with Marlin's residency rule and print the `M105`
+//!   line with ` W:<s>` once a second while they wait; `M108` ends the
+//!   wait;
+//! - `M303 E<n> S<°C> C<cycles> U1` tunes, prints each cycle and Marlin's
+//!   closing block, and with `U1` applies the gains (`M500` saves them).
+
+use super::error::CommandError;
+use super::{Machine, Outcome, Running};
+use crate::gcode::Command;
+use crate::thermal::{
+    write_temperatures, Autotune, Celsius, Gains, HeaterChannel, Oversampled, TemperatureWait, TuneConfig,
+    TuneProgress, WaitConfig, WaitStatus,
+};
+use ufmt::uWrite;
+
+/// Which of the machine's heaters a command means.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum HeaterSlot {
+    Hotend,
+    Bed,
+}
+
+impl<'q> Machine<'q> {
+    fn channel(&mut self, slot: HeaterSlot) -> &mut HeaterChannel {
+        match slot {
+            HeaterSlot::Hotend => &mut self.hotend,
+            HeaterSlot::Bed => &mut self.bed,
+        }
+    }
+
+    /// Every sample period (100 ms): the averaged thermistor readings
+    /// (`None`: no new reading this period). Runs the heater laws and
+    /// protections, the `M303` tune, and reports a fault once.
+    pub fn on_thermal_samples<W: uWrite + ?Sized>(
+        &mut self,
+        hotend: Option<Oversampled>,
+        bed: Option<Oversampled>,
+        out: &mut W,
+    ) -> Result<(), W::Error> {
+        let tuning = match self.running {
+            Running::Autotune { slot, .. } => Some(slot),
+            _ => None,
+        };
+        for (slot, reading) in [(HeaterSlot::Hotend, hotend), (HeaterSlot::Bed, bed)] {
+            let Some(reading) = reading else { continue };
+            if tuning == Some(slot) {
+                self.tuning_sample(slot, reading, out)?;
+                continue;
+            }
+            if let Some(fault) = self.channel(slot).on_sample(reading) {
+                let id = self.channel(slot).id();
+                fault.write(id, out)?;
+                self.kill(out)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn tuning_sample<W: uWrite + ?Sized>(&mut self, slot: HeaterSlot, reading: Oversampled, out: &mut W) -> Result<(), W::Error> {
+        let Running::Autotune { slot: _, apply, ref mut tune } = self.running else { return Ok(()) };
+        let mut tune = *tune;
+        let progress = self.channel(slot).on_tuning_sample(reading, &mut tune);
+        if let Running::Autotune { tune: ref mut kept, .. } = self.running {
+            *kept = tune;
+        }
+        let id = self.channel(slot).id();
+        match progress {
+            TuneProgress::Running => {}
+            TuneProgress::Cycle => tune.last_cycle().write(out)?,
+            TuneProgress::Done(result) => {
+                result.write_finished(id, out)?;
+                if apply {
+                    self.channel(slot).set_gains(result.gains);
+                    self.store_gains(slot, result.gains);
+                }
+                self.running = Running::AutotuneDone;
+            }
+            TuneProgress::Failed(error) => {
+                error.write(out)?;
+                self.running = Running::AutotuneDone;
+            }
+            TuneProgress::Fault(fault) => {
+                fault.write(id, out)?;
+                self.kill(out)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn store_gains(&mut self, slot: HeaterSlot, gains: Gains) {
+        let stored = [gains.kp as i32, gains.ki as i32, gains.kd as i32];
+        match slot {
+            HeaterSlot::Hotend => self.settings.hotend_pid = stored,
+            HeaterSlot::Bed => self.settings.bed_pid = stored,
+        }
+    }
+
+    /// The settings' gains into the channels (boot, `M501`, `M502`).
+    pub(super) fn apply_heater_settings(&mut self) {
+        for (slot, [kp, ki, kd]) in [(HeaterSlot::Hotend, self.settings.hotend_pid), (HeaterSlot::Bed, self.settings.bed_pid)] {
+            if let Some(gains) = Gains::new(kp, ki, kd) {
+                self.channel(slot).set_gains(gains);
+            }
+        }
+    }
+
+    /// Duties for the heater outputs (hot end, bed), 0–255; 0 when halted.
+    pub fn heater_duties(&self) -> (u8, u8) {
+        if self.halted {
+            (0, 0)
+        } else {
+            (self.hotend.duty(), self.bed.duty())
+        }
+    }
+
+    /// Whether the hot end may push filament (`M302`'s interlock).
+    pub fn extrusion_allowed(&self) -> bool {
+        self.cold_extrusion.check(self.hotend.measured()).is_ok()
+    }
+
+    /// ` T:… /… B:… /… @:… B@:…` (used by `M105` and auto-reports).
+    pub fn write_temperatures<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        write_temperatures(&self.hotend, Some(&self.bed), out)
+    }
+
+    /// `M104`/`M140` (`wait: None`) and `M109`/`M190`: set the target;
+    /// the waits start a [`Running::HeatWait`].
+    pub(super) fn set_temperature<W: uWrite + ?Sized>(
+        &mut self,
+        command: &Command,
+        slot: HeaterSlot,
+        wait: Option<WaitConfig>,
+        now_ms: u32,
+        out: &mut W,
+    ) -> Result<Outcome, W::Error> {
+        let (value, cooling) = match (command.value(b'S'), command.value(b'R')) {
+            (Ok(Some(s)), _) => (Some(s), false),
+            (_, Ok(Some(r))) if wait.is_some() => (Some(r), true),
+            (Err(e), _) | (_, Err(e)) => return Ok(Outcome::Failed(e.into())),
+            _ => (None, false),
+        };
+        let Some(value) = value else { return Ok(Outcome::Done) };
+        let Some(hundredths) = value.to_scaled(2) else {
+            return Ok(Outcome::Failed(CommandError::OutOfRange(if cooling { b'R' } else { b'S' })));
+        };
+        let target = match self.channel(slot).set_target(Celsius(hundredths)) {
+            Ok(target) => target,
+            Err(fault) => {
+                let id = self.channel(slot).id();
+                fault.write(id, out)?;
+                return Ok(Outcome::Failed(CommandError::Halted));
+            }
+        };
+        Ok(match wait {
+            None => Outcome::Done,
+            Some(config) => {
+                self.last_report_ms = now_ms;
+                Outcome::Started(Running::HeatWait { slot, wait: TemperatureWait::new(config, target, cooling, now_ms) })
+            }
+        })
+    }
+
+    /// A running `M109`/`M190`: done when the wait says so; the `M105`
+    /// line with ` W:` once a second meanwhile (Marlin's keep-alive while
+    /// heating, so hosts see no `busy:` lines then).
+    pub(super) fn heat_wait_done<W: uWrite + ?Sized>(&mut self, now_ms: u32, out: &mut W) -> Result<bool, W::Error> {
+        let Running::HeatWait { slot, ref mut wait } = self.running else { return Ok(true) };
+        let measured = match slot {
+            HeaterSlot::Hotend => self.hotend.measured(),
+            HeaterSlot::Bed => self.bed.measured(),
+        };
+        let status = wait.poll(now_ms, measured);
+        match status {
+            WaitStatus::Waiting(left) => {
+                if now_ms.wrapping_sub(self.last_report_ms) >= 1000 {
+                    self.last_report_ms = now_ms;
+                    // Marlin's format: the report without its newline, then W.
+                    ufmt::uwrite!(out, " T:{} /{} B:{} /{} @:{} B@:{} W:", self.hotend.measured(), self.hotend.target(), self.bed.measured(), self.bed.target(), self.hotend.power_report(), self.bed.power_report())?;
+                    match left {
+                        Some(s) => ufmt::uwrite!(out, "{}\n", s)?,
+                        None => out.write_str("?\n")?,
+                    }
+                }
+                // Keeps the executor from printing `busy:` as well.
+                self.last_busy_ms = now_ms;
+                Ok(false)
+            }
+            WaitStatus::Reached | WaitStatus::CoolingStalled => Ok(true),
+            WaitStatus::TimedOut => {
+                out.write_str("Error:Heating timed out\n")?;
+                Ok(true)
+            }
+        }
+    }
+
+    /// `M301 [P] [I] [D]` (hot end, Marlin's units): set what is given;
+    /// bare `M301` reports.
+    pub(super) fn set_pid<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
+        let current = self.hotend.gains();
+        let read = |letter, now: u32| -> Result<i32, CommandError> {
+            match command.value(letter)? {
+                None => Ok(now as i32),
+                Some(v) => v.to_scaled(4).ok_or(CommandError::OutOfRange(letter)),
+            }
+        };
+        if !(command.has(b'P') || command.has(b'I') || command.has(b'D')) {
+            let _ = out.write_str("echo:");
+            let _ = current.write_m301(out);
+            let _ = out.write_str("\n");
+            return Ok(());
+        }
+        let gains = Gains::new(read(b'P', current.kp)?, read(b'I', current.ki)?, read(b'D', current.kd)?)
+            .ok_or(CommandError::OutOfRange(b'P'))?;
+        self.hotend.set_gains(gains);
+        self.store_gains(HeaterSlot::Hotend, gains);
+        Ok(())
+    }
+
+    /// `M302 [S<°C>] [P<0|1>]`: the cold-extrusion interlock.
+    pub(super) fn cold_extrusion_command<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
+        let min = match command.value(b'S')? {
+            None => None,
+            Some(v) => Some(Celsius(v.to_int().filter(|t| (0..=1000).contains(t)).ok_or(CommandError::OutOfRange(b'S'))? * 100)),
+        };
+        let allow = match command.value(b'P')? {
+            None => None,
+            Some(v) => Some(v.to_int().ok_or(CommandError::OutOfRange(b'P'))? != 0),
+        };
+        if self.cold_extrusion.m302(min, allow) {
+            let _ = self.cold_extrusion.write_state(out);
+        }
+        Ok(())
+    }
+
+    /// `M303 E<0|-1> S<°C> C<cycles> [U1]`: relay auto-tune of the hot end
+    /// (`E0`) or the bed (`E-1`).
+    pub(super) fn autotune<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<Outcome, W::Error> {
+        let int = |letter, default: i32| -> Result<i32, CommandError> {
+            match command.value(letter)? {
+                None => Ok(default),
+                Some(v) => v.to_int().ok_or(CommandError::OutOfRange(letter)),
+            }
+        };
+        let parsed = (|| -> Result<(HeaterSlot, i32, u8, bool), CommandError> {
+            let slot = match int(b'E', 0)? {
+                0 => HeaterSlot::Hotend,
+                -1 => HeaterSlot::Bed,
+                _ => return Err(CommandError::OutOfRange(b'E')),
+            };
+            let target = int(b'S', if slot == HeaterSlot::Bed { 70 } else { 150 })?;
+            if !(1..=400).contains(&target) {
+                return Err(CommandError::OutOfRange(b'S'));
+            }
+            let cycles = int(b'C', 5)?;
+            if !(3..=20).contains(&cycles) {
+                return Err(CommandError::OutOfRange(b'C'));
+            }
+            Ok((slot, target, cycles as u8, int(b'U', 0)? != 0))
+        })();
+        let (slot, target, cycles, apply) = match parsed {
+            Ok(p) => p,
+            Err(e) => return Ok(Outcome::Failed(e)),
+        };
+        let period = self.channel(slot).config().sample_period_ms;
+        let tune = Autotune::new(TuneConfig { cycles, ..TuneConfig::new(Celsius(target * 100), period) });
+        if let Err(fault) = self.channel(slot).start_tuning(&tune) {
+            let id = self.channel(slot).id();
+            fault.write(id, out)?;
+            return Ok(Outcome::Failed(CommandError::Halted));
+        }
+        crate::flash_str!("PID Autotune start\n").write_to(out)?;
+        Ok(Outcome::Started(Running::Autotune { slot, apply, tune }))
+    }
+}
