@@ -14,7 +14,7 @@ use firmware::closed_loop::control::FollowingErrorLimit;
 use firmware::closed_loop::AxisFault;
 use firmware::storage::{self, MemoryStorage};
 use hal_sim::axis_plant::Rng;
-use hal_sim::board::{SimBoard, SimEeprom};
+use hal_sim::board::{SimBoard, SimEeprom, Thermistor};
 use hal_sim::encoder_trace::{self, TraceRow};
 
 /// One row of the table.
@@ -40,6 +40,11 @@ fn main() {
         endstop_never_triggers(),
         endstop_hit_mid_print(),
         m112_during_a_fast_move(),
+        thermal_fault("thermistor open", "hot-end input at 1023 counts while heating to 200 °C", "Error:MINTEMP triggered (thermistor open)", |b| b.hotend_sensor = Thermistor::Count(1023), 2_000),
+        thermal_fault("thermistor shorted", "hot-end input at 0 counts while heating to 200 °C", "Error:MAXTEMP triggered (thermistor shorted)", |b| b.hotend_sensor = Thermistor::Count(0), 2_000),
+        thermistor_intermittent(),
+        thermal_fault("heater disconnected", "the hot end's heater wire cut at M104 S200", "Error:Heating failed", |b| b.hotend_plant.disconnect_heater(), 30_000),
+        thermal_fault("heater stuck on", "a shorted MOSFET: full power whatever the firmware drives", "Error:MAXTEMP triggered", |b| b.hotend_plant.stick_output(1.0), 400_000),
         encoder_disconnected(),
     ];
     print_table(&rows);
@@ -387,6 +392,62 @@ fn endstop_hit_mid_print() -> Outcome {
         observed,
         safe_after_ms: ms,
         passed,
+    }
+}
+
+/// Heat the hot end towards 200 °C, inject `fault` a second in, and wait
+/// for the firmware's reaction: the named `Error:` line, every heater off,
+/// halted.
+fn thermal_fault(
+    fault: &'static str,
+    injected: &'static str,
+    error: &'static str,
+    inject: impl FnOnce(&mut SimBoard),
+    max_ms: u32,
+) -> Outcome {
+    let mut board = booted();
+    board.run_gcode("M104 S200\n", 1_000);
+    board.take_output();
+    inject(&mut board);
+    let safe = run_until(&mut board, max_ms, |b| b.link.machine.is_halted() && b.link.machine.heater_duties() == (0, 0));
+    let output = board.take_output();
+    let named = output.lines().find(|l| l.starts_with(error)).map(str::to_string);
+    Outcome {
+        fault,
+        injected,
+        expected: "named Error: line, every heater off, halted",
+        observed: match &named {
+            Some(line) => format!("{line}; heaters off, halted"),
+            None => format!("no {error:?} line"),
+        },
+        safe_after_ms: safe,
+        passed: safe.is_some() && named.is_some(),
+    }
+}
+
+fn thermistor_intermittent() -> Outcome {
+    let mut board = booted();
+    board.run_gcode("M104 S200\n", 1_000);
+    board.take_output();
+    // Open for 300 ms (three readings) every 2 s: a loose crimp.
+    let mut safe = None;
+    for ms in 0..20_000u32 {
+        board.hotend_sensor = if ms % 2_000 < 300 { Thermistor::Count(1023) } else { Thermistor::Plant };
+        board.advance(1);
+        if board.link.machine.is_halted() {
+            safe = Some(ms);
+            break;
+        }
+    }
+    let output = board.take_output();
+    let named = output.contains("Error:MINTEMP triggered (thermistor open)");
+    Outcome {
+        fault: "thermistor intermittent",
+        injected: "hot-end input open 300 ms of every 2 s while heating",
+        expected: "fault once three readings in a row are bad, heaters off, halted",
+        observed: format!("{}; heaters {}", if named { "Error:MINTEMP triggered (thermistor open)" } else { "no error" }, if board.link.machine.heater_duties() == (0, 0) { "off" } else { "ON" }),
+        safe_after_ms: safe,
+        passed: named && safe.is_some() && board.link.machine.heater_duties() == (0, 0),
     }
 }
 
