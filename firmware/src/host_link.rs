@@ -51,9 +51,10 @@ impl<'q> HostLink<'q> {
         if emergencies.contains(Emergency::QuickStop) {
             self.machine.quick_stop();
         }
-        if link.take_dropped() > 0 {
-            self.assembler.mark_damaged();
-        }
+        // Lost bytes are marked in the byte stream itself (`rx::LOST_BYTES`),
+        // so the line that lost them is refused when it is complete; the
+        // count only feeds statistics.
+        let _ = link.take_dropped();
         // Take bytes only while the queue has room for a line; the rest
         // waits in the receive ring (hosts wait for `ok` anyway).
         while self.machine.can_accept_line() {

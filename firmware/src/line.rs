@@ -51,6 +51,11 @@ impl LineAssembler {
         if core::mem::take(&mut self.handed_out) {
             self.buffer.clear();
         }
+        if byte == crate::rx::LOST_BYTES {
+            // Bytes were lost right here (see `rx::LOST_BYTES`).
+            self.damaged = true;
+            return None;
+        }
         if byte != b'\n' && byte != b'\r' {
             if self.buffer.push(byte).is_err() {
                 self.overflowed = true;
@@ -117,6 +122,16 @@ mod tests {
         let mut line = [b'1'; MAX_LINE + 1];
         line[MAX_LINE] = b'\n';
         assert_eq!(feed(&mut a, &line), Some(Line::Text(&[b'1'; MAX_LINE])));
+    }
+
+    /// The receive ring's marker damages the line it falls in, and only
+    /// that one: the lines before and after are intact.
+    #[test]
+    fn the_lost_bytes_marker_damages_exactly_the_line_it_falls_in() {
+        let mut a = LineAssembler::new();
+        assert_eq!(feed(&mut a, b"G1 X1\n"), Some(Line::Text(b"G1 X1")));
+        assert_eq!(feed(&mut a, b"G1 X\x002\n"), Some(Line::Damaged));
+        assert_eq!(feed(&mut a, b"G1 X3\n"), Some(Line::Text(b"G1 X3")));
     }
 
     #[test]

@@ -18,9 +18,18 @@ pub const RX_RING_SLOTS: usize = 128;
 pub type RxQueue = Queue<u8, RX_RING_SLOTS>;
 
 /// Interrupt side of the ring.
+/// Put into the byte stream where bytes were lost (the ring was full, or
+/// the UART overran): the line assembler refuses the line it falls in, so
+/// the damage is charged to the line that lost bytes, not to whichever
+/// line the main loop happens to be assembling. NUL never belongs in
+/// G-code, so a NUL that arrives on the wire is refused the same way.
+pub const LOST_BYTES: u8 = 0;
+
 pub struct RxProducer<'a> {
     queue: Producer<'a, u8, RX_RING_SLOTS>,
     dropped: u8,
+    /// Bytes were lost and the marker is not in the ring yet.
+    marker_owed: bool,
     emergency: EmergencyScanner,
 }
 
@@ -32,7 +41,7 @@ pub struct RxConsumer<'a> {
 /// Split a queue into its two ends.
 pub fn split(queue: &mut RxQueue) -> (RxProducer<'_>, RxConsumer<'_>) {
     let (producer, consumer) = queue.split();
-    (RxProducer { queue: producer, dropped: 0, emergency: EmergencyScanner::new() }, RxConsumer { queue: consumer })
+    (RxProducer { queue: producer, dropped: 0, marker_owed: false, emergency: EmergencyScanner::new() }, RxConsumer { queue: consumer })
 }
 
 impl RxProducer<'_> {
@@ -42,17 +51,31 @@ impl RxProducer<'_> {
     /// on at once (it sees every byte, even those the ring has no room for).
     pub fn push(&mut self, byte: u8, hardware_overrun: bool) -> Option<Emergency> {
         if hardware_overrun {
+            // The UART lost the byte before this one.
             self.dropped = self.dropped.saturating_add(1);
+            self.marker_owed = true;
         }
-        if self.queue.enqueue(byte).is_err() {
+        // The marker goes in before the first byte after the gap (it needs
+        // a slot of its own; until there is one, that byte is lost too).
+        if self.marker_owed && self.queue.enqueue(LOST_BYTES).is_ok() {
+            self.marker_owed = false;
+        }
+        if self.marker_owed || self.queue.enqueue(byte).is_err() {
             self.dropped = self.dropped.saturating_add(1);
+            self.marker_owed = true;
         }
         self.emergency.push(byte)
     }
 
     /// Take (and reset) the count of bytes lost since the last call.
     /// Called by the main loop inside a critical section.
+    /// Bytes lost since the last call. Also puts an owed marker into the
+    /// ring once it has room, so a gap at the end of a burst is marked
+    /// even if no byte follows it for a while.
     pub fn take_dropped(&mut self) -> u8 {
+        if self.marker_owed && self.queue.enqueue(LOST_BYTES).is_ok() {
+            self.marker_owed = false;
+        }
         core::mem::take(&mut self.dropped)
     }
 }
@@ -81,6 +104,26 @@ mod tests {
         }
         assert_eq!(&got, b"M105\n");
         assert_eq!(c.pop(), None);
+    }
+
+    /// After a gap the marker comes first, in the byte's place: the
+    /// consumer sees exactly where the stream is broken.
+    #[test]
+    fn bytes_lost_to_a_full_ring_leave_a_marker_where_they_were() {
+        let mut q = RxQueue::new();
+        let (mut p, mut c) = split(&mut q);
+        for _ in 0..RX_RING_SLOTS - 1 {
+            p.push(b'a', false);
+        }
+        p.push(b'L', false); // lost: the ring holds 127
+        for _ in 0..3 {
+            c.pop();
+        }
+        p.push(b'b', false); // the marker takes the first free slot
+        p.push(b'c', false);
+        let tail: std::vec::Vec<u8> = core::iter::from_fn(|| c.pop()).collect();
+        assert_eq!(&tail[tail.len() - 3..], &[LOST_BYTES, b'b', b'c']);
+        assert_eq!(p.take_dropped(), 1);
     }
 
     #[test]

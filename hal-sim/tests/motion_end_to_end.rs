@@ -176,7 +176,7 @@ fn homing_without_a_switch_fails_and_halts() {
     board.set_endstops(Box::new(|_: &[i64; 4]| 0));
     let output = board.run_gcode("G28 X\n", 120_000);
     assert!(
-        output.ends_with("Error:Homing Failed\nError:Printer halted. kill() called!\n"),
+        output.ends_with("Error:Homing Failed\nError:Printer halted. kill() called!\nok\n"),
         "{output}"
     );
     assert!(board.link.machine.is_halted());

@@ -198,10 +198,15 @@ impl<'q> Machine<'q> {
         self.halted = true;
         self.hotend.turn_off();
         self.bed.turn_off();
-        self.running = Running::Idle;
-        self.queue.clear();
         self.motion.request_stop();
-        out.write_str("Error:Printer halted. kill() called!\n")
+        out.write_str("Error:Printer halted. kill() called!\n")?;
+        // The command that was running ends here and gets its `ok`; the
+        // queued ones stay, to be refused one by one (each its `Error:`
+        // and `ok`): a host waiting for `ok` is never left hanging.
+        if !matches!(core::mem::replace(&mut self.running, Running::Idle), Running::Idle) {
+            out.write_str("ok\n")?;
+        }
+        Ok(())
     }
 
     /// `M108` from the receive interrupt: end the current wait for a
@@ -356,9 +361,9 @@ impl<'q> Machine<'q> {
             Err(ParseError::Empty) => return Ok(Outcome::Done),
             Err(error) => return Ok(Outcome::Failed(error.into())),
         };
-        // Halted, the machine still answers what only reports (hosts keep
-        // polling M105), and refuses everything that would act.
-        if self.halted && !matches!(command.code, Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410)) {
+        // Halted, the machine still answers what only reports or waits
+        // (hosts keep polling M105), and refuses everything that would act.
+        if self.halted && !matches!(command.code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410)) {
             return Ok(Outcome::Failed(CommandError::Halted));
         }
         let result = match command.code {

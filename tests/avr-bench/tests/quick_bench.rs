@@ -291,7 +291,6 @@ fn a_burst_without_flow_control_reports_lost_input() {
 }
 
 #[test]
-#[ignore = "firmware bug: the receive-ring loss is charged to the next line assembled, not to the line that lost bytes (see tests/avr-bench/README.md)"]
 fn lines_spliced_by_a_receive_overflow_are_never_executed() {
     let mut config = RampsConfig::stock(115_200);
     config.host = HostConfig {
