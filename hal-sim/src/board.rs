@@ -223,18 +223,31 @@ impl SimBoard {
         self.endstops = endstops;
     }
 
-    /// Send `gcode` and run until every line is answered and the machine
-    /// is idle, or `max_ms` passed; the output so far.
+    /// Send `gcode` as a host with `ok` flow control does (the next line
+    /// once the previous one is answered) and run until every line is
+    /// answered and the machine is idle, or `max_ms` passed; the output.
     pub fn run_gcode(&mut self, gcode: &str, max_ms: u32) -> String {
-        self.receive(gcode.as_bytes());
-        let lines = gcode.lines().filter(|l| !l.trim().is_empty()).count();
+        let mut lines = gcode.lines().filter(|l| !l.trim().is_empty());
         let mut output = String::new();
+        let mut in_flight = false;
         for _ in 0..max_ms {
-            self.advance(1);
-            output.push_str(&self.take_output());
-            if self.wire.is_empty() && output.matches("ok").count() >= lines && self.link.machine.motion_idle() {
-                break;
+            if !in_flight {
+                match lines.next() {
+                    Some(line) => {
+                        self.receive(line.as_bytes());
+                        self.receive(b"\n");
+                        in_flight = true;
+                    }
+                    None if self.link.machine.motion_idle() => break,
+                    None => {}
+                }
             }
+            self.advance(1);
+            let new = self.take_output();
+            if new.lines().any(|l| l == "ok" || l.starts_with("ok ")) {
+                in_flight = false;
+            }
+            output.push_str(&new);
         }
         output
     }

@@ -62,6 +62,9 @@ pub enum Code {
     T(u16),
     /// Axis words with no command: repeat the modal motion (`G0`/`G1`).
     Modal,
+    /// A G or M code with a subcode or a negative number (`M862.3`):
+    /// no command of ours; answered as an unknown command.
+    Other,
 }
 
 /// One parsed line.
@@ -136,6 +139,30 @@ pub fn parse(text: &[u8]) -> Result<Command, ParseError> {
         command.words.push(word).map_err(|_| ParseError::TooManyWords)?;
     }
     Ok(command)
+}
+
+/// Only the command code of a line (its first word), for lines whose
+/// arguments do not parse: `M115 U3.13.0` is still an `M115`, and
+/// `M862.3 P "MK3S"` is [`Code::Other`]. `None` for an empty line or one
+/// that does not start with a word.
+pub fn code_of(text: &[u8]) -> Option<Code> {
+    let mut lexer = Lexer { text, index: 0 };
+    let first = match lexer.next_word() {
+        Ok(Some(word)) => word,
+        Ok(None) => return None,
+        Err(_) => return match text.iter().find(|b| **b != b' ') {
+            Some(b'G' | b'g' | b'M' | b'm') => Some(Code::Other),
+            _ => None,
+        },
+    };
+    let number = first.value.filter(|v| v.fraction_digits() == 0 && !v.is_negative()).and_then(|v| u16::try_from(v.mantissa()).ok());
+    Some(match (first.letter, number) {
+        (b'G', Some(n)) => Code::G(n),
+        (b'M', Some(n)) => Code::M(n),
+        (b'T', Some(n)) => Code::T(n),
+        (b'G' | b'M' | b'T', None) => Code::Other,
+        _ => Code::Modal,
+    })
 }
 
 /// The free text of an `M117`/`M118` line: everything after the code.

@@ -359,7 +359,21 @@ impl<'q> Machine<'q> {
         let command = match gcode::parse(text) {
             Ok(command) => command,
             Err(ParseError::Empty) => return Ok(Outcome::Done),
-            Err(error) => return Ok(Outcome::Failed(error.into())),
+            // Arguments that do not parse are an error only for commands we
+            // run: Marlin answers `M115 U3.13.0` (PrusaSlicer's version
+            // check) and echoes unknown ones (`M862.3 P "MK3S"`) whatever
+            // their arguments, and hosts treat an `Error:` line as fatal.
+            Err(error) => match gcode::code_of(text) {
+                Some(Code::M(115)) => {
+                    write_capabilities(out)?;
+                    return Ok(Outcome::Done);
+                }
+                Some(code) if !is_known(code) => {
+                    ufmt::uwrite!(out, "echo:Unknown command: \"{}\"\n", Printable(trim(text)))?;
+                    return Ok(Outcome::Done);
+                }
+                _ => return Ok(Outcome::Failed(error.into())),
+            },
         };
         // Halted, the machine still answers what only reports or waits
         // (hosts keep polling M105), and refuses everything that would act.
@@ -534,6 +548,21 @@ impl<'q> Machine<'q> {
             ufmt::uwrite!(out, "{}: {}\n", *name, if triggered { "TRIGGERED" } else { "open" })?;
         }
         Ok(())
+    }
+}
+
+/// Whether the executor runs `code` (the dispatch in `execute`); the rest
+/// are echoed as unknown.
+fn is_known(code: Code) -> bool {
+    match code {
+        Code::G(n) => matches!(n, 0..=4 | 10 | 11 | 20 | 21 | 28 | 90..=92),
+        Code::M(n) => matches!(
+            n,
+            17 | 18 | 82..=84 | 92 | 104..=110 | 112 | 114..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221 | 301..=303 | 400 | 410
+                | 500..=503 | 665 | 666
+        ),
+        Code::T(_) | Code::Modal => true,
+        Code::Other => false,
     }
 }
 

@@ -283,3 +283,21 @@ fn each_machine_starts_from_its_own_defaults_and_m502_restores_them() {
     assert_eq!(converse(&mut machine, 0, "M92 X100\nM502\n"), "ok\necho:Hardcoded Default Settings Loaded\nok\n");
     assert_eq!(machine.settings().steps_per_mm_milli[0], 80_000);
 }
+
+/// PrusaSlicer's first lines: `M115 U<version>` asks for the capabilities
+/// (Marlin answers them), `M862.x` checks are Prusa-only codes with quoted
+/// arguments: echoed as unknown, never an `Error:` a host would treat as
+/// fatal.
+#[test]
+fn slicer_checks_get_marlins_answers_not_errors() {
+    let caps = reply("M115 U3.13.0\n");
+    assert!(caps.starts_with("FIRMWARE_NAME:Ferrostep "), "{caps}");
+    assert!(caps.ends_with("ok\n") && !caps.contains("Error"), "{caps}");
+    // (quotes inside the echoed command print as `?`, as every
+    // non-printable byte does, so the quoted form stays unambiguous)
+    assert_eq!(reply("M862.3 P \"MK3S\"\n"), "echo:Unknown command: \"M862.3 P ?MK3S?\"\nok\n");
+    assert_eq!(reply("M862.1 P0.4\n"), "echo:Unknown command: \"M862.1 P0.4\"\nok\n");
+    assert_eq!(reply("M23 model.gco\n"), "echo:Unknown command: \"M23 model.gco\"\nok\n");
+    // A command we run still refuses arguments that do not parse.
+    assert_eq!(reply("G1 X1.2.3\n"), "Error:Bad number after X\nok\n");
+}
