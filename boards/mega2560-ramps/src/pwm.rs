@@ -43,7 +43,10 @@ pub fn set(dp: &Peripherals, output: Output, duty: u8) {
         Output::Fan => (5, crate::pins::FAN),
         Output::Bed => (3, crate::pins::BED),
     };
-    let connect = duty != 0;
+    // 0 and 255 are plain levels, as Arduino's analogWrite makes them: a
+    // compare unit at either end of fast PWM still emits a one-cycle pulse
+    // each period (and a pin that never toggles reads as a level anyway).
+    let connect = duty != 0 && duty != 255;
     match output {
         Output::Hotend => dp.TC2.ocr2a.write(|w| w.bits(duty)),
         Output::Fan => dp.TC2.ocr2b.write(|w| w.bits(duty)),
@@ -55,9 +58,9 @@ pub fn set(dp: &Peripherals, output: Output, duty: u8) {
         Output::Hotend | Output::Fan => dp.TC2.tccr2a.modify(|r, w| unsafe { w.bits(update(r.bits())) }),
         Output::Bed => dp.TC4.tccr4a.modify(|r, w| unsafe { w.bits(update(r.bits())) }),
     }
-    // Low in PORT: the level whenever the compare unit is disconnected;
-    // and the pin must be an output for the compare unit to drive it.
-    crate::pins::make_output(dp, pin, false);
+    // The PORT level whenever the compare unit is disconnected (high only
+    // for full power); the pin must be an output for the unit to drive it.
+    crate::pins::make_output(dp, pin, duty == 255);
 }
 
 /// Disconnect every PWM output from its timer (then the pins follow their

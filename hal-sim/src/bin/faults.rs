@@ -46,6 +46,7 @@ fn main() {
         thermal_fault("heater disconnected", "the hot end's heater wire cut at M104 S200", "Error:Heating failed", |b| b.hotend_plant.disconnect_heater(), 30_000),
         thermal_fault("heater stuck on", "a shorted MOSFET: full power whatever the firmware drives", "Error:MAXTEMP triggered", |b| b.hotend_plant.stick_output(1.0), 400_000),
         encoder_disconnected(),
+        watchdog_reset_mid_print(),
     ];
     print_table(&rows);
     let failed = rows.iter().filter(|r| !r.passed).count();
@@ -484,6 +485,36 @@ fn m112_during_a_fast_move() -> Outcome {
         observed: format!("{}halted: {halted}", if output.contains("kill() called") { "Error:Printer halted, " } else { "" }),
         safe_after_ms: stopped_after,
         passed: halted && stopped_after.is_some_and(|ms| ms <= 2),
+    }
+}
+
+/// The watchdog resets the chip in the middle of a print (the main loop
+/// hung): the board comes back with every output off and asks the host to
+/// start over; nothing of the job resumes by itself.
+fn watchdog_reset_mid_print() -> Outcome {
+    let mut board = homed();
+    board.run_gcode("M104 S200\nM140 S60\nM106 S255\nM17\n", 2_000);
+    board.receive(b"G1 X150 F3000\n");
+    board.advance(300);
+    let heating = board.link.machine.heater_duties() != (0, 0);
+    // The reset: a new core on the same EEPROM, as the chip reboots.
+    let mut rebooted = SimBoard::with_eeprom(SimEeprom { bytes: board.eeprom.bytes, ..SimEeprom::new() });
+    let banner = rebooted.take_output();
+    let m = &rebooted.link.machine;
+    let safe = m.heater_duties() == (0, 0) && m.fan_duty() == 0 && !m.steppers_enabled();
+    rebooted.advance(2_000);
+    let still = rebooted.steps.positions() == [0, 0, 0, 0] && rebooted.link.machine.heater_duties() == (0, 0);
+    Outcome {
+        fault: "watchdog reset mid-print",
+        injected: "the chip resets while heating and moving (main loop hung)",
+        expected: "boots with heaters, fan and drivers off; `start` tells the host; nothing resumes",
+        observed: format!(
+            "was heating: {heating}; after reset: outputs {}, `start` sent: {}, nothing moved or heated for 2 s: {still}",
+            if safe { "off" } else { "ON" },
+            banner.starts_with("start\n")
+        ),
+        safe_after_ms: Some(0),
+        passed: heating && safe && still && banner.starts_with("start\n"),
     }
 }
 

@@ -254,8 +254,9 @@ impl DutyMeter {
             return;
         }
         if self.level {
-            self.high_in_tick += now - self.since;
-            self.high_in_sample += now - self.since;
+            // (saturating: simavr restarts its cycle count at a reset)
+            self.high_in_tick += now.saturating_sub(self.since);
+            self.high_in_sample += now.saturating_sub(self.since);
         }
         self.level = level;
         self.since = now;
@@ -264,8 +265,9 @@ impl DutyMeter {
 
     fn close(&mut self, now: u64) {
         if self.level {
-            self.high_in_tick += now - self.since;
-            self.high_in_sample += now - self.since;
+            // (saturating: simavr restarts its cycle count at a reset)
+            self.high_in_tick += now.saturating_sub(self.since);
+            self.high_in_sample += now.saturating_sub(self.since);
         }
         self.since = now;
     }
@@ -632,7 +634,7 @@ impl Board {
 
     /// The core loop: one instruction per call, with the accounting.
     /// `keep_going` is checked every 1024 instructions.
-    pub fn run_while(&mut self, end: u64, mut keep_going: impl FnMut(u64) -> bool) {
+    pub fn run_while(&mut self, mut end: u64, mut keep_going: impl FnMut(u64) -> bool) {
         let avr = self.avr;
         let started = Instant::now();
         let start_cycle = self.cycle();
@@ -666,7 +668,13 @@ impl Board {
                     && *(*avr).flash.add(pc_before as usize + 1) == 0x95;
                 let state = ffi::avr_run(avr);
                 let after = (*avr).cycle;
-                let spent = after - cycle;
+                if after < cycle {
+                    // A reset restarted simavr's cycle count: the deadline
+                    // moves back with it, so the run still lasts as long.
+                    end = end.saturating_sub(cycle - after);
+                }
+                // simavr restarts its cycle count at a reset (watchdog).
+                let spent = after.saturating_sub(cycle);
                 if let Some(profile) = &mut (*shared).profile {
                     if let Some(slot) = profile.get_mut((pc_before / 2) as usize) {
                         *slot += spent;
@@ -685,7 +693,7 @@ impl Board {
                 stats.instructions += 1;
                 if is_wdr {
                     if stats.watchdog_feeds > 0 {
-                        stats.max_watchdog_gap = stats.max_watchdog_gap.max(cycle - stats.last_watchdog_feed);
+                        stats.max_watchdog_gap = stats.max_watchdog_gap.max(cycle.saturating_sub(stats.last_watchdog_feed));
                     }
                     stats.watchdog_feeds += 1;
                     stats.last_watchdog_feed = cycle;
@@ -737,7 +745,7 @@ impl Board {
             }
         }
         self.wall += started.elapsed();
-        self.wall_cycles += self.cycle() - start_cycle;
+        self.wall_cycles += self.cycle().saturating_sub(start_cycle);
     }
 
     /// Simulated seconds per wall-clock second so far.
@@ -950,6 +958,12 @@ impl Board {
 
     /// The flash byte range of the first function whose symbol contains
     /// `name` (e.g. `"make_output"`).
+    /// The flash address of the symbol named exactly `name` (labels of
+    /// size 0 included, e.g. avr-libc's `__stop_program`).
+    pub fn symbol_address(&self, name: &str) -> Option<u32> {
+        self.elf.symbols.iter().find(|s| s.value < crate::elf::DATA_OFFSET && s.name == name).map(|s| s.value)
+    }
+
     pub fn function_range(&self, name: &str) -> Option<std::ops::Range<u32>> {
         self.elf
             .symbols
@@ -1346,7 +1360,7 @@ unsafe extern "C" fn on_axis_pin(irq: *mut ffi::avr_irq_t, value: u32, param: *m
         state.last_rise = now;
         shared.update_endstops(false);
     } else {
-        let high = now - state.last_rise;
+        let high = now.saturating_sub(state.last_rise);
         state.min_high_cycles = Some(state.min_high_cycles.map_or(high, |m| m.min(high)));
     }
 }
