@@ -104,6 +104,21 @@ impl SimBoard {
         Self::with_eeprom(SimEeprom::new())
     }
 
+    /// A booted board (blank EEPROM) whose banner has been read.
+    pub fn booted() -> Self {
+        let mut board = Self::new();
+        board.take_output();
+        board
+    }
+
+    /// A booted Prusa i3 homed on the default switches (where the motors
+    /// were at boot); `None` if `G28` did not end with a plain `ok`.
+    pub fn homed() -> Option<Self> {
+        let mut board = Self::booted();
+        let output = board.run_gcode("G28\n", 60_000);
+        (output.replace("echo:busy: processing\n", "") == "ok\n").then_some(board)
+    }
+
     /// A board booting with `eeprom`'s contents (e.g. after a power loss).
     pub fn with_eeprom(eeprom: SimEeprom) -> Self {
         Self::with_machine(MotionConfig::prusa_i3(), eeprom)

@@ -5,15 +5,11 @@
 use hal_sim::board::SimBoard;
 
 fn booted() -> SimBoard {
-    let mut board = SimBoard::new();
-    board.take_output();
-    board
+    SimBoard::booted()
 }
 
 fn homed() -> SimBoard {
-    let mut board = booted();
-    let output = board.run_gcode("G28\n", 60_000);
-    assert_eq!(output.replace("echo:busy: processing\n", ""), "ok\n");
+    let board = SimBoard::homed().expect("G28 answers ok");
     assert_eq!(board.steps.setup_violations, 0);
     board
 }

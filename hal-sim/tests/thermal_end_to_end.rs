@@ -7,9 +7,7 @@
 use hal_sim::board::{SimBoard, Thermistor};
 
 fn booted() -> SimBoard {
-    let mut board = SimBoard::new();
-    board.take_output();
-    board
+    SimBoard::booted()
 }
 
 /// Run until `text` shows up in the output or `max_ms` pass; the output.

@@ -68,16 +68,11 @@ fn print_table(rows: &[Outcome]) {
 }
 
 fn booted() -> SimBoard {
-    let mut board = SimBoard::new();
-    board.take_output();
-    board
+    SimBoard::booted()
 }
 
 fn homed() -> SimBoard {
-    let mut board = booted();
-    board.run_gcode("G28\n", 60_000);
-    board.take_output();
-    board
+    SimBoard::homed().expect("the simulated Prusa i3 homes")
 }
 
 /// Steps made so far on X, Y, Z, E.
