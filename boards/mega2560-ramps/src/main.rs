@@ -9,6 +9,7 @@
 #![no_std]
 #![no_main]
 #![feature(abi_avr_interrupt)]
+#![feature(asm_experimental_arch)]
 #![deny(unsafe_op_in_unsafe_fn)]
 
 mod adc;

@@ -8,24 +8,43 @@ use avr_device::atmega2560::Peripherals;
 /// WDP2..0 = 111: 256 k cycles of the 128 kHz watchdog oscillator = 2 s.
 const TIMEOUT_BITS: u8 = 0b0000_0111;
 
+/// WDTCSR's data-space address on the ATmega2560.
+const WDTCSR: u16 = 0x60;
+
+/// The timed write: WDCE | WDE, then `value` within four cycles. Two `sts`
+/// in assembly, so the compiler can never schedule anything between them
+/// (if it did, the change would be ignored, and after a watchdog reset the
+/// 16 ms default timeout would stay in force).
+fn timed_write(value: u8) {
+    // SAFETY: the documented change sequence on WDTCSR; interrupts are off
+    // (callers run it inside a critical section or with them disabled).
+    unsafe {
+        core::arch::asm!(
+            "sts {addr}, {unlock}",
+            "sts {addr}, {value}",
+            addr = const WDTCSR,
+            unlock = in(reg) (1u8 << 4) | (1 << 3),
+            value = in(reg) value,
+            options(nostack),
+        );
+    }
+}
+
 pub fn start(dp: &Peripherals) {
     avr_device::interrupt::free(|_| {
         // SAFETY: clearing WDRF (bit 3) is required before WDE can be changed.
         dp.CPU.mcusr.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 3)) });
         avr_device::asm::wdr();
-        // Timed sequence: WDCE | WDE, then the new value within 4 cycles.
-        // SAFETY: documented sequence; WDE (bit 3) with the 2 s prescaler.
-        dp.WDT.wdtcsr.write(|w| unsafe { w.bits((1 << 4) | (1 << 3)) });
-        dp.WDT.wdtcsr.write(|w| unsafe { w.bits((1 << 3) | TIMEOUT_BITS) });
+        // WDE (bit 3) with the 2 s prescaler.
+        timed_write((1 << 3) | TIMEOUT_BITS);
     });
 }
 
 pub fn stop(dp: &Peripherals) {
-    // SAFETY: the same timed sequence, ending with WDE clear.
     avr_device::asm::wdr();
+    // SAFETY: clearing WDRF, as in `start`.
     dp.CPU.mcusr.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 3)) });
-    dp.WDT.wdtcsr.write(|w| unsafe { w.bits((1 << 4) | (1 << 3)) });
-    dp.WDT.wdtcsr.write(|w| unsafe { w.bits(0) });
+    timed_write(0);
 }
 
 /// Reset the watchdog's count; called once per main-loop pass.
