@@ -143,12 +143,40 @@ fn parse_checksum(text: &[u8]) -> Option<u8> {
 
 /// `Some(N argument)` when the body's command is `M110` (the numbering
 /// reset, which exempts its line from the order check, as in Marlin).
+///
+/// Every line passes here, and the executor parses it again later, so the
+/// full parse runs only for a line that can be an `M110`: one whose first
+/// word is `M110`, or one that starts with a comment (which the parser
+/// skips). A `G1 …` line costs a look at its first byte.
 fn m110_argument(body: &[u8]) -> Option<Option<i32>> {
+    if !may_be_m110(body) {
+        return None;
+    }
     let command = crate::gcode::parse(body).ok()?;
     if command.code != crate::gcode::Code::M(110) {
         return None;
     }
     Some(command.value(b'N').ok().flatten().and_then(|n| n.to_int()))
+}
+
+/// `false` only when the line's first word is certainly not `M110`: the
+/// answer [`crate::gcode::parse`] would give is then "not M110" too.
+fn may_be_m110(body: &[u8]) -> bool {
+    let blank = |b: &u8| matches!(b, b' ' | b'\t');
+    let start = body.iter().position(|b| !blank(b)).unwrap_or(body.len());
+    match body.get(start) {
+        Some(b'M' | b'm') => {}
+        // A comment first: let the parser find the first word.
+        Some(b'(' | b';') => return true,
+        // Another letter, another byte, or nothing: not an M110 line.
+        _ => return false,
+    }
+    let rest = &body[start + 1..];
+    let digits = rest.iter().position(|b| !blank(b)).unwrap_or(rest.len());
+    matches!(
+        crate::gcode::Decimal::parse(&rest[digits..]),
+        Ok((number, _)) if number == crate::gcode::Decimal::from_int(110)
+    )
 }
 
 #[cfg(test)]
@@ -232,6 +260,25 @@ mod tests {
         let mut out = Text::default();
         p.write_rejection(LineRejection::TooLong, &mut out).unwrap();
         assert_eq!(out.0, "Error:Line too long\nok\n");
+    }
+
+    #[test]
+    fn only_lines_whose_first_word_can_be_m110_are_parsed_for_it() {
+        for body in ["M110", " m110 N5", "M 110", "M110.", "(reset) M110 N3", "; M110"] {
+            assert!(may_be_m110(body.as_bytes()), "{body}");
+        }
+        for body in ["G1 X5", "M1100", "M11", "M111 N5", "M110.5", "N5 M110", "", "  ", "T0"] {
+            assert!(!may_be_m110(body.as_bytes()), "{body}");
+        }
+    }
+
+    #[test]
+    fn m110_after_a_comment_still_sets_the_numbering() {
+        let mut p = HostProtocol::new();
+        assert!(accept(&mut p, "(restart) M110 N20").is_ok());
+        assert_eq!(p.last_line(), 20);
+        assert!(accept(&mut p, &with_checksum("N21 M110 N40 ; again")).is_ok());
+        assert_eq!(p.last_line(), 40);
     }
 
     #[test]

@@ -31,22 +31,77 @@ pub enum NumberError {
     OutOfRange,
 }
 
-/// `value · 10 + digit` for a non-negative `value`, or `None` on overflow.
+/// Largest magnitude that can take one more digit: `i32::MAX / 10`.
+const TIMES_TEN_LIMIT: u32 = i32::MAX as u32 / 10;
+/// The last digit `TIMES_TEN_LIMIT` may still take: `i32::MAX % 10`.
+const TIMES_TEN_LAST_DIGIT: u8 = (i32::MAX % 10) as u8;
+
+/// `value · 10 + digit` when it stays within `i32::MAX`, else `None`.
 ///
-/// Written with a comparison instead of `checked_mul`: on the AVR,
-/// `i32::checked_mul` calls compiler-builtins' `__mulosi4`, which stores a
-/// 32-bit overflow flag where avr-gcc's ABI reserves a 16-bit `int` and so
-/// corrupts the caller's stack (seen with nightly 1.97 on simavr and QEMU).
-fn times_ten_plus(value: i32, digit: i32) -> Option<i32> {
-    if value > (i32::MAX - digit) / 10 {
+/// The bound is a constant: a division per digit pulls in compiler-builtins'
+/// generic 32-bit division on the AVR, thousands of cycles a call (the G1
+/// benchmark spent most of its time there). And a comparison, not
+/// `checked_mul`: on the AVR, `i32::checked_mul` calls compiler-builtins'
+/// `__mulosi4`, which stores a 32-bit overflow flag where avr-gcc's ABI
+/// reserves a 16-bit `int` and so corrupts the caller's stack (seen with
+/// nightly 1.97 on simavr and QEMU).
+#[inline(always)]
+fn times_ten_plus(value: u32, digit: u8) -> Option<u32> {
+    if value > TIMES_TEN_LIMIT || (value == TIMES_TEN_LIMIT && digit > TIMES_TEN_LAST_DIGIT) {
         None
     } else {
-        Some(value * 10 + digit)
+        // `(v << 3) + (v << 1)`: shifts and adds, no multiply call.
+        Some((value << 3) + (value << 1) + u32::from(digit))
     }
 }
 
 const POWERS_OF_TEN: [i32; 10] =
     [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000, 1_000_000_000];
+
+/// `n / 10` and `n % 10` with shifts and adds (Hacker's Delight, `divu10`):
+/// about a hundred AVR cycles where a 32-bit division costs thousands.
+#[inline]
+pub(crate) fn div_rem_10(n: u32) -> (u32, u32) {
+    let mut q = (n >> 1) + (n >> 2);
+    q += q >> 4;
+    q += q >> 8;
+    q += q >> 16;
+    q >>= 3;
+    let mut r = n - ((q << 3) + (q << 1));
+    if r > 9 {
+        q += 1;
+        r -= 10;
+    }
+    (q, r)
+}
+
+/// `n / 60` (feed rates per minute to per second) without a 32-bit
+/// division: `⌊⌊⌊n / 10⌋ / 2⌋ / 3⌋`, the last step Hacker's Delight's
+/// shift-and-add `divu3`.
+pub(crate) fn div_60(n: u32) -> u32 {
+    let n = div_rem_10(n).0 >> 1;
+    let mut q = (n >> 2) + (n >> 4);
+    q += q >> 4;
+    q += q >> 8;
+    q += q >> 16;
+    let r = n - (q + (q << 1));
+    q + (((r << 3) + (r << 1) + r) >> 5)
+}
+
+/// `n / 10^k`, rounded half up (for magnitudes: half away from zero), with
+/// `k` divisions by ten instead of one 32-bit division.
+fn div_pow10_rounded(n: u32, k: u8) -> u32 {
+    let mut quotient = n;
+    // The remainder is at least half of 10^k exactly when the most
+    // significant digit dropped (the last one) is 5 or more.
+    let mut round_up = false;
+    for _ in 0..k {
+        let (q, r) = div_rem_10(quotient);
+        round_up = r >= 5;
+        quotient = q;
+    }
+    quotient + u32::from(round_up)
+}
 
 impl Decimal {
     /// `mantissa × 10^(−fraction_digits)`.
@@ -79,22 +134,19 @@ impl Decimal {
     /// `None` when it does not fit an `i32`.
     pub fn to_scaled(self, digits: u8) -> Option<i32> {
         if digits >= self.fraction_digits {
-            let factor = *POWERS_OF_TEN.get(usize::from(digits - self.fraction_digits))?;
-            // A bound check, not `checked_mul` (see `times_ten_plus`).
-            if self.mantissa.unsigned_abs() > (i32::MAX / factor) as u32 {
-                None
-            } else {
-                Some(self.mantissa * factor)
+            // k steps of `times_ten_plus` (no table in RAM, no division,
+            // no `checked_mul`), with its bound check at each step.
+            let mut magnitude = self.mantissa.unsigned_abs();
+            for _ in self.fraction_digits..digits {
+                magnitude = times_ten_plus(magnitude, 0)?;
             }
+            // At most i32::MAX (times_ten_plus), so the cast is exact; and
+            // i32::MIN's magnitude is refused at the first step, or, with
+            // no step, returned as is.
+            Some(if self.mantissa < 0 { (magnitude as i32).wrapping_neg() } else { magnitude as i32 })
         } else {
-            let divisor = POWERS_OF_TEN[usize::from(self.fraction_digits - digits)];
-            let half = divisor / 2;
-            let rounded = if self.mantissa >= 0 {
-                (self.mantissa / divisor) + i32::from(self.mantissa % divisor >= half)
-            } else {
-                (self.mantissa / divisor) - i32::from(-(self.mantissa % divisor) >= half)
-            };
-            Some(rounded)
+            let magnitude = div_pow10_rounded(self.mantissa.unsigned_abs(), self.fraction_digits - digits) as i32;
+            Some(if self.mantissa < 0 { -magnitude } else { magnitude })
         }
     }
 
@@ -125,7 +177,7 @@ impl Decimal {
             }
             _ => false,
         };
-        let mut magnitude: i32 = 0;
+        let mut magnitude: u32 = 0;
         let mut fraction_digits: u8 = 0;
         let mut seen_point = false;
         let mut seen_digit = false;
@@ -135,7 +187,7 @@ impl Decimal {
             match byte {
                 b'0'..=b'9' => {
                     seen_digit = true;
-                    let digit = i32::from(byte - b'0');
+                    let digit = byte - b'0';
                     if seen_point {
                         if !fraction_full && fraction_digits < MAX_FRACTION_DIGITS {
                             match times_ten_plus(magnitude, digit) {
@@ -165,7 +217,8 @@ impl Decimal {
         if !seen_digit {
             return Err(NumberError::Malformed);
         }
-        let mantissa = if negative { -magnitude } else { magnitude };
+        // At most i32::MAX (times_ten_plus), so the cast is exact.
+        let mantissa = if negative { -(magnitude as i32) } else { magnitude as i32 };
         Ok((Self { mantissa, fraction_digits }, index))
     }
 }
@@ -232,6 +285,78 @@ mod tests {
         assert_eq!(Decimal::new(15, 0).to_scaled(3), Some(15_000));
         assert_eq!(Decimal::new(3_000_000, 0).to_scaled(3), None);
         assert_eq!(Decimal::new(25, 1).to_int(), Some(3));
+    }
+
+    #[test]
+    fn the_largest_integer_part_is_i32_max_exactly() {
+        assert_eq!(parsed("2147483647"), Ok((Decimal::new(i32::MAX, 0), 10)));
+        assert_eq!(parsed("-2147483647"), Ok((Decimal::new(-i32::MAX, 0), 11)));
+        assert_eq!(parsed("2147483648"), Err(NumberError::OutOfRange));
+        assert_eq!(parsed("2147483650"), Err(NumberError::OutOfRange));
+        assert_eq!(parsed("214748365"), Ok((Decimal::new(214_748_365, 0), 9)));
+        // Fraction digits stop where the next one would overflow.
+        assert_eq!(parsed("0.2147483647"), Ok((Decimal::new(214_748_364, 9), 12)));
+        assert_eq!(parsed("21474836.48"), Ok((Decimal::new(214_748_364, 1), 11)));
+    }
+
+    #[test]
+    fn scaling_down_rounds_on_the_first_dropped_digit() {
+        assert_eq!(Decimal::new(12_345, 4).to_scaled(3), Some(1_235));
+        assert_eq!(Decimal::new(1_234_499_999, 9).to_scaled(3), Some(1_234));
+        assert_eq!(Decimal::new(1_234_500_000, 9).to_scaled(3), Some(1_235));
+        assert_eq!(Decimal::new(-1_234_500_000, 9).to_scaled(0), Some(-1));
+        assert_eq!(Decimal::new(i32::MAX, 9).to_scaled(0), Some(2));
+        assert_eq!(Decimal::new(-i32::MAX, 1).to_scaled(0), Some(-214_748_365));
+        assert_eq!(Decimal::new(99_999, 5).to_scaled(0), Some(1));
+    }
+
+    #[test]
+    fn division_by_ten_is_exact_over_the_whole_range() {
+        for n in (0..=u32::MAX).step_by(9_973).chain([u32::MAX, u32::MAX - 1, 9, 10, 11, 19, 20, 99, 100]) {
+            assert_eq!(div_rem_10(n), (n / 10, n % 10), "{n}");
+        }
+    }
+
+    #[test]
+    fn scaling_matches_exact_arithmetic() {
+        fn reference(mantissa: i32, from: u8, to: u8) -> Option<i32> {
+            let m = i64::from(mantissa);
+            let value = if to >= from {
+                m.checked_mul(10i64.checked_pow(u32::from(to - from))?)?
+            } else {
+                let d = 10i64.pow(u32::from(from - to));
+                let q = m.abs() / d + i64::from(m.abs() % d * 2 >= d);
+                q * m.signum()
+            };
+            i32::try_from(value).ok()
+        }
+        for mantissa in (i32::MIN + 1..=i32::MAX).step_by(65_537).chain([-1, 0, 1, 5, -5, 49, 50, -50]) {
+            for from in 0..=9 {
+                for to in 0..=9 {
+                    assert_eq!(
+                        Decimal::new(mantissa, from).to_scaled(to),
+                        reference(mantissa, from, to),
+                        "{mantissa} e-{from} to e-{to}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn division_by_sixty_is_exact_over_the_whole_range() {
+        for n in (0..=u32::MAX).step_by(7_919).chain([u32::MAX, 59, 60, 61, 119, 120, 179, 180, 1_799_999]) {
+            assert_eq!(div_60(n), n / 60, "{n}");
+        }
+    }
+
+    #[test]
+    fn scaling_up_stops_at_the_limit() {
+        assert_eq!(Decimal::new(2_147_483, 0).to_scaled(3), Some(2_147_483_000));
+        assert_eq!(Decimal::new(2_147_484, 0).to_scaled(3), None);
+        assert_eq!(Decimal::new(-2_147_483, 0).to_scaled(3), Some(-2_147_483_000));
+        assert_eq!(Decimal::new(i32::MAX, 0).to_scaled(0), Some(i32::MAX));
+        assert_eq!(Decimal::new(3, 0).to_scaled(10), None);
     }
 
     #[test]
