@@ -32,6 +32,24 @@ impl<'q> HostLink<'q> {
         Self { machine, assembler: LineAssembler::new() }
     }
 
+    /// The link and its machine built directly in `slot` (a `static` on the
+    /// boards), without kilobyte-sized temporaries on the stack; see
+    /// [`Machine::init_in`].
+    pub fn init_in<'s>(
+        slot: &'s mut core::mem::MaybeUninit<Self>,
+        config: crate::motion::MotionConfig,
+        feeder: crate::motion::StepFeeder<'q>,
+    ) -> &'s mut Self {
+        let p = slot.as_mut_ptr();
+        // SAFETY: both fields of the valid slot are written once, `machine`
+        // in place by `Machine::init_in`; the slot is then initialised.
+        unsafe {
+            Machine::init_in(&mut *core::ptr::addr_of_mut!((*p).machine).cast(), config, feeder);
+            core::ptr::addr_of_mut!((*p).assembler).write(LineAssembler::new());
+            slot.assume_init_mut()
+        }
+    }
+
     /// One pass: emergencies first, then input, then execution.
     #[inline(never)]
     pub fn service<W: uWrite + ?Sized>(

@@ -24,7 +24,7 @@ mod watchdog;
 use avr_device::atmega2560::Peripherals;
 use firmware::host_link::HostLink;
 use firmware::machine::Machine;
-use firmware::motion::{Motion, MotionConfig, StepperRequest};
+use firmware::motion::{MotionConfig, StepperRequest};
 use firmware::rx::{self, RxQueue};
 use firmware::thermal::SampleAverager;
 
@@ -32,6 +32,9 @@ use firmware::thermal::SampleAverager;
 const THERMAL_PERIOD_MS: u32 = 100;
 
 static mut RX_QUEUE: RxQueue = RxQueue::new();
+
+/// The machine and its host link live here, not on main's stack.
+static mut LINK: core::mem::MaybeUninit<HostLink<'static>> = core::mem::MaybeUninit::uninit();
 
 #[avr_device::entry]
 fn main() -> ! {
@@ -55,7 +58,8 @@ fn main() -> ! {
 
     let mut tx = serial::Tx;
     let mut rx = serial::Rx { consumer };
-    let mut link = HostLink::new(Machine::new(Motion::new(config, feeder)));
+    // SAFETY: written once, here; main is the only user from here on.
+    let link = HostLink::init_in(unsafe { &mut *core::ptr::addr_of_mut!(LINK) }, config, feeder);
     // SAFETY: the EEPROM registers are used by this driver only.
     let mut eeprom = eeprom::Eeprom::new(unsafe { Peripherals::steal() }.EEPROM);
     for endstop in pins::ENDSTOPS {

@@ -22,7 +22,9 @@ mod motion_commands;
 mod thermal;
 
 use crate::gcode::{self, Code, Command, ParseError};
-use crate::motion::Motion;
+use crate::motion::{Motion, MotionConfig, StepFeeder};
+use core::mem::MaybeUninit;
+use core::ptr::addr_of_mut;
 use crate::line::{Line, MAX_LINE};
 use crate::protocol::HostProtocol;
 use crate::reply::{Fixed, Printable};
@@ -112,33 +114,98 @@ impl<'q> Machine<'q> {
     /// An executor driving `motion` (the board's machine configuration).
     /// The settings start as the machine's defaults, which `motion`
     /// receives.
-    pub fn new(mut motion: Motion<'q>) -> Self {
-        let settings = Settings::for_machine(&motion.config);
-        motion.apply_settings(&settings);
-        Self {
-            protocol: HostProtocol::new(),
-            queue: heapless::Deque::new(),
-            modal: ModalState::new(),
-            settings: settings.clone(),
-            running: Running::Idle,
-            wait_cancelled: false,
-            last_busy_ms: 0,
-            auto_report: AutoReport::new(),
-            last_report_ms: 0,
-            halted: false,
-            steppers_enabled: false,
-            fan_duty: 0,
+    pub fn new(motion: Motion<'q>) -> Self {
+        let mut slot = MaybeUninit::<Self>::uninit();
+        let p = slot.as_mut_ptr();
+        // SAFETY: `p` points to the slot; the field is written once.
+        unsafe { addr_of_mut!((*p).motion).write(motion) };
+        // SAFETY: `motion` is initialised; `init_other_fields` writes every
+        // other field.
+        unsafe {
+            Self::init_other_fields(p);
+            slot.assume_init()
+        }
+    }
+
+    /// The same machine built directly in `slot` (a `static` on the boards):
+    /// `new` returns a value that is moved into place, and on the AVR the
+    /// moved temporaries (the planner ring, the command queue) would need
+    /// kilobytes of stack at boot.
+    pub fn init_in<'s>(slot: &'s mut MaybeUninit<Self>, config: MotionConfig, feeder: StepFeeder<'q>) -> &'s mut Self {
+        let p = slot.as_mut_ptr();
+        // SAFETY: `p` points to the slot; `Motion::init_in` writes the whole
+        // `motion` field in place and `init_other_fields` every other one.
+        unsafe {
+            Motion::init_in(&mut *addr_of_mut!((*p).motion).cast::<MaybeUninit<Motion<'q>>>(), config, feeder);
+            Self::init_other_fields(p);
+            slot.assume_init_mut()
+        }
+    }
+
+    /// Write every field but `motion` (already initialised) and give the
+    /// machine's default settings to the motion.
+    ///
+    /// # Safety
+    /// `p` is valid for writes and its `motion` field is initialised.
+    unsafe fn init_other_fields(p: *mut Self) {
+        // SAFETY: `motion` is initialised (caller), so reading it is sound.
+        let settings = Settings::for_machine(unsafe { &(*p).motion.config });
+        // SAFETY: as above; `apply_settings` touches `motion` only.
+        unsafe { (*p).motion.apply_settings(&settings) };
+        // SAFETY: each write is to a field of the valid slot `p`; none of
+        // these fields has been initialised, so nothing is dropped.
+        unsafe {
+            addr_of_mut!((*p).protocol).write(HostProtocol::new());
+            addr_of_mut!((*p).queue).write(heapless::Deque::new());
+            addr_of_mut!((*p).modal).write(ModalState::new());
+            addr_of_mut!((*p).settings).write(settings.clone());
+            addr_of_mut!((*p).running).write(Running::Idle);
+            addr_of_mut!((*p).wait_cancelled).write(false);
+            addr_of_mut!((*p).last_busy_ms).write(0);
+            addr_of_mut!((*p).auto_report).write(AutoReport::new());
+            addr_of_mut!((*p).last_report_ms).write(0);
+            addr_of_mut!((*p).halted).write(false);
+            addr_of_mut!((*p).steppers_enabled).write(false);
+            addr_of_mut!((*p).fan_duty).write(0);
             // RAMPS with mechanical switches and pull-ups: pressed = high
             // (Marlin's *_ENDSTOP_INVERTING false).
-            endstop_trigger_levels: 0b11_1111,
-            endstop_levels: 0,
-            hotend: HeaterChannel::new(&HOTEND_0, Gains::MARLIN_HOTEND),
-            bed: HeaterChannel::new(&BED, Gains::MARLIN_BED),
-            cold_extrusion: ColdExtrusionGuard::HOTEND,
-            motion,
-            position_lost: false,
-            defaults: settings.clone(),
+            addr_of_mut!((*p).endstop_trigger_levels).write(0b11_1111);
+            addr_of_mut!((*p).endstop_levels).write(0);
+            addr_of_mut!((*p).hotend).write(HeaterChannel::new(&HOTEND_0, Gains::MARLIN_HOTEND));
+            addr_of_mut!((*p).bed).write(HeaterChannel::new(&BED, Gains::MARLIN_BED));
+            addr_of_mut!((*p).cold_extrusion).write(ColdExtrusionGuard::HOTEND);
+            addr_of_mut!((*p).position_lost).write(false);
+            addr_of_mut!((*p).defaults).write(settings);
         }
+    }
+
+    /// Never called: the compiler checks that this pattern names every
+    /// field, so a field added to `Machine` without a write in
+    /// `init_other_fields` does not build.
+    #[allow(dead_code)]
+    fn every_field_is_initialised(&self) {
+        let Self {
+            protocol: _,
+            queue: _,
+            modal: _,
+            settings: _,
+            running: _,
+            wait_cancelled: _,
+            last_busy_ms: _,
+            auto_report: _,
+            last_report_ms: _,
+            halted: _,
+            steppers_enabled: _,
+            fan_duty: _,
+            endstop_trigger_levels: _,
+            endstop_levels: _,
+            hotend: _,
+            bed: _,
+            cold_extrusion: _,
+            motion: _,
+            position_lost: _,
+            defaults: _,
+        } = self;
     }
 
     /// The start banner, printed once at boot. `start` is what Printrun and

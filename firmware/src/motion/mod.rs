@@ -127,6 +127,8 @@ use prep::Prep;
 pub use stepper::{StepFault, StepFeeder, StepGenerator, StepQueues, StepperConfig, StepperStatus, TimerAction, MOTORS};
 
 use crate::settings::Settings;
+use core::mem::MaybeUninit;
+use core::ptr::addr_of_mut;
 
 /// Index of the extruder motor.
 pub const E: usize = 3;
@@ -464,31 +466,73 @@ pub struct Motion<'q> {
 
 impl<'q> Motion<'q> {
     pub fn new(config: MotionConfig, feeder: StepFeeder<'q>) -> Self {
-        let mut motion = Self {
-            config,
-            planner: Planner::new(),
-            prep: Prep::new(),
-            feeder,
-            position: [0.0; MOTORS],
-            motor_steps: [0; MOTORS],
-            e_remainder: 0.0,
-            pending: Pending::Nothing,
-            homing: Homing::new(),
-            homing_requested: None,
-            homing_move: None,
-            homed: 0,
-            error: None,
-            machine_limits: config.stepper.limit_endstops,
-            stop_requested: false,
-            stepper_changed: false,
-            fault_seen: false,
-            status: StepperStatus::default(),
+        let mut slot = MaybeUninit::uninit();
+        Self::init_in(&mut slot, config, feeder);
+        // SAFETY: `init_in` initialised the slot.
+        unsafe { slot.assume_init() }
+    }
+
+    /// The motion state built directly in `slot` (inside the board's
+    /// `static` machine): the planner ring is never a temporary on the
+    /// stack.
+    pub fn init_in<'s>(slot: &'s mut MaybeUninit<Self>, config: MotionConfig, feeder: StepFeeder<'q>) -> &'s mut Self {
+        let p = slot.as_mut_ptr();
+        // SAFETY: each write is to a field of the valid slot `p`, every
+        // field exactly once (`every_field_is_initialised` lists them), so
+        // the slot is initialised afterwards.
+        let motion = unsafe {
+            addr_of_mut!((*p).config).write(config);
+            addr_of_mut!((*p).planner).write(Planner::new());
+            addr_of_mut!((*p).prep).write(Prep::new());
+            addr_of_mut!((*p).feeder).write(feeder);
+            addr_of_mut!((*p).position).write([0.0; MOTORS]);
+            addr_of_mut!((*p).motor_steps).write([0; MOTORS]);
+            addr_of_mut!((*p).e_remainder).write(0.0);
+            addr_of_mut!((*p).pending).write(Pending::Nothing);
+            addr_of_mut!((*p).homing).write(Homing::new());
+            addr_of_mut!((*p).homing_requested).write(None);
+            addr_of_mut!((*p).homing_move).write(None);
+            addr_of_mut!((*p).homed).write(0);
+            addr_of_mut!((*p).error).write(None);
+            addr_of_mut!((*p).machine_limits).write(config.stepper.limit_endstops);
+            addr_of_mut!((*p).stop_requested).write(false);
+            addr_of_mut!((*p).stepper_changed).write(false);
+            addr_of_mut!((*p).fault_seen).write(false);
+            addr_of_mut!((*p).status).write(StepperStatus::default());
+            slot.assume_init_mut()
         };
         motion.configure();
         // Until homed, the machine believes it is at the origin (reachable
         // on all three machine families).
         motion.set_position_mm([0.0; MOTORS]);
         motion
+    }
+
+    /// Never called: the compiler checks that this pattern names every
+    /// field, so a field added to `Motion` without a write in `init_in`
+    /// does not build.
+    #[allow(dead_code)]
+    fn every_field_is_initialised(&self) {
+        let Self {
+            config: _,
+            planner: _,
+            prep: _,
+            feeder: _,
+            position: _,
+            motor_steps: _,
+            e_remainder: _,
+            pending: _,
+            homing: _,
+            homing_requested: _,
+            homing_move: _,
+            homed: _,
+            error: _,
+            machine_limits: _,
+            stop_requested: _,
+            stepper_changed: _,
+            fault_seen: _,
+            status: _,
+        } = self;
     }
 
     fn configure(&mut self) {

@@ -129,6 +129,7 @@ fn boots_answers_and_stays_within_its_budgets() {
         "static RAM {ram_static} B"
     );
     let stack = board.stack_peak_sp();
+    eprintln!("static RAM {ram_static} B, stack peak {stack} B of {} B", stack_budget(ram_static));
     assert!(
         stack > 0 && stack <= stack_budget(ram_static),
         "stack {stack} B of {}",
