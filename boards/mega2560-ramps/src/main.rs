@@ -58,8 +58,7 @@ fn main() -> ! {
 
     let mut tx = serial::Tx;
     let mut rx = serial::Rx { consumer };
-    // SAFETY: written once, here; main is the only user from here on.
-    let link = HostLink::init_in(unsafe { &mut *core::ptr::addr_of_mut!(LINK) }, config, feeder);
+    let link = build_link(config, feeder);
     // SAFETY: the EEPROM registers are used by this driver only.
     let mut eeprom = eeprom::Eeprom::new(unsafe { Peripherals::steal() }.EEPROM);
     for endstop in pins::ENDSTOPS {
@@ -96,6 +95,15 @@ fn main() -> ! {
         sampler.poll(&dp, &channels, &mut averagers);
         apply_outputs(&dp, &link.machine, &mut outputs);
     }
+}
+
+/// The machine, built in place in `LINK`. Not inlined: the construction's
+/// temporaries (the planner ring's initial value among them) live in this
+/// frame, which is gone before the main loop starts, instead of in main's.
+#[inline(never)]
+fn build_link(config: MotionConfig, feeder: firmware::motion::StepFeeder<'static>) -> &'static mut HostLink<'static> {
+    // SAFETY: called once, from main, before anything else uses `LINK`.
+    HostLink::init_in(unsafe { &mut *core::ptr::addr_of_mut!(LINK) }, config, feeder)
 }
 
 /// The machine chosen at build time (cargo feature `machine-…`).

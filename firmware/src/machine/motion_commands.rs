@@ -33,6 +33,7 @@ impl<'q> Machine<'q> {
     /// interrupt's status to the planner side, refill the step queues, and
     /// report what went wrong. The board then does what the returned
     /// request says to its step generator.
+    #[inline(never)]
     pub fn poll_motion<W: uWrite + ?Sized>(
         &mut self,
         status: &StepperStatus,

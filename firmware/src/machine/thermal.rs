@@ -40,6 +40,7 @@ impl<'q> Machine<'q> {
     /// Every sample period (100 ms): the averaged thermistor readings
     /// (`None`: no new reading this period). Runs the heater laws and
     /// protections, the `M303` tune, and reports a fault once.
+    #[inline(never)]
     pub fn on_thermal_samples<W: uWrite + ?Sized>(
         &mut self,
         hotend: Option<Oversampled>,
