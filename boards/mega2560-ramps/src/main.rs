@@ -43,28 +43,10 @@ fn main() -> ! {
     pins::all_outputs_safe(&dp);
     watchdog::start(&dp);
 
-    // SAFETY: the queue is split exactly once, here, before interrupts are
-    // enabled; afterwards only its two ends are used.
-    let queue = unsafe { &mut *core::ptr::addr_of_mut!(RX_QUEUE) };
-    let (producer, consumer) = rx::split(queue);
-    serial::init(&dp, producer);
-    let config = machine_config();
-    let feeder = stepping::init(&dp, config.stepper());
-    clock::init(&dp);
-    adc::init(&dp);
-    pwm::init(&dp);
-    // SAFETY: everything the interrupts touch is initialised.
-    unsafe { avr_device::interrupt::enable() };
-
     let mut tx = serial::Tx;
-    let mut rx = serial::Rx { consumer };
-    let link = build_link(config, feeder);
+    let (link, mut rx) = boot(&dp, &mut tx);
     // SAFETY: the EEPROM registers are used by this driver only.
     let mut eeprom = eeprom::Eeprom::new(unsafe { Peripherals::steal() }.EEPROM);
-    for endstop in pins::ENDSTOPS {
-        pins::make_input_pulled_up(&dp, endstop);
-    }
-    let _ = link.machine.write_banner(&mut tx);
     let _ = link.machine.load_settings(&mut eeprom, &mut tx);
     let mut next_thermal_ms = 0u32;
     // Hot end and bed thermistors, 16 conversions averaged per reading.
@@ -97,13 +79,32 @@ fn main() -> ! {
     }
 }
 
-/// The machine, built in place in `LINK`. Not inlined: the construction's
-/// temporaries (the planner ring's initial value among them) live in this
-/// frame, which is gone before the main loop starts, instead of in main's.
+/// Peripherals, interrupts and the machine, built in place in `LINK`; the
+/// banner. Not inlined: the temporaries of the construction (the machine
+/// configuration, the planner ring's initial value) live in this frame,
+/// which is gone before the main loop starts, and main's own frame stays
+/// small enough for short `Y+q` addressing.
 #[inline(never)]
-fn build_link(config: MotionConfig, feeder: firmware::motion::StepFeeder<'static>) -> &'static mut HostLink<'static> {
+fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static>, serial::Rx) {
+    // SAFETY: the queue is split exactly once, here, before interrupts are
+    // enabled; afterwards only its two ends are used.
+    let queue = unsafe { &mut *core::ptr::addr_of_mut!(RX_QUEUE) };
+    let (producer, consumer) = rx::split(queue);
+    serial::init(dp, producer);
+    let config = machine_config();
+    let feeder = stepping::init(dp, config.stepper());
+    clock::init(dp);
+    adc::init(dp);
+    pwm::init(dp);
+    // SAFETY: everything the interrupts touch is initialised.
+    unsafe { avr_device::interrupt::enable() };
     // SAFETY: called once, from main, before anything else uses `LINK`.
-    HostLink::init_in(unsafe { &mut *core::ptr::addr_of_mut!(LINK) }, config, feeder)
+    let link = HostLink::init_in(unsafe { &mut *core::ptr::addr_of_mut!(LINK) }, config, feeder);
+    for endstop in pins::ENDSTOPS {
+        pins::make_input_pulled_up(dp, endstop);
+    }
+    let _ = link.machine.write_banner(tx);
+    (link, serial::Rx { consumer })
 }
 
 /// The machine chosen at build time (cargo feature `machine-…`).
