@@ -110,6 +110,9 @@ pub struct Machine<'q> {
     defaults: Settings,
 }
 
+/// How one M-code changes the settings (`M92`, `M201`, …).
+type SettingsChange = fn(&Command, &mut Settings) -> Result<(), CommandError>;
+
 impl<'q> Machine<'q> {
     /// An executor driving `motion` (the board's machine configuration).
     /// The settings start as the machine's defaults, which `motion`
@@ -442,21 +445,36 @@ impl<'q> Machine<'q> {
                 _ => return Ok(Outcome::Failed(error.into())),
             },
         };
+        self.dispatch(&command, text, now_ms, storage, out)
+    }
+
+    /// Run a parsed command. Out of line from `execute` so that the parsed
+    /// words stay in `execute`'s frame: on the AVR a frame larger than 64
+    /// bytes makes every access to it several instructions longer.
+    #[inline(never)]
+    fn dispatch<W: uWrite + ?Sized>(
+        &mut self,
+        command: &Command,
+        text: &[u8],
+        now_ms: u32,
+        storage: &mut dyn NonVolatile,
+        out: &mut W,
+    ) -> Result<Outcome, W::Error> {
         // Halted, the machine still answers what only reports or waits
         // (hosts keep polling M105), and refuses everything that would act.
         if self.halted && !matches!(command.code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410)) {
             return Ok(Outcome::Failed(CommandError::Halted));
         }
         let result = match command.code {
-            Code::G(0 | 1) | Code::Modal => self.linear_move(&command, out),
-            Code::G(2 | 3) => self.arc_move(&command, out),
-            Code::G(4) => return Ok(self.dwell(&command)),
-            Code::G(28) => return Ok(self.home(&command)),
+            Code::G(0 | 1) | Code::Modal => self.linear_move(command, out),
+            Code::G(2 | 3) => self.arc_move(command, out),
+            Code::G(4) => return Ok(self.dwell(command)),
+            Code::G(28) => return Ok(self.home(command)),
             Code::G(20) => Ok(self.modal.units = Units::Inches),
             Code::G(21) => Ok(self.modal.units = Units::Millimetres),
             Code::G(90) => Ok(self.set_distance(Distance::Absolute)),
             Code::G(91) => Ok(self.set_distance(Distance::Relative)),
-            Code::G(92) => self.modal.set_logical_position(&command),
+            Code::G(92) => self.modal.set_logical_position(command),
             Code::M(82) => Ok(self.modal.extruder_distance = Distance::Absolute),
             Code::M(83) => Ok(self.modal.extruder_distance = Distance::Relative),
             Code::M(17) => Ok(self.steppers_enabled = true),
@@ -467,7 +485,7 @@ impl<'q> Machine<'q> {
                 self.write_temperatures(out)?;
                 return Ok(Outcome::Acknowledged);
             }
-            Code::M(106) => self.set_fan(&command),
+            Code::M(106) => self.set_fan(command),
             Code::M(107) => Ok(self.fan_duty = 0),
             // M108 and M410 act from the receive interrupt; M110 in the
             // protocol layer. Here they only get their `ok`.
@@ -481,21 +499,21 @@ impl<'q> Machine<'q> {
             Code::M(117) => Ok(()),
             Code::M(118) => self.echo(text, out).map(Ok)?,
             Code::M(119) => self.report_endstops(out).map(Ok)?,
-            Code::M(155) => self.set_auto_report(&command, now_ms),
+            Code::M(155) => self.set_auto_report(command, now_ms),
             Code::M(400) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false })),
             Code::M(120) => Ok(self.motion.set_endstops_always(true)),
             Code::M(121) => Ok(self.motion.set_endstops_always(false)),
             #[cfg(feature = "delta")]
-            Code::M(665) => self.delta_geometry(&command, out),
+            Code::M(665) => self.delta_geometry(command, out),
             #[cfg(feature = "delta")]
-            Code::M(666) => self.delta_trim(&command, out),
-            Code::M(92) => self.change_settings(|s| settings_axes(&command, &mut s.steps_per_mm_milli)),
-            Code::M(201) => self.change_settings(|s| settings_axes(&command, &mut s.max_accel_um_per_s2)),
-            Code::M(203) => self.change_settings(|s| settings_axes(&command, &mut s.max_feed_um_per_s)),
-            Code::M(204) => self.change_settings(|s| set_accelerations(&command, s)),
-            Code::M(205) => self.change_settings(|s| set_advanced(&command, s)),
-            Code::M(220) => self.change_settings(|s| percent(&command, &mut s.feed_percent)),
-            Code::M(221) => self.change_settings(|s| percent(&command, &mut s.flow_percent)),
+            Code::M(666) => self.delta_trim(command, out),
+            Code::M(92) => self.change_settings(command, |c, s| settings_axes(c, &mut s.steps_per_mm_milli)),
+            Code::M(201) => self.change_settings(command, |c, s| settings_axes(c, &mut s.max_accel_um_per_s2)),
+            Code::M(203) => self.change_settings(command, |c, s| settings_axes(c, &mut s.max_feed_um_per_s)),
+            Code::M(204) => self.change_settings(command, set_accelerations),
+            Code::M(205) => self.change_settings(command, set_advanced),
+            Code::M(220) => self.change_settings(command, |c, s| percent(c, &mut s.feed_percent)),
+            Code::M(221) => self.change_settings(command, |c, s| percent(c, &mut s.flow_percent)),
             Code::M(500) => self.save_settings(storage, out).map(Ok)?,
             Code::M(501) => {
                 self.load_settings(storage, out)?;
@@ -515,13 +533,13 @@ impl<'q> Machine<'q> {
                 Ok(())
             }
             // Parsed and acknowledged; their subsystems land with later work.
-            Code::M(104) => return self.set_temperature(&command, HeaterSlot::Hotend, None, now_ms, out),
-            Code::M(140) => return self.set_temperature(&command, HeaterSlot::Bed, None, now_ms, out),
-            Code::M(109) => return self.set_temperature(&command, HeaterSlot::Hotend, Some(WaitConfig::HOTEND), now_ms, out),
-            Code::M(190) => return self.set_temperature(&command, HeaterSlot::Bed, Some(WaitConfig::BED), now_ms, out),
-            Code::M(301) => self.set_pid(&command, out),
-            Code::M(302) => self.cold_extrusion_command(&command, out),
-            Code::M(303) => return self.autotune(&command, out),
+            Code::M(104) => return self.set_temperature(command, HeaterSlot::Hotend, None, now_ms, out),
+            Code::M(140) => return self.set_temperature(command, HeaterSlot::Bed, None, now_ms, out),
+            Code::M(109) => return self.set_temperature(command, HeaterSlot::Hotend, Some(WaitConfig::HOTEND), now_ms, out),
+            Code::M(190) => return self.set_temperature(command, HeaterSlot::Bed, Some(WaitConfig::BED), now_ms, out),
+            Code::M(301) => self.set_pid(command, out),
+            Code::M(302) => self.cold_extrusion_command(command, out),
+            Code::M(303) => return self.autotune(command, out),
             Code::G(10 | 11) => {
                 self.not_yet_available(text, out)?;
                 Ok(())
@@ -548,11 +566,13 @@ impl<'q> Machine<'q> {
     }
 
     /// Change settings all or nothing, then hand them to motion (they
-    /// apply to the moves accepted from now on).
+    /// apply to the moves accepted from now on). `change` is a plain
+    /// function, not a generic closure: one copy of this code for every
+    /// M-code that changes settings.
     #[inline(never)]
-    fn change_settings(&mut self, change: impl FnOnce(&mut Settings) -> Result<(), CommandError>) -> Result<(), CommandError> {
+    fn change_settings(&mut self, command: &Command, change: SettingsChange) -> Result<(), CommandError> {
         let mut settings = self.settings.clone();
-        change(&mut settings)?;
+        change(command, &mut settings)?;
         self.settings = settings;
         self.motion.apply_settings(&self.settings);
         Ok(())
