@@ -107,7 +107,9 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
     (link, serial::Rx { consumer })
 }
 
-/// The machine chosen at build time (cargo feature `machine-…`).
+/// The machine chosen at build time (cargo feature `machine-…`). Out of
+/// line: the configuration is built in the caller's slot through a pointer.
+#[inline(never)]
 fn machine_config() -> MotionConfig {
     #[cfg(feature = "machine-delta")]
     return MotionConfig::spec_delta(false);

@@ -150,6 +150,7 @@ impl<'q> Machine<'q> {
     ///
     /// # Safety
     /// `p` is valid for writes and its `motion` field is initialised.
+    #[inline(never)]
     unsafe fn init_other_fields(p: *mut Self) {
         // SAFETY: `motion` is initialised (caller), so reading it is sound.
         let settings = Settings::for_machine(unsafe { &(*p).motion.config });

@@ -67,16 +67,20 @@ impl<'q> Machine<'q> {
     }
 
     fn tuning_sample<W: uWrite + ?Sized>(&mut self, slot: HeaterSlot, reading: Oversampled, out: &mut W) -> Result<(), W::Error> {
+        // The tune is updated where it lies (no copy of it on the stack):
+        // the channel and `running` are disjoint fields.
+        let channel = match slot {
+            HeaterSlot::Hotend => &mut self.hotend,
+            HeaterSlot::Bed => &mut self.bed,
+        };
         let Running::Autotune { slot: _, apply, ref mut tune } = self.running else { return Ok(()) };
-        let mut tune = *tune;
-        let progress = self.channel(slot).on_tuning_sample(reading, &mut tune);
-        if let Running::Autotune { tune: ref mut kept, .. } = self.running {
-            *kept = tune;
+        let progress = channel.on_tuning_sample(reading, tune);
+        if let TuneProgress::Cycle = progress {
+            tune.last_cycle().write(out)?;
         }
-        let id = self.channel(slot).id();
+        let id = channel.id();
         match progress {
-            TuneProgress::Running => {}
-            TuneProgress::Cycle => tune.last_cycle().write(out)?,
+            TuneProgress::Running | TuneProgress::Cycle => {}
             TuneProgress::Done(result) => {
                 result.write_finished(id, out)?;
                 if apply {

@@ -474,7 +474,9 @@ impl<'q> Motion<'q> {
 
     /// The motion state built directly in `slot` (inside the board's
     /// `static` machine): the planner ring is never a temporary on the
-    /// stack.
+    /// stack. Out of line: the temporaries of construction stay out of the
+    /// caller's frame.
+    #[inline(never)]
     pub fn init_in<'s>(slot: &'s mut MaybeUninit<Self>, config: MotionConfig, feeder: StepFeeder<'q>) -> &'s mut Self {
         let p = slot.as_mut_ptr();
         // SAFETY: each write is to a field of the valid slot `p`, every
