@@ -107,6 +107,12 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
     (link, serial::Rx { consumer })
 }
 
+/// The Prusa i3's configuration, kept in flash (it is `const`) and copied
+/// out once at boot: building it in code costs 2 KB of stores.
+#[cfg(not(any(feature = "machine-delta", feature = "machine-arm")))]
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static PRUSA_I3: firmware::progmem::Flash<MotionConfig> = firmware::progmem::Flash::new(MotionConfig::prusa_i3());
+
 /// The machine chosen at build time (cargo feature `machine-…`). Out of
 /// line: the configuration is built in the caller's slot through a pointer.
 #[inline(never)]
@@ -116,7 +122,7 @@ fn machine_config() -> MotionConfig {
     #[cfg(feature = "machine-arm")]
     return MotionConfig::spec_arm(400);
     #[cfg(not(any(feature = "machine-delta", feature = "machine-arm")))]
-    MotionConfig::prusa_i3()
+    PRUSA_I3.load()
 }
 
 #[cfg(all(feature = "machine-delta", feature = "machine-arm"))]

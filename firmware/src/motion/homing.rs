@@ -42,7 +42,7 @@ pub struct AxisHoming {
 
 impl AxisHoming {
     /// Marlin-like bump homing from mm figures.
-    pub fn bump(towards_max: bool, steps_per_mm: f32, feed_mm_s: f32, travel_mm: f32, backoff_mm: f32) -> Self {
+    pub const fn bump(towards_max: bool, steps_per_mm: f32, feed_mm_s: f32, travel_mm: f32, backoff_mm: f32) -> Self {
         Self {
             towards_max,
             fast_rate: feed_mm_s * steps_per_mm,

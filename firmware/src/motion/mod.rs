@@ -187,10 +187,11 @@ pub struct MotionConfig {
 impl MotionConfig {
     /// SPEC §1: the Prusa i3 (100 steps/mm X/Y, 400 Z, 93 E), homing to the
     /// min endstops, X then Y then Z. The Y motor's direction is inverted:
-    /// the belt moves the bed, so the nozzle's +Y is the bed's −Y.
-    pub fn prusa_i3() -> Self {
-        let settings = Settings::prusa_i3();
-        let mut config = Self {
+    /// the belt moves the bed, so the nozzle's +Y is the bed's −Y. The
+    /// tunable values are those of [`Settings::prusa_i3`] (a test checks
+    /// it); `const`, so a board can keep it in flash.
+    pub const fn prusa_i3() -> Self {
+        Self {
             kinematics: MachineKinematics::Cartesian(Cartesian),
             steps_per_mm: [100.0, 100.0, 400.0, 93.0],
             max_feed: [300.0, 300.0, 5.0, 25.0],
@@ -215,10 +216,8 @@ impl MotionConfig {
             },
             home: HomePosition::Cartesian([0.0, 0.0, 0.0]),
             must_home: false,
-            stepper: StepperConfig { dir_invert: 0b0010, limit_endstops: 0, ..StepperConfig::default() },
-        };
-        config.apply_settings(&settings);
-        config
+            stepper: StepperConfig { dir_invert: 0b0010, limit_endstops: 0, ..StepperConfig::DEFAULT },
+        }
     }
 
     /// SPEC §2: the delta (80 steps/mm carriages, E 102), homing all

@@ -141,10 +141,15 @@ pub struct StepperConfig {
     pub limit_endstops: u8,
 }
 
+impl StepperConfig {
+    /// 5 µs direction set-up covers the TB6600 and the CL86T;
+    /// A4988/DRV8825 need 0.2/0.65.
+    pub const DEFAULT: Self = Self { dir_invert: 0, dir_setup_ticks: 10, limit_endstops: 0 };
+}
+
 impl Default for StepperConfig {
     fn default() -> Self {
-        // 5 µs covers the TB6600 and the CL86T; A4988/DRV8825 need 0.2/0.65.
-        Self { dir_invert: 0, dir_setup_ticks: 10, limit_endstops: 0 }
+        Self::DEFAULT
     }
 }
 
