@@ -392,7 +392,7 @@ impl<'q> Machine<'q> {
         if !self.motion.is_idle() {
             return Err(CommandError::Motion(MotionError::Busy));
         }
-        self.motion.config.kinematics = kinematics;
+        self.motion.set_kinematics(kinematics);
         self.position_lost = true;
         Ok(())
     }

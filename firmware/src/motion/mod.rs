@@ -439,6 +439,9 @@ enum Pending {
 /// The main loop's motion state.
 pub struct Motion<'q> {
     pub config: MotionConfig,
+    /// `config.motor_limits()`, kept up to date by `configure` (computing
+    /// it costs a dozen float divisions, too many for every planned piece).
+    limits: MotorLimits,
     planner: Planner,
     prep: Prep,
     feeder: StepFeeder<'q>,
@@ -483,6 +486,7 @@ impl<'q> Motion<'q> {
         // the slot is initialised afterwards.
         let motion = unsafe {
             addr_of_mut!((*p).config).write(config);
+            addr_of_mut!((*p).limits).write(config.motor_limits());
             addr_of_mut!((*p).planner).write(Planner::new());
             addr_of_mut!((*p).prep).write(Prep::new());
             addr_of_mut!((*p).feeder).write(feeder);
@@ -516,6 +520,7 @@ impl<'q> Motion<'q> {
     fn every_field_is_initialised(&self) {
         let Self {
             config: _,
+            limits: _,
             planner: _,
             prep: _,
             feeder: _,
@@ -537,6 +542,7 @@ impl<'q> Motion<'q> {
     }
 
     fn configure(&mut self) {
+        self.limits = self.config.motor_limits();
         self.planner.junction_deviation = self.config.junction_deviation;
         let min_ticks = (stepper::TIMER_HZ as f32 / self.config.max_step_rate).max(4.0);
         self.prep.min_interval_q8 = (min_ticks * 256.0) as u32;
@@ -550,6 +556,13 @@ impl<'q> Motion<'q> {
         self.configure();
         let position = self.position;
         self.set_position_mm(position);
+    }
+
+    /// New kinematics (`M665`, `M666`) for the moves that follow.
+    #[cfg(feature = "delta")]
+    pub fn set_kinematics(&mut self, kinematics: MachineKinematics) {
+        self.config.kinematics = kinematics;
+        self.configure();
     }
 
     /// Declare the current position (mm) without moving (after homing, or
@@ -825,7 +838,7 @@ impl<'q> Motion<'q> {
             (math::abs(delta[E]), [0.0; MOTORS], self.config.retract_accel)
         };
         let motion = PlannerMove { steps, millimetres, unit, speed: feed, acceleration, watch: 0, watch_release: false };
-        if self.planner.push(&motion, &self.config.motor_limits()).is_err() {
+        if self.planner.push(&motion, &self.limits).is_err() {
             // The caller checked for room; never drop a piece silently.
             return Err(MotionError::Busy);
         }
@@ -877,7 +890,7 @@ impl<'q> Motion<'q> {
                         watch,
                         watch_release: release,
                     };
-                    if dominant == 0 || self.planner.push(&motion, &self.config.motor_limits()).is_err() {
+                    if dominant == 0 || self.planner.push(&motion, &self.limits).is_err() {
                         self.error = Some(MotionError::HomingFailed(self.homing.group()));
                         self.homing.abort();
                         return;
