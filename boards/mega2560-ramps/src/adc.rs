@@ -1,60 +1,127 @@
-//! Thermistor sampling on the ADC (AVcc reference, 125 kHz ADC clock).
+//! Thermistor sampling in the ADC interrupt.
 //!
-//! A conversion takes 13 ADC clocks = 104 µs. The wait is bounded, so a
-//! missing or broken ADC (QEMU's AVR machine has none) yields a reading of
-//! zero, which the core reports as a shorted sensor, instead of a hang.
+//! The 1 kHz tick (`clock.rs`) starts one conversion per millisecond; the
+//! conversion-complete interrupt adds the result to its channel's
+//! [`SampleAverager`] and points the multiplexer at the other thermistor
+//! for the next one. So each thermistor is sampled 500 times a second and
+//! the interrupt does an add, a compare and two register writes (see
+//! `firmware::thermal`, "ADC interrupt"). A conversion takes 13 ADC clocks
+//! at 125 kHz = 104 µs, well inside the millisecond.
+//!
+//! The main loop takes one averaged reading per channel every sample
+//! period ([`take_readings`]). A channel that produced no average for
+//! [`MISSING_PERIODS_LIMIT`] periods in a row (a dead ADC; QEMU's AVR
+//! machine has none) is reported as a reading of 0, which the thermal core
+//! judges a shorted sensor: a board whose thermistors cannot be read never
+//! heats.
 
 use avr_device::atmega2560::Peripherals;
+use avr_device::interrupt::Mutex;
+use core::cell::Cell;
+use firmware::thermal::{Oversampled, SampleAverager};
 
-/// Longest wait for one conversion, in polls (a conversion needs ≈ 300).
-const MAX_POLLS: u16 = 2_000;
+use crate::pins;
+
+/// Conversions per averaged reading: 16 at 500 per second per channel, one
+/// average every 32 ms, so every 100 ms sample period has a fresh one.
+const SAMPLES_PER_READING: u8 = 16;
+
+/// Sample periods without a reading before the channel counts as dead.
+pub const MISSING_PERIODS_LIMIT: u8 = 3;
+
+/// The thermistors in conversion order: hot end, bed.
+const CHANNELS: [u8; 2] = [pins::HOTEND_THERMISTOR_CHANNEL, pins::BED_THERMISTOR_CHANNEL];
+
+/// ADCSRA: ADEN, ADSC, ADIE and prescaler 128 (16 MHz / 128 = 125 kHz).
+/// ADIF (bit 4) is written 0, which leaves a pending completion alone.
+const START_CONVERSION: u8 = 0b1100_1111;
+
+/// What the interrupt fills and the main loop empties.
+#[derive(Clone, Copy)]
+struct Sampling {
+    averagers: [SampleAverager; 2],
+    /// Index into [`CHANNELS`] of the conversion running.
+    current: u8,
+}
+
+static SAMPLING: Mutex<Cell<Sampling>> = Mutex::new(Cell::new(Sampling {
+    averagers: [SampleAverager::new(SAMPLES_PER_READING), SampleAverager::new(SAMPLES_PER_READING)],
+    current: 0,
+}));
 
 pub fn init(dp: &Peripherals) {
-    // SAFETY: ADEN and prescaler 128 (ADPS2..0 = 111).
-    dp.ADC.adcsra.write(|w| unsafe { w.bits(0b1000_0111) });
+    select(dp, CHANNELS[0]);
+    // SAFETY: ADEN | ADIE, prescaler 128; no conversion started yet.
+    dp.ADC.adcsra.write(|w| unsafe { w.bits(0b1000_1111) });
 }
 
-
-/// Non-blocking sampling of the thermistors for the main loop: each call
-/// collects a finished conversion into its channel's averager and starts
-/// the next channel's, so no pass waits the 104 µs of a conversion.
-pub struct Sampler {
-    /// Index into the channel list of the conversion running, if any.
-    running: Option<usize>,
-    /// Calls since that conversion started (QEMU has no ADC: give up).
-    polls: u16,
+/// Start a conversion (from the 1 kHz tick, interrupts off).
+#[inline(always)]
+pub fn start_conversion(dp: &Peripherals) {
+    // SAFETY: a valid ADCSRA value (see `START_CONVERSION`); writing ADSC
+    // while a conversion runs has no effect.
+    dp.ADC.adcsra.write(|w| unsafe { w.bits(START_CONVERSION) });
 }
 
-impl Sampler {
+/// Point the multiplexer at `channel` (0–15), AVcc reference.
+fn select(dp: &Peripherals, channel: u8) {
+    // SAFETY: MUX5 in ADCSRB for channels 8–15; REFS0 (AVcc) and MUX2..0.
+    dp.ADC.adcsrb.write(|w| unsafe { w.bits(if channel >= 8 { 1 << 3 } else { 0 }) });
+    dp.ADC.admux.write(|w| unsafe { w.bits((1 << 6) | (channel & 0x07)) });
+}
+
+#[avr_device::interrupt(atmega2560)]
+fn ADC() {
+    // SAFETY: the ADC registers are only written here, in `init` (before
+    // interrupts) and by `start_conversion` (inside another interrupt).
+    let dp = unsafe { Peripherals::steal() };
+    let value = dp.ADC.adc.read().bits();
+    avr_device::interrupt::free(|cs| {
+        let cell = SAMPLING.borrow(cs);
+        // `Sampling` is a few bytes: copy, change, put back.
+        let mut sampling = cell.get();
+        let index = usize::from(sampling.current & 1);
+        sampling.averagers[index].push(value);
+        sampling.current = (sampling.current + 1) & 1;
+        select(&dp, CHANNELS[usize::from(sampling.current)]);
+        cell.set(sampling);
+    });
+}
+
+/// Per-channel count of sample periods without a reading.
+pub struct Readings {
+    missing: [u8; 2],
+}
+
+impl Readings {
     pub const fn new() -> Self {
-        Self { running: None, polls: 0 }
+        Self { missing: [0; 2] }
     }
 
-    /// One step; `averagers[i]` collects `channels[i]`. A conversion that
-    /// never finishes (no ADC) counts as a reading of 0, which the thermal
-    /// core reports as a shorted sensor: a board without working
-    /// thermistors never heats.
-    pub fn poll(&mut self, dp: &Peripherals, channels: &[u8], averagers: &mut [firmware::thermal::SampleAverager]) {
-        let adc = &dp.ADC;
-        if let Some(index) = self.running {
-            let done = adc.adcsra.read().bits() & (1 << 6) == 0;
-            self.polls = self.polls.saturating_add(1);
-            if !done && self.polls < MAX_POLLS {
-                return;
-            }
-            let value = if done { adc.adc.read().bits() } else { 0 };
-            averagers[index].push(value);
-            self.running = Some((index + 1) % channels.len());
-        } else {
-            self.running = Some(0);
+    /// The hot end's and the bed's averaged readings for this sample
+    /// period: `None` when none is new yet, a reading of 0 (shorted) once
+    /// a channel has had none for [`MISSING_PERIODS_LIMIT`] periods.
+    pub fn take(&mut self) -> [Option<Oversampled>; 2] {
+        let fresh = avr_device::interrupt::free(|cs| {
+            let cell = SAMPLING.borrow(cs);
+            let mut sampling = cell.get();
+            let fresh = [sampling.averagers[0].take(), sampling.averagers[1].take()];
+            cell.set(sampling);
+            fresh
+        });
+        let mut readings = [None; 2];
+        for (index, reading) in fresh.into_iter().enumerate() {
+            readings[index] = match reading {
+                Some(reading) => {
+                    self.missing[index] = 0;
+                    Some(reading)
+                }
+                None => {
+                    self.missing[index] = self.missing[index].saturating_add(1);
+                    (self.missing[index] >= MISSING_PERIODS_LIMIT).then(|| Oversampled::from_count(0))
+                }
+            };
         }
-        let index = self.running.unwrap_or(0);
-        let channel = channels[index];
-        // SAFETY: valid channel selections, AVcc reference, ADEN | ADSC |
-        // prescaler 128.
-        adc.adcsrb.write(|w| unsafe { w.bits(if channel >= 8 { 1 << 3 } else { 0 }) });
-        adc.admux.write(|w| unsafe { w.bits((1 << 6) | (channel & 0x07)) });
-        adc.adcsra.write(|w| unsafe { w.bits(0b1100_0111) });
-        self.polls = 0;
+        readings
     }
 }

@@ -27,6 +27,8 @@ pub fn millis() -> u32 {
 
 #[avr_device::interrupt(atmega2560)]
 fn TIMER3_COMPA() {
+    // SAFETY: only the ADC's control register is written (see adc.rs).
+    crate::adc::start_conversion(&unsafe { Peripherals::steal() });
     avr_device::interrupt::free(|cs| {
         let millis = MILLIS.borrow(cs);
         millis.set(millis.get().wrapping_add(1));

@@ -26,7 +26,6 @@ use firmware::host_link::HostLink;
 use firmware::machine::Machine;
 use firmware::motion::{MotionConfig, StepperRequest};
 use firmware::rx::{self, RxQueue};
-use firmware::thermal::SampleAverager;
 
 /// How often the thermistors are read, in milliseconds.
 const THERMAL_PERIOD_MS: u32 = 100;
@@ -49,10 +48,8 @@ fn main() -> ! {
     let mut eeprom = eeprom::Eeprom::new(unsafe { Peripherals::steal() }.EEPROM);
     let _ = link.machine.load_settings(&mut eeprom, &mut tx);
     let mut next_thermal_ms = 0u32;
-    // Hot end and bed thermistors, 16 conversions averaged per reading.
-    let channels = [pins::HOTEND_THERMISTOR_CHANNEL, pins::BED_THERMISTOR_CHANNEL];
-    let mut averagers = [SampleAverager::new(16), SampleAverager::new(16)];
-    let mut sampler = adc::Sampler::new();
+    // Hot end and bed thermistors, averaged in the ADC interrupt.
+    let mut readings = adc::Readings::new();
     let mut outputs = Outputs::default();
 
     // The loop never sleeps: QEMU's AVR machine does not wake from `sleep`
@@ -70,11 +67,10 @@ fn main() -> ! {
         let _ = link.service(&mut rx, &mut eeprom, now, &mut tx);
         if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
             next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
-            let [hotend, bed] = &mut averagers;
-            let _ = link.machine.on_thermal_samples(hotend.take(), bed.take(), &mut tx);
+            let [hotend, bed] = readings.take();
+            let _ = link.machine.on_thermal_samples(hotend, bed, &mut tx);
             link.machine.set_endstop_levels(pins::endstop_levels(&dp));
         }
-        sampler.poll(&dp, &channels, &mut averagers);
         apply_outputs(&dp, &link.machine, &mut outputs);
     }
 }

@@ -37,6 +37,12 @@ pub fn start(dp: &Peripherals) {
         avr_device::asm::wdr();
         // WDE (bit 3) with the 2 s prescaler.
         timed_write((1 << 3) | TIMEOUT_BITS);
+        // Restart the count under the new timeout. Harmless on silicon;
+        // needed on simavr, which re-arms its watchdog timer on `wdr` but
+        // not on a prescaler change while WDE stays on: after a watchdog
+        // reset (16 ms default) the board otherwise reset again 16 ms into
+        // every boot, a boot loop whenever booting took longer than that.
+        avr_device::asm::wdr();
     });
 }
 
