@@ -20,6 +20,10 @@ for machine in delta arm; do
   bash tests/scripts/size-check.sh "$target/machines/$machine/avr-none/release/mega2560-ramps.elf"
 done
 
+say "building the Prusa i3 with its bed on a solid-state relay: cargo +nightly avr --features mega2560-ramps/bed-ssr"
+CARGO_TARGET_DIR=$target/machines/bed-ssr cargo +nightly avr --features mega2560-ramps/bed-ssr
+bash tests/scripts/size-check.sh "$target/machines/bed-ssr/avr-none/release/mega2560-ramps.elf"
+
 arm_dir=$target/thumbv7em-none-eabihf/release
 say "building the SKR Pro release firmware once: cargo arm"
 cargo arm

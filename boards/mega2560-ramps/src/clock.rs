@@ -31,6 +31,9 @@ fn TIMER3_COMPA() {
     crate::adc::start_conversion(&unsafe { Peripherals::steal() });
     avr_device::interrupt::free(|cs| {
         let millis = MILLIS.borrow(cs);
-        millis.set(millis.get().wrapping_add(1));
+        let now = millis.get().wrapping_add(1);
+        millis.set(now);
+        #[cfg(feature = "bed-ssr")]
+        crate::ssr::on_tick(&unsafe { Peripherals::steal() }, cs, now);
     });
 }

@@ -18,6 +18,8 @@ mod eeprom;
 mod pins;
 mod pwm;
 mod serial;
+#[cfg(feature = "bed-ssr")]
+mod ssr;
 mod stepping;
 mod watchdog;
 
@@ -96,6 +98,8 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
     unsafe { avr_device::interrupt::enable() };
     // SAFETY: called once, from main, before anything else uses `LINK`.
     let link = HostLink::init_in(unsafe { &mut *core::ptr::addr_of_mut!(LINK) }, config, feeder);
+    #[cfg(feature = "bed-ssr")]
+    link.machine.use_bed_config(&firmware::thermal::channel::BED_SSR);
     for endstop in pins::ENDSTOPS {
         pins::make_input_pulled_up(dp, endstop);
     }
@@ -138,6 +142,8 @@ struct Outputs {
 fn apply_outputs(dp: &Peripherals, machine: &Machine, last: &mut Outputs) {
     if machine.is_halted() {
         stepping::halt();
+        #[cfg(feature = "bed-ssr")]
+        ssr::stop();
         pins::all_outputs_safe(dp);
         *last = Outputs { drivers_enabled: Some(false), fan_duty: Some(0), heater_duties: Some((0, 0)) };
         return;
@@ -155,7 +161,10 @@ fn apply_outputs(dp: &Peripherals, machine: &Machine, last: &mut Outputs) {
     let heaters = machine.heater_duties();
     if last.heater_duties != Some(heaters) {
         pwm::set(dp, pwm::Output::Hotend, heaters.0);
+        #[cfg(not(feature = "bed-ssr"))]
         pwm::set(dp, pwm::Output::Bed, heaters.1);
+        #[cfg(feature = "bed-ssr")]
+        ssr::set_duty(heaters.1);
         last.heater_duties = Some(heaters);
     }
 }

@@ -77,6 +77,13 @@ pub fn make_output(dp: &Peripherals, pin: Pin, high: bool) {
     avr_device::interrupt::free(|_| make_output_unguarded(dp, pin, high));
 }
 
+/// [`make_output`] from code that already holds interrupts off (an
+/// interrupt handler).
+#[cfg_attr(not(feature = "bed-ssr"), allow(dead_code))]
+pub fn make_output_in(dp: &Peripherals, _cs: avr_device::interrupt::CriticalSection, pin: Pin, high: bool) {
+    make_output_unguarded(dp, pin, high);
+}
+
 fn make_output_unguarded(dp: &Peripherals, pin: Pin, high: bool) {
     let mask = 1u8 << pin.bit;
     macro_rules! drive {

@@ -19,6 +19,7 @@ use avr_device::atmega2560::Peripherals;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Output {
     Hotend,
+    #[cfg_attr(feature = "bed-ssr", allow(dead_code))]
     Bed,
     Fan,
 }

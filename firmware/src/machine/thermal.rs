@@ -118,6 +118,14 @@ impl<'q> Machine<'q> {
         }
     }
 
+    /// Drive the bed with `config` instead of RAMPS' MOSFET bed (e.g.
+    /// [`BED_SSR`](crate::thermal::channel::BED_SSR) for a solid-state
+    /// relay), keeping the gains; the board calls it at boot, before any
+    /// command.
+    pub fn use_bed_config(&mut self, config: &'static crate::progmem::Flash<crate::thermal::HeaterConfig>) {
+        self.bed = HeaterChannel::new(config, self.bed.gains());
+    }
+
     /// Duties for the heater outputs (hot end, bed), 0–255; 0 when halted.
     pub fn heater_duties(&self) -> (u8, u8) {
         if self.halted {

@@ -9,7 +9,7 @@
 use super::autotune::{Autotune, TuneError, TuneResult, TuneStep};
 use super::guard::{GuardConfig, HeaterGuard, ThermalFault, Verdict};
 use super::output::{OutputMode, TimeProportioning};
-use super::pid::{bang_bang, Control, Gains, PidState};
+use super::pid::{bang_bang, Control, Gains, Law, PidState};
 use super::thermistor::{Oversampled, Thermistor};
 use super::{Celsius, Heater, HeaterId};
 use crate::progmem::Flash;
@@ -107,6 +107,11 @@ pub static BED: Flash<HeaterConfig> = Flash::new(HeaterConfig::bed());
 /// [`HeaterConfig::bed`] with bang-bang control, in flash.
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
 pub static BED_BANG_BANG: Flash<HeaterConfig> = Flash::new(HeaterConfig { control: Control::BANG_BANG, ..HeaterConfig::bed() });
+/// [`HeaterConfig::bed`] behind a solid-state relay: the same PID, its
+/// duty as time-proportioning (200 ms window, slots ≥ 10 ms), in flash.
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+pub static BED_SSR: Flash<HeaterConfig> =
+    Flash::new(HeaterConfig { output: OutputMode::TimeProportioning(TimeProportioning::SSR), ..HeaterConfig::bed() });
 /// [`HeaterConfig::barrel`] in flash.
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
 pub static BARREL: Flash<HeaterConfig> = Flash::new(HeaterConfig::barrel());
@@ -317,7 +322,8 @@ impl HeaterChannel {
         self.countdown = c.control_every.max(1) - 1;
         self.duty = match c.control {
             Control::Pid { functional_range_c, .. } => {
-                self.pid.control(&self.gains, functional_range_c, c.control_period_ms(), c.max_power, self.target, measured)
+                let law = Law { functional_range_c, control_period_ms: c.control_period_ms(), max_power: c.max_power, target: self.target, measured };
+                self.pid.control(&self.gains, &law)
             }
             Control::BangBang { hysteresis_tenths } => bang_bang(hysteresis_tenths, c.max_power, self.target, measured, self.duty > 0),
         };

@@ -121,7 +121,7 @@ pub use autotune::{relay_gains, Autotune, TuneConfig, TuneError, TuneResult};
 pub use channel::{HeaterChannel, HeaterConfig, TuneProgress};
 pub use guard::{ColdExtrusionGuard, ColdExtrusionReading, GuardConfig, HeaterGuard, ThermalFault};
 pub use output::{OutputMode, SlowPwm, TimeProportioning};
-pub use pid::{Control, Gains};
+pub use pid::{Control, Gains, Law};
 pub use report::{write_temperatures, AutoReport, TemperatureWait, WaitConfig, WaitStatus};
 pub use thermistor::{Oversampled, SampleAverager, Thermistor};
 

@@ -136,6 +136,19 @@ impl Control {
     pub const BANG_BANG: Control = Control::BangBang { hysteresis_tenths: 20 };
 }
 
+/// The inputs of one run of the law ([`PidState::control`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Law {
+    /// See [`Control::Pid`].
+    pub functional_range_c: u8,
+    /// T, ms.
+    pub control_period_ms: u16,
+    /// Largest duty.
+    pub max_power: u8,
+    pub target: Celsius,
+    pub measured: Celsius,
+}
+
 /// The memory of the PID law: 8 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PidState {
@@ -176,7 +189,7 @@ impl PidState {
         previous: Celsius,
     ) -> u8 {
         self.observe(gains, derivative_filter_shift, period_ms, measured, previous);
-        self.control(gains, functional_range_c, period_ms, max_power, target, measured)
+        self.control(gains, &Law { functional_range_c, control_period_ms: period_ms, max_power, target, measured })
     }
 
     /// Every sample: the derivative on the measurement (no kick when the
@@ -194,8 +207,16 @@ impl PidState {
     }
 
     /// The law, every `control_period_ms`: the duty (0..=`max_power`).
+    ///
+    /// The inputs come bundled in [`Law`], passed by reference: as separate
+    /// arguments (and with LLVM turning `&Gains` into its values) they took
+    /// more than the 18 argument registers, and LLVM passed the
+    /// temperatures on the stack, where it reads them one byte off on the
+    /// ATmega2560 (a 3-byte return address; `tests/scripts/size-check.sh`
+    /// refuses such code).
     #[inline(never)]
-    pub fn control(&mut self, gains: &Gains, functional_range_c: u8, control_period_ms: u16, max_power: u8, target: Celsius, measured: Celsius) -> u8 {
+    pub fn control(&mut self, gains: &Gains, law: &Law) -> u8 {
+        let Law { functional_range_c, control_period_ms, max_power, target, measured } = *law;
         let period = i32::from(control_period_ms.max(1));
         let max = i32::from(max_power) * MICRO;
         let error = target.0 - measured.0;

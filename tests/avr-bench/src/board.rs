@@ -249,9 +249,10 @@ struct DutyMeter {
 }
 
 impl DutyMeter {
-    fn edge(&mut self, now: u64, level: bool) {
+    /// A level seen at `now`; `true` when it changed.
+    fn edge(&mut self, now: u64, level: bool) -> bool {
         if level == self.level {
-            return;
+            return false;
         }
         if self.level {
             // (saturating: simavr restarts its cycle count at a reset)
@@ -261,6 +262,7 @@ impl DutyMeter {
         self.level = level;
         self.since = now;
         self.edges += 1;
+        true
     }
 
     fn close(&mut self, now: u64) {
@@ -319,6 +321,8 @@ struct Shared {
     endstop_levels: [bool; 6],
     dir_high_is_positive: [bool; 5],
     meters: Vec<(Pin, *mut ffi::avr_irq_t, DutyMeter)>,
+    /// Level changes of the bed pin (D8), when asked for.
+    bed_edges: Option<Vec<(u64, bool)>>,
     /// Per meter: the TCCRnA address and bit shift of the compare unit
     /// that can drive the pin (COMnx1:0).
     meter_compare: Vec<(u16, u8)>,
@@ -446,6 +450,7 @@ impl Board {
                 endstop_levels: [true; 6],
                 dir_high_is_positive: config.dir_high_is_positive,
                 meters: Vec::new(),
+                bed_edges: None,
                 meter_compare: Vec::new(),
                 sensors: Vec::new(),
                 plant_period_cycles: (config.plant_period_s * f64::from(CPU_HZ)).round() as u64,
@@ -874,6 +879,17 @@ impl Board {
             .iter()
             .find(|s| s.config.adc_channel == adc_channel)
             .map(|s| s.counts)
+    }
+
+    /// Start (or stop) recording the bed pin's level changes.
+    pub fn record_bed_edges(&mut self, on: bool) {
+        self.shared.bed_edges = on.then(Vec::new);
+    }
+
+    /// The bed pin's level changes since `record_bed_edges(true)`:
+    /// (cycle, new level).
+    pub fn bed_edges(&self) -> &[(u64, bool)] {
+        self.shared.bed_edges.as_deref().unwrap_or(&[])
     }
 
     pub fn thermal_history(&self) -> &[ThermalSample] {
@@ -1379,8 +1395,11 @@ unsafe extern "C" fn on_meter_pin(irq: *mut ffi::avr_irq_t, value: u32, param: *
         if *pin_irq == irq {
             let (tccr, shift) = shared.meter_compare[i];
             let connected = (*(*shared.avr).data.add(usize::from(tccr)) >> shift) & 0b11 != 0;
-            if connected == from_timer {
-                meter.edge(now, value & 1 != 0);
+            if connected == from_timer && meter.edge(now, value & 1 != 0) {
+                // Meter 1 is the bed (hot end, bed, fan: the order above).
+                if let (Some(edges), 1) = (shared.bed_edges.as_mut(), i) {
+                    edges.push((now, value & 1 != 0));
+                }
             }
         }
     }

@@ -703,3 +703,71 @@ fn a_hung_main_loop_is_reset_by_the_watchdog_with_everything_off() {
     assert_eq!(board.peek(TCCR4A) & 0b1111_1100, 0);
     assert_ne!(board.peek(0x2B) & 1 << 7, 0, "X driver disabled (PD7 high)");
 }
+
+/// The `bed-ssr` build drives D8 as a solid-state relay wants it: 200 ms
+/// windows, every on and off slot at least 10 ms, never kilohertz PWM; and
+/// a kill lowers the pin for good, though the window runs in the tick.
+#[test]
+fn the_ssr_bed_switches_in_200_ms_windows_with_slots_of_at_least_10_ms() {
+    let elf = avr_bench::build::build_variant(
+        &avr_bench::build::target_dir().join("machines/bed-ssr"),
+        &["mega2560-ramps/bed-ssr"],
+        false,
+    )
+    .expect("the bed-ssr build");
+    let mut config = RampsConfig::stock(115_200);
+    config.host = HostConfig::raw(115_200);
+    let mut board = bench::boot(&elf, config).expect("the firmware boots");
+    // A few degrees short of the target: the PID asks for part power.
+    board.set_plant_celsius(14, 59.5);
+    board.record_bed_edges(true);
+    assert_eq!(replies(&mut board, &["M140 S60"]), ["ok"]);
+    board.run_for_ms(4_000.0);
+    let edges = board.bed_edges().to_vec();
+    let ms = |cycles: u64| cycles as f64 * 1000.0 / f64::from(CPU_HZ);
+    assert!(edges.len() >= 8, "the relay switches: {edges:?}");
+    assert!(edges.len() <= 2 * 21, "at most two edges a window: {} in 4 s", edges.len());
+    for pair in edges.windows(2) {
+        let slot = ms(pair[1].0 - pair[0].0);
+        assert!(slot >= 9.9, "a {slot:.2} ms slot ({pair:?})");
+    }
+    let rises: Vec<u64> = edges.iter().filter(|(_, high)| *high).map(|(t, _)| *t).collect();
+    for pair in rises.windows(2) {
+        let gap = ms(pair[1] - pair[0]);
+        let windows = (gap / 200.0).round();
+        assert!(windows >= 1.0 && (gap - windows * 200.0).abs() < 0.1, "rising edges {gap:.3} ms apart");
+    }
+    let history = board.thermal_history();
+    let heating = history[history.len() - 20..].iter().map(|s| s.duty[1]).sum::<f64>() / 20.0;
+    assert!(heating > 0.02 && heating < 0.5, "part power over the last 2 s: {heating}");
+    // Kill: low at once and for good.
+    board.send(["M112"]);
+    board.run_for_ms(50.0);
+    let killed_at = board.cycle();
+    board.run_for_ms(1_000.0);
+    assert!(
+        board.bed_edges().iter().all(|(t, high)| *t < killed_at || !*high),
+        "the bed pin rose after the kill"
+    );
+    const PORTH: u16 = 0x102;
+    assert_eq!(board.peek(PORTH) & 1 << 5, 0);
+}
+
+/// The hot end's PID on the real ELF gives part power close to the target
+/// and none above it (it once acted as bang-bang: LLVM read the
+/// temperatures, passed on the stack, one byte off on the ATmega2560).
+#[test]
+fn the_hot_end_pid_gives_part_power_near_the_target() {
+    let mut board = boot_raw();
+    assert_eq!(replies(&mut board, &["M104 S200"]), ["ok"]);
+    // 142 counts ≈ 199.1 °C: P = 22.2 × 0.9 ≈ 20 of 255, plus a growing I.
+    board.set_sensor_input(13, SensorInput::Fixed(142));
+    board.run_for_ms(1_000.0);
+    let near = board.thermal_history().last().unwrap().duty[0];
+    assert!(near > 0.02 && near < 0.2, "duty {near} at 199.1 °C");
+    assert_eq!(replies(&mut board, &["M105"]).len(), 1);
+    // 139 counts ≈ 201.0 °C: above the target, off.
+    board.set_sensor_input(13, SensorInput::Fixed(139));
+    board.run_for_ms(1_000.0);
+    assert_eq!(board.thermal_history().last().unwrap().duty[0], 0.0);
+}
