@@ -11,6 +11,12 @@ fn booted_board() -> QemuBoard {
     assert!(banner[1].starts_with("echo:Ferrostep "), "banner: {banner:?}");
     // QEMU has no EEPROM: it reads back blank, so the defaults apply.
     assert_eq!(banner[2..], ["echo:No stored settings", "echo:Hardcoded Default Settings Loaded"], "banner: {banner:?}");
+    // QEMU models no ADC: no conversion ever completes, so after three
+    // sample periods the thermistors count as shorted and the thermal
+    // protection halts the board, saying so; reports keep working.
+    let lines = board.read_until(Duration::from_secs(10), |l| l.contains("Heater_ID: bed"));
+    assert!(lines.iter().any(|l| l == "Error:Printer halted. kill() called!"), "{lines:?}");
+    assert!(lines.iter().all(|l| l.starts_with("Error:")), "{lines:?}");
     board
 }
 

@@ -42,7 +42,7 @@ fn main() -> ! {
     let (producer, consumer) = rx::split(unsafe { &mut *RX_QUEUE.0.get() });
     serial::init(&dp.RCC, &dp.USART1, &clocks, producer);
     adc::init(&dp.RCC, &dp.ADC_COMMON, &dp.ADC3);
-    pwm::init(&dp.RCC, &dp.TIM3);
+    pwm::init(&dp.RCC, &dp.TIM3, &dp.TIM4);
     let config = MotionConfig::prusa_i3();
     let feeder = stepper::init(&dp.RCC, &dp.TIM5, &clocks, config.stepper());
     // SAFETY: priorities are set before the lines are unmasked; everything
@@ -76,10 +76,9 @@ fn main() -> ! {
         let _ = link.service(&mut rx, &mut settings, now, &mut tx);
         if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
             next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
-            // The heater outputs are not driven on this board yet, so the
-            // thermal core gets no readings (`on_thermal_samples`): targets
-            // are accepted but nothing heats. (QEMU's ADC reads no
-            // thermistor and would halt the board at boot.)
+            let hotend = adc::oversampled(&dp.ADC3, pins::HOTEND_THERMISTOR_CHANNEL);
+            let bed = adc::oversampled(&dp.ADC3, pins::BED_THERMISTOR_CHANNEL);
+            let _ = link.machine.on_thermal_samples(Some(hotend), Some(bed), &mut tx);
             link.machine.set_endstop_levels(pins::endstop_levels());
         }
         apply_outputs(&link.machine);
@@ -95,6 +94,9 @@ fn apply_outputs(machine: &Machine) {
     }
     pins::set_steppers_enabled(machine.steppers_enabled());
     pwm::set_fan(machine.fan_duty());
+    let (hotend, bed) = machine.heater_duties();
+    pwm::set_hotend(hotend);
+    pwm::set_bed(bed);
 }
 
 #[interrupt]

@@ -242,9 +242,9 @@ pub fn init() {
 /// changes levels with BSRR stores only (and mode bits that already hold
 /// these values are rewritten with the same values at boot only).
 pub fn all_outputs_safe() {
-    // Disconnect the fan's PWM first: a pin in alternate-function mode
-    // ignores BSRR. Its compare value to 0 holds the output low even if
-    // the pin stays on the timer.
+    // The fan and the heaters run on timer channels: a pin in
+    // alternate-function mode ignores BSRR, so their compare values go to
+    // 0 first, which holds each output low though it stays on the timer.
     crate::pwm::force_off();
     static CONFIGURED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
     if !CONFIGURED.swap(true, core::sync::atomic::Ordering::Relaxed) {

@@ -462,8 +462,9 @@ impl<'q> Machine<'q> {
         out: &mut W,
     ) -> Result<Outcome, W::Error> {
         // Halted, the machine still answers what only reports or waits
-        // (hosts keep polling M105), and refuses everything that would act.
-        if self.halted && !matches!(command.code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410)) {
+        // (hosts keep polling M105) and echoes unknown codes as unknown;
+        // it refuses everything that would act.
+        if self.halted && is_known(command.code) && !matches!(command.code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410)) {
             return Ok(Outcome::Failed(CommandError::Halted));
         }
         let result = match command.code {

@@ -164,6 +164,14 @@ fn m112_halts_and_refuses_everything_after() {
 }
 
 #[test]
+fn a_halted_machine_still_echoes_unknown_codes_as_unknown() {
+    let mut machine = new_machine();
+    converse(&mut machine, 0, "M112\n");
+    let out = converse(&mut machine, 0, "M9999 S1\nG1 X1\n");
+    assert_eq!(out, "echo:Unknown command: \"M9999 S1\"\nok\nError:Printer halted. kill() called!\nok\n");
+}
+
+#[test]
 fn settings_commands_change_what_m503_prints() {
     let mut machine = new_machine();
     converse(&mut machine, 0, "M92 X80 E415.5\nM203 Z10\nM201 X1000\nM204 P800 T2000\nM205 J0.02\nM220 S150\n");
