@@ -100,6 +100,8 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
     let link = HostLink::init_in(unsafe { &mut *core::ptr::addr_of_mut!(LINK) }, config, feeder);
     #[cfg(feature = "bed-ssr")]
     link.machine.use_bed_config(&firmware::thermal::channel::BED_SSR);
+    #[cfg(feature = "bed-bang-bang")]
+    link.machine.use_bed_config(&firmware::thermal::channel::BED_BANG_BANG);
     for endstop in pins::ENDSTOPS {
         pins::make_input_pulled_up(dp, endstop);
     }
@@ -124,6 +126,9 @@ fn machine_config() -> MotionConfig {
     #[cfg(not(any(feature = "machine-delta", feature = "machine-arm")))]
     PRUSA_I3.load()
 }
+
+#[cfg(all(feature = "bed-ssr", feature = "bed-bang-bang"))]
+compile_error!("choose one bed: bed-ssr or bed-bang-bang");
 
 #[cfg(all(feature = "machine-delta", feature = "machine-arm"))]
 compile_error!("choose one machine: machine-delta or machine-arm");
