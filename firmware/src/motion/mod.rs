@@ -390,19 +390,21 @@ impl LineCut {
         for axis in 0..MOTORS {
             delta[axis] = target[axis] - start[axis];
         }
-        let length = sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]);
+        // Only kinematics that bend straight lines (delta, arm) are cut by
+        // length; a Cartesian line needs no square root here (this runs
+        // for every G1 of a slicer stream).
         let mut pieces = match config.kinematics.segment_mm() {
-            Some(segment) if segment > 0.0 => length / segment,
+            Some(segment) if segment > 0.0 => sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]) / segment,
             _ => 0.0,
         };
         // Keep each motor within a block's 16-bit step count (with room for
         // the delta's up-to-3× carriage travel).
         let spu = config.steps_per_unit();
-        let headroom = MAX_BLOCK_STEPS as f32 / 4.0;
+        const PER_HEADROOM: f32 = 4.0 / MAX_BLOCK_STEPS as f32;
         for axis in 0..LINEAR_AXES {
-            pieces = pieces.max(math::abs(delta[axis]) * config.steps_per_mm[axis].max(spu[axis]) / headroom);
+            pieces = pieces.max(math::abs(delta[axis]) * config.steps_per_mm[axis].max(spu[axis]) * PER_HEADROOM);
         }
-        pieces = pieces.max(math::abs(delta[E]) * spu[E] * config.flow_factor / headroom);
+        pieces = pieces.max(math::abs(delta[E]) * spu[E] * config.flow_factor * PER_HEADROOM);
         let pieces = (pieces.min(1.0e7) as u32).saturating_add(1);
         Self { start, delta, target, pieces, done: 0 }
     }
@@ -831,7 +833,8 @@ impl<'q> Motion<'q> {
         }
         let xyz = sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]);
         let (millimetres, unit, acceleration) = if xyz > 1.0e-5 {
-            let unit = [delta[0] / xyz, delta[1] / xyz, delta[2] / xyz, 0.0];
+            let per_mm = 1.0 / xyz;
+            let unit = [delta[0] * per_mm, delta[1] * per_mm, delta[2] * per_mm, 0.0];
             let acceleration = if e_steps != 0 { self.config.print_accel } else { self.config.travel_accel };
             (xyz, unit, acceleration)
         } else {

@@ -47,7 +47,7 @@ pub const MAX_CRUISE_SEGMENT_S: f32 = 0.010;
 /// Largest ratio of speeds at the two ends of an accelerating segment.
 pub const SPEED_RATIO: f32 = 1.2;
 /// Most segments [`Prep::fill`] queues per call.
-const SEGMENTS_PER_FILL: usize = 16;
+const SEGMENTS_PER_FILL: usize = 4;
 /// Segments queued ahead before [`Prep::fill`] goes one per call.
 const SEGMENTS_AHEAD: usize = 4;
 /// Q24.8 ticks per second.
@@ -59,10 +59,16 @@ pub struct Prep {
     active: bool,
     events_left: u16,
     events_per_mm: f32,
+    /// 1 / `events_per_mm`.
+    mm_per_event: f32,
     /// The running block's nominal speed (events/s) and acceleration
-    /// (events/s²), fixed for the block: computed once, not per segment.
+    /// (events/s²), fixed for the block: computed once, not per segment,
+    /// with their reciprocals (a float division costs the AVR three
+    /// multiplications: the per-segment work multiplies instead).
     nominal: f32,
+    inv_nominal: f32,
     accel: f32,
+    inv_accel: f32,
     /// Speed at the end of the last queued segment, events/s.
     speed: f32,
     /// Queued time minus ideal time, 1/256 ticks.
@@ -85,6 +91,9 @@ impl Default for Prep {
 struct Profile {
     start_speed: f32,
     accel: f32,
+    /// 1 / `accel`, 1 / `peak`.
+    inv_accel: f32,
+    inv_peak: f32,
     peak: f32,
     /// Events from now where acceleration ends and deceleration begins.
     accel_end: f32,
@@ -92,17 +101,20 @@ struct Profile {
 }
 
 impl Profile {
-    fn new(start_speed: f32, distance: f32, nominal: f32, exit: f32, accel: f32) -> Self {
+    /// `inv_accel` and `inv_nominal` are 1/`accel` and 1/`nominal`.
+    fn new(start_speed: f32, distance: f32, nominal: f32, exit: f32, accel: f32, inv_accel: f32, inv_nominal: f32) -> Self {
         let v0_sqr = start_speed * start_speed;
         let peak_sqr_nominal = nominal * nominal;
         let exit_sqr = exit * exit;
-        let two_a = 2.0 * accel;
-        let accel_distance = (peak_sqr_nominal - v0_sqr) / two_a;
-        let decel_distance = (peak_sqr_nominal - exit_sqr) / two_a;
+        let half_inv_a = 0.5 * inv_accel;
+        let accel_distance = (peak_sqr_nominal - v0_sqr) * half_inv_a;
+        let decel_distance = (peak_sqr_nominal - exit_sqr) * half_inv_a;
         if start_speed <= nominal && accel_distance + decel_distance <= distance {
             return Self {
                 start_speed,
                 accel,
+                inv_accel,
+                inv_peak: inv_nominal,
                 peak: nominal,
                 accel_end: accel_distance,
                 decel_start: distance - decel_distance,
@@ -112,10 +124,11 @@ impl Profile {
         // be reached (it always can, by the planner's passes, but rounding
         // happens) accelerate throughout; if the speed is too high to slow
         // to the exit (likewise), decelerate throughout.
-        let peak_sqr = ((two_a * distance + v0_sqr + exit_sqr) * 0.5).max(v0_sqr);
+        let peak_sqr = ((2.0 * accel * distance + v0_sqr + exit_sqr) * 0.5).max(v0_sqr);
         let peak = sqrt(peak_sqr).max(start_speed);
-        let accel_end = ((peak_sqr - v0_sqr) / two_a).clamp(0.0, distance);
-        Self { start_speed, accel, peak, accel_end, decel_start: accel_end }
+        let accel_end = ((peak_sqr - v0_sqr) * half_inv_a).clamp(0.0, distance);
+        let inv_peak = if peak > 0.0 { 1.0 / peak } else { 0.0 };
+        Self { start_speed, accel, inv_accel, inv_peak, peak, accel_end, decel_start: accel_end }
     }
 
     /// Speed after `e` events.
@@ -138,14 +151,14 @@ impl Profile {
     /// square root fewer: each is hundreds of cycles on the AVR).
     fn time_at_speed(&self, e: f32, speed: f32) -> f32 {
         if e <= self.accel_end {
-            return (speed - self.start_speed) / self.accel;
+            return (speed - self.start_speed) * self.inv_accel;
         }
-        let accel_time = (self.peak - self.start_speed) / self.accel;
+        let accel_time = (self.peak - self.start_speed) * self.inv_accel;
         if e <= self.decel_start {
-            return accel_time + (e - self.accel_end) / self.peak;
+            return accel_time + (e - self.accel_end) * self.inv_peak;
         }
-        let cruise_time = (self.decel_start - self.accel_end) / self.peak;
-        accel_time + cruise_time + (self.peak - speed) / self.accel
+        let cruise_time = (self.decel_start - self.accel_end) * self.inv_peak;
+        accel_time + cruise_time + (self.peak - speed) * self.inv_accel
     }
 
     /// Events in the next segment (≥ 1, ≤ `left`).
@@ -153,13 +166,13 @@ impl Profile {
         let v = self.start_speed;
         let (mut target, boundary) = if self.accel_end >= 0.5 {
             let faster = (v * SPEED_RATIO).min(self.peak);
-            ((faster * faster - v * v) / (2.0 * self.accel), self.accel_end)
+            ((faster * faster - v * v) * 0.5 * self.inv_accel, self.accel_end)
         } else if self.decel_start >= 0.5 {
             // Cruising: constant speed up to the deceleration.
             (v * MAX_CRUISE_SEGMENT_S, self.decel_start)
         } else {
             let slower = v / SPEED_RATIO;
-            ((v * v - slower * slower) / (2.0 * self.accel), left as f32)
+            ((v * v - slower * slower) * 0.5 * self.inv_accel, left as f32)
         };
         let within_time = v * MAX_SEGMENT_S + 0.5 * self.accel * MAX_SEGMENT_S * MAX_SEGMENT_S;
         if self.accel_end >= 0.5 || self.decel_start < 0.5 {
@@ -180,8 +193,11 @@ impl Prep {
             active: false,
             events_left: 0,
             events_per_mm: 0.0,
+            mm_per_event: 0.0,
             nominal: 0.0,
+            inv_nominal: 0.0,
             accel: 0.0,
+            inv_accel: 0.0,
             speed: 0.0,
             time_debt_q8: 0.0,
             min_interval_q8: 8 << 8,
@@ -234,9 +250,12 @@ impl Prep {
                     watch_release: block.watch_release,
                 };
                 self.events_per_mm = block.events as f32 / block.millimetres;
+                self.mm_per_event = block.millimetres / block.events as f32;
                 self.speed = sqrt(block.entry_speed_sqr) * self.events_per_mm;
                 self.nominal = sqrt(block.nominal_speed_sqr) * self.events_per_mm;
+                self.inv_nominal = if self.nominal > 0.0 { 1.0 / self.nominal } else { 0.0 };
                 self.accel = block.acceleration * self.events_per_mm;
+                self.inv_accel = if self.accel > 0.0 { 1.0 / self.accel } else { 0.0 };
                 self.events_left = block.events;
                 self.active = true;
                 feeder.push_block(step_block);
@@ -249,8 +268,8 @@ impl Prep {
             let segment = self.next_segment(exit_sqr, starts_block);
             feeder.push_segment(segment);
             queued += 1;
-            block.millimetres = self.events_left as f32 / self.events_per_mm;
-            let speed_mm = self.speed / self.events_per_mm;
+            block.millimetres = self.events_left as f32 * self.mm_per_event;
+            let speed_mm = self.speed * self.mm_per_event;
             block.entry_speed_sqr = speed_mm * speed_mm;
             if self.events_left == 0 {
                 self.active = false;
@@ -267,6 +286,8 @@ impl Prep {
             self.nominal,
             sqrt(exit_speed_sqr) * self.events_per_mm,
             self.accel,
+            self.inv_accel,
+            self.inv_nominal,
         );
         let events = profile.segment_events(self.events_left);
         let end_speed = profile.speed_at(events as f32);
@@ -290,12 +311,15 @@ impl Prep {
             return (interval as u32, 0, (interval as u32) as f32);
         }
         let pairs = k * (k - 1.0) * 0.5;
-        let mut add = round_f32((total_q8 - k * first_q8) / pairs);
+        // One division: 1/k = ((k − 1)/2) · (1/pairs).
+        let inv_pairs = 1.0 / pairs;
+        let inv_k = (k - 1.0) * 0.5 * inv_pairs;
+        let mut add = round_f32((total_q8 - k * first_q8) * inv_pairs);
         // Keep every wait above the minimum: the last one is I₀ + (k−1)·add.
-        let mut interval = round_f32((total_q8 - add * pairs) / k);
+        let mut interval = round_f32((total_q8 - add * pairs) * inv_k);
         if interval < min || interval + add * (k - 1.0) < min {
             add = 0.0;
-            interval = round_f32(total_q8 / k).max(min);
+            interval = round_f32(total_q8 * inv_k).max(min);
         }
         let actual = k * interval + add * pairs;
         (interval as u32, add as i32, actual)
@@ -314,23 +338,23 @@ mod tests {
     fn profile_times_match_the_analytic_trapezoid() {
         // 1000 events, 0 → 10 000 ev/s at 100 000 ev/s²: 500 to accelerate,
         // 500 to stop: a triangle peaking at 10 000 after 0.1 s.
-        let p = Profile::new(0.0, 1000.0, 20_000.0, 0.0, 100_000.0);
+        let p = Profile::new(0.0, 1000.0, 20_000.0, 0.0, 100_000.0, 1.0 / 100_000.0, 1.0 / 20_000.0);
         assert!((p.peak - 10_000.0).abs() < 1.0);
         assert!((p.time_at(500.0) - 0.1).abs() < 1e-5);
         assert!((p.time_at(1000.0) - 0.2).abs() < 1e-5);
         // Trapezoid: cruise at 5000.
-        let p = Profile::new(0.0, 1000.0, 5_000.0, 0.0, 100_000.0);
+        let p = Profile::new(0.0, 1000.0, 5_000.0, 0.0, 100_000.0, 1.0 / 100_000.0, 1.0 / 5_000.0);
         assert!((p.accel_end - 125.0).abs() < 1e-3 && (p.decel_start - 875.0).abs() < 1e-3);
         assert!((p.time_at(1000.0) - (0.05 + 0.15 + 0.05)).abs() < 1e-5);
     }
 
     #[test]
     fn segments_cover_the_block_exactly() {
-        let p = Profile::new(3000.0, 700.0, 8000.0, 1000.0, 200_000.0);
+        let p = Profile::new(3000.0, 700.0, 8000.0, 1000.0, 200_000.0, 1.0 / 200_000.0, 1.0 / 8000.0);
         let mut left = 700_u16;
         let mut chunks = 0;
         while left > 0 {
-            let k = Profile::new(p.speed_at((700 - left) as f32), left as f32, 8000.0, 1000.0, 200_000.0).segment_events(left);
+            let k = Profile::new(p.speed_at((700 - left) as f32), left as f32, 8000.0, 1000.0, 200_000.0, 1.0 / 200_000.0, 1.0 / 8000.0).segment_events(left);
             assert!(k >= 1 && k <= left);
             left -= k;
             chunks += 1;

@@ -502,8 +502,15 @@ pub fn isr_share_at(elf: &Path, rate_hz: f64) -> Result<(f64, PhaseLog), String>
     ))
 }
 
-/// Short slicer-like segments: a spiral of 0.3–0.6 mm moves with extrusion.
+/// Short slicer-like segments: a gentle spiral (radius 20 mm) of 1 mm
+/// moves with extrusion at 100 mm/s.
 pub fn short_segments(count: usize) -> Vec<String> {
+    segments_of(count, 1.0)
+}
+
+/// The same spiral cut into `length_mm` segments (a turn of the segment
+/// direction of `length_mm / 20` rad each: a gentle curve).
+pub fn segments_of(count: usize, length_mm: f64) -> Vec<String> {
     let mut lines = vec![
         "G90".to_string(),
         "M83".to_string(),
@@ -515,8 +522,8 @@ pub fn short_segments(count: usize) -> Vec<String> {
     ];
     let (cx, cy) = (100.0f64, 100.0f64);
     for i in 0..count {
-        let angle = i as f64 * 0.05;
-        let r = 20.0 + i as f64 * 0.002;
+        let angle = i as f64 * length_mm / 20.0;
+        let r = 20.0 + i as f64 * 0.002 * length_mm;
         lines.push(format!(
             "G1 X{:.3} Y{:.3} E.0{:04}",
             cx + r * angle.cos(),
@@ -593,6 +600,38 @@ pub fn stream_rate(elf: &Path, baud: u32, segments: usize) -> Result<StreamResul
         mean_reply_bytes: reply_bytes as f64 / n,
         log: PhaseLog::of(&format!("stream at {baud}"), &board),
     })
+}
+
+/// How close a stream of `length_mm` segments at 100 mm/s comes to full
+/// speed on the real ELF at `baud`: the path's length over 100 mm/s,
+/// divided by the time from the first to the last step pulse of the
+/// segments (1.0: never slower than asked; the ramps at the two ends cost a
+/// few hundredths). Also the lines per second the host got acknowledged.
+pub fn segment_speed(elf: &Path, baud: u32, segments: usize, length_mm: f64) -> Result<(f64, f64, PhaseLog), String> {
+    let mut board = boot(elf, RampsConfig::stock(baud))?;
+    let job = segments_of(segments, length_mm);
+    board.send(job.iter());
+    let timeout = segments as f64 * length_mm / 20.0 + 10.0;
+    if !board.run_until_host_done(timeout) {
+        return Err(format!("the stream did not finish within {timeout} s"));
+    }
+    board.run_for_ms(500.0);
+    if let Some(error) = board.host().replies.iter().find(|r| r.text.starts_with("Error")) {
+        return Err(format!("the firmware answered {:?}", error.text));
+    }
+    let edges: Vec<u64> = [X, Y]
+        .iter()
+        .flat_map(|&axis| board.step_edges(axis).iter().filter(|e| e.rising).map(|e| e.cycle))
+        .collect();
+    let (first, last) = (edges.iter().min().ok_or("no steps")?, edges.iter().max().ok_or("no steps")?);
+    let seconds = (last - first) as f64 / f64::from(CPU_HZ);
+    let ideal = segments as f64 * length_mm / 100.0;
+    let host = board.host();
+    let sent: Vec<_> = host.sent.iter().filter(|s| s.job_index.is_some_and(|i| i >= 5)).collect();
+    let (a, b) = (sent.first().ok_or("nothing sent")?, sent.last().ok_or("nothing sent")?);
+    let ok = &host.replies[b.ok_reply.ok_or("last segment without ok")?];
+    let lines_per_s = sent.len() as f64 / ((ok.arrived_cycle - a.start_cycle) as f64 / f64::from(CPU_HZ));
+    Ok((ideal / seconds, lines_per_s, PhaseLog::of(&format!("{length_mm} mm segments"), &board)))
 }
 
 /// Flash and static RAM from the ELF.

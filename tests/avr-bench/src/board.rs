@@ -927,6 +927,59 @@ impl Board {
         self.shared.watchdog_feeds_at.clear();
     }
 
+    /// Functions sampled (see [`Board::sample_pcs`]) between two cycles,
+    /// most samples first.
+    pub fn samples_between(&self, from: u64, to: u64) -> Vec<(String, usize)> {
+        let mut counts: std::collections::BTreeMap<String, usize> = Default::default();
+        for &(cycle, pc) in &self.shared.pc_samples {
+            if cycle >= from && cycle < to {
+                let name = self.symbol_at(pc).map(demangle).unwrap_or_else(|| format!("{pc:#x}"));
+                *counts.entry(name).or_default() += 1;
+            }
+        }
+        let mut counts: Vec<_> = counts.into_iter().collect();
+        counts.sort_by(|a, b| b.1.cmp(&a.1));
+        counts
+    }
+
+    /// The sampled functions between two cycles in time order, runs of the
+    /// same function merged: (first cycle, function, samples).
+    pub fn timeline_between(&self, from: u64, to: u64) -> Vec<(u64, String, usize)> {
+        let mut runs: Vec<(u64, String, usize)> = Vec::new();
+        for &(cycle, pc) in &self.shared.pc_samples {
+            if cycle >= from && cycle < to {
+                let name = self.symbol_at(pc).map(demangle).unwrap_or_else(|| format!("{pc:#x}"));
+                match runs.last_mut() {
+                    Some((_, last, n)) if *last == name => *n += 1,
+                    _ => runs.push((cycle, name, 1)),
+                }
+            }
+        }
+        runs
+    }
+
+    /// Main-loop passes (watchdog feed to feed) longer than `min_cycles`:
+    /// their length and the functions sampled in them, most samples first.
+    pub fn long_passes(&self, min_cycles: u64) -> Vec<(u64, Vec<(String, usize)>)> {
+        let feeds = &self.shared.watchdog_feeds_at;
+        feeds
+            .windows(2)
+            .filter(|w| w[1] - w[0] > min_cycles)
+            .map(|w| {
+                let mut counts: std::collections::BTreeMap<String, usize> = Default::default();
+                for &(cycle, pc) in &self.shared.pc_samples {
+                    if cycle >= w[0] && cycle < w[1] {
+                        let name = self.symbol_at(pc).map(demangle).unwrap_or_else(|| format!("{pc:#x}"));
+                        *counts.entry(name).or_default() += 1;
+                    }
+                }
+                let mut counts: Vec<_> = counts.into_iter().collect();
+                counts.sort_by(|a, b| b.1.cmp(&a.1));
+                (w[1] - w[0], counts)
+            })
+            .collect()
+    }
+
     /// The PC samples taken during the longest main-loop pass: (its length
     /// in cycles, function name → samples).
     pub fn longest_pass_samples(&self) -> (u64, Vec<(String, usize)>) {

@@ -112,10 +112,22 @@ fn main() {
     }
 
     eprintln!("benchmark: G1 stream at 250000 baud …");
-    let stream = elf_250k.and_then(|e| bench::stream_rate(&e, 250_000, 400));
+    let stream = elf_250k.clone().and_then(|e| bench::stream_rate(&e, 250_000, 400));
     if let Ok(s) = &stream {
         phases.push(s.log.clone());
     }
+
+    eprintln!("benchmark: short segments at 100 mm/s (1, 0.5, 0.2 mm) …");
+    let segment_speeds: Vec<(&str, f64, Result<(f64, f64), String>)> = [("segment_speed_ratio_1mm", 1.0), ("segment_speed_ratio_0_5mm", 0.5), ("segment_speed_ratio_0_2mm", 0.2)]
+        .into_iter()
+        .map(|(key, length)| {
+            let result = elf_250k.clone().and_then(|e| bench::segment_speed(&e, 250_000, (60.0 / length) as usize, length)).map(|(ratio, lines, log)| {
+                phases.push(log);
+                (ratio, lines)
+            });
+            (key, length, result)
+        })
+        .collect();
 
     eprintln!("benchmark: heaters and fan for 6 s …");
     let heat = bench::heat_run(&elf, 200, 6.0);
@@ -227,6 +239,19 @@ fn main() {
         },
         Err(e) => missing("g1_lines_per_s_at_250000_baud", e, String::new()),
     });
+
+    for (key, length, result) in &segment_speeds {
+        let anchor = format!("1.0 = the 60 mm spiral of {length} mm segments at the requested 100 mm/s (ramps at both ends included in the time)");
+        rows.push(match result {
+            Ok((ratio, lines)) => Row {
+                key: *key,
+                value: Ok(*ratio),
+                shown: format!("{:.2} of 100 mm/s ({lines:.0} lines/s acknowledged, 250000 baud, ok flow control)", ratio),
+                anchor,
+            },
+            Err(e) => missing(*key, e, anchor),
+        });
+    }
 
     eprintln!("benchmark: host-side figures (closed-loop circle, extrusion line, thermal loops, SKR Pro on QEMU) …");
     rows.extend(host_side_rows());
