@@ -47,7 +47,7 @@ pub const MAX_CRUISE_SEGMENT_S: f32 = 0.010;
 /// Largest ratio of speeds at the two ends of an accelerating segment.
 pub const SPEED_RATIO: f32 = 1.2;
 /// Most segments [`Prep::fill`] queues per call.
-const SEGMENTS_PER_FILL: usize = 4;
+const SEGMENTS_PER_FILL: usize = 16;
 /// Segments queued ahead before [`Prep::fill`] goes one per call.
 const SEGMENTS_AHEAD: usize = 4;
 /// Q24.8 ticks per second.
