@@ -129,6 +129,11 @@ impl Settings {
         if let Some(gains) = crate::thermal::Gains::new(kp, ki, kd) {
             gains.write_m301(out)?;
         }
+        crate::flash_str!("\necho:; Bed PID:\necho:  ").write_to(out)?;
+        let [kp, ki, kd] = self.bed_pid;
+        if let Some(gains) = crate::thermal::Gains::new(kp, ki, kd) {
+            gains.write_as(304, out)?;
+        }
         out.write_str("\n")
     }
 }

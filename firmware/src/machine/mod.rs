@@ -539,7 +539,8 @@ impl<'q> Machine<'q> {
             Code::M(140) => return self.set_temperature(command, HeaterSlot::Bed, None, now_ms, out),
             Code::M(109) => return self.set_temperature(command, HeaterSlot::Hotend, Some(WaitConfig::HOTEND), now_ms, out),
             Code::M(190) => return self.set_temperature(command, HeaterSlot::Bed, Some(WaitConfig::BED), now_ms, out),
-            Code::M(301) => self.set_pid(command, out),
+            Code::M(301) => self.set_pid(command, HeaterSlot::Hotend, out),
+            Code::M(304) => self.set_pid(command, HeaterSlot::Bed, out),
             Code::M(302) => self.cold_extrusion_command(command, out),
             Code::M(303) => return self.autotune(command, out),
             Code::G(10 | 11) => {
@@ -647,7 +648,7 @@ fn is_known(code: Code) -> bool {
         Code::G(n) => matches!(n, 0..=4 | 10 | 11 | 20 | 21 | 28 | 90..=92),
         Code::M(n) => matches!(
             n,
-            17 | 18 | 82..=84 | 92 | 104..=110 | 112 | 114..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221 | 301..=303 | 400 | 410
+            17 | 18 | 82..=84 | 92 | 104..=110 | 112 | 114..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221 | 301..=304 | 400 | 410
                 | 500..=503 | 665 | 666
         ),
         Code::T(_) | Code::Modal => true,

@@ -309,3 +309,14 @@ fn slicer_checks_get_marlins_answers_not_errors() {
     // A command we run still refuses arguments that do not parse.
     assert_eq!(reply("G1 X1.2.3\n"), "Error:Bad number after X\nok\n");
 }
+
+#[test]
+fn m304_sets_the_bed_gains_which_m503_reports() {
+    let mut machine = new_machine();
+    assert_eq!(converse(&mut machine, 0, "M304\n"), "echo:M304 P10.00 I0.023 D305.40\nok\n");
+    assert_eq!(converse(&mut machine, 0, "M304 P20 I1.5 D300\n"), "ok\n");
+    let report = converse(&mut machine, 0, "M503\n");
+    assert!(report.contains("echo:  M301 P22.20 I1.08 D114.00\necho:; Bed PID:\necho:  M304 P20.00 I1.50 D300.00\n"), "{report}");
+    // The hot end keeps its own.
+    assert_eq!(converse(&mut machine, 0, "M301\n"), "echo:M301 P22.20 I1.08 D114.00\nok\n");
+}

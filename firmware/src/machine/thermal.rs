@@ -217,8 +217,10 @@ impl<'q> Machine<'q> {
 
     /// `M301 [P] [I] [D]` (hot end, Marlin's units): set what is given;
     /// bare `M301` reports.
-    pub(super) fn set_pid<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
-        let current = self.hotend.gains();
+    /// `M301` (hot end) and `M304` (bed): `P`, `I`, `D` in Marlin's units;
+    /// without any, the current gains.
+    pub(super) fn set_pid<W: uWrite + ?Sized>(&mut self, command: &Command, slot: HeaterSlot, out: &mut W) -> Result<(), CommandError> {
+        let current = self.channel(slot).gains();
         let read = |letter, now: u32| -> Result<i32, CommandError> {
             match command.value(letter)? {
                 None => Ok(now as i32),
@@ -227,14 +229,14 @@ impl<'q> Machine<'q> {
         };
         if !(command.has(b'P') || command.has(b'I') || command.has(b'D')) {
             let _ = out.write_str("echo:");
-            let _ = current.write_m301(out);
+            let _ = current.write_as(if slot == HeaterSlot::Bed { 304 } else { 301 }, out);
             let _ = out.write_str("\n");
             return Ok(());
         }
         let gains = Gains::new(read(b'P', current.kp)?, read(b'I', current.ki)?, read(b'D', current.kd)?)
             .ok_or(CommandError::OutOfRange(b'P'))?;
-        self.hotend.set_gains(gains);
-        self.store_gains(HeaterSlot::Hotend, gains);
+        self.channel(slot).set_gains(gains);
+        self.store_gains(slot, gains);
         Ok(())
     }
 

@@ -67,7 +67,13 @@ impl Gains {
 
     /// `M301 P22.20 I1.08 D114.00` (no newline), the `M503` line.
     pub fn write_m301<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "M301 P{} I{} D{}", Gain(self.kp), Gain(self.ki), Gain(self.kd))
+        self.write_as(301, out)
+    }
+
+    /// `M<code> P… I… D…` (no newline): `M301` for a hot end, `M304` for
+    /// the bed.
+    pub fn write_as<W: ufmt::uWrite + ?Sized>(&self, code: u16, out: &mut W) -> Result<(), W::Error> {
+        ufmt::uwrite!(out, "M{} P{} I{} D{}", code, Gain(self.kp), Gain(self.ki), Gain(self.kd))
     }
 }
 
