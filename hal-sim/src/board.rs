@@ -267,6 +267,22 @@ impl SimBoard {
         output
     }
 
+    /// The serial line's rate (8N1), from now on.
+    pub fn set_baud(&mut self, baud: u32) {
+        self.bytes_per_s = (baud / 10).max(1);
+    }
+
+    /// Keep every step's time (default), or only positions and counts.
+    pub fn set_record_steps(&mut self, keep: bool) {
+        self.steps.keep_steps = keep;
+    }
+
+    /// Times the step interrupt ran out of prepared segments in the middle
+    /// of a block (the planner side starved it).
+    pub fn underruns(&self) -> u16 {
+        self.generator.status().underruns
+    }
+
     /// Virtual time since boot, ms.
     pub fn now_ms(&self) -> u32 {
         self.now_ms

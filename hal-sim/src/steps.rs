@@ -72,6 +72,11 @@ pub struct StepRecorder {
     pub setup_violations: usize,
     /// Every action seen.
     pub actions: usize,
+    /// Keep every step's time in `motors[..].steps` (default); off, only
+    /// positions and counts are kept (hour-long simulations).
+    pub keep_steps: bool,
+    /// Steps of each motor so far (kept even when `keep_steps` is off).
+    pub step_counts: [u64; 4],
     last_dir: u8,
 }
 
@@ -84,6 +89,8 @@ impl StepRecorder {
             motors: Default::default(),
             setup_violations: 0,
             actions: 0,
+            keep_steps: true,
+            step_counts: [0; 4],
             last_dir: dir_invert,
         }
     }
@@ -100,7 +107,10 @@ impl StepRecorder {
             if step_mask & (1 << motor) != 0 {
                 let sign = if logical & (1 << motor) != 0 { 1 } else { -1 };
                 trace.position += sign as i64;
-                trace.steps.push((self.now, sign));
+                self.step_counts[motor] += 1;
+                if self.keep_steps {
+                    trace.steps.push((self.now, sign));
+                }
             }
         }
         self.now += next_interval_ticks as u64;

@@ -1,0 +1,102 @@
+//! `ferrosim serve | simulate FILE | replay TRACE` (see `--help`).
+
+use clap::{Parser, Subcommand};
+use ferrosim::simulate::{self, MachineKind, Options};
+use ferrosim::{plots, replay, serve};
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(name = "ferrosim", about = "Ferrostep's firmware core on a simulated board: a virtual printer, print simulation with plots, encoder-trace replay")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// A virtual printer on a pseudo-terminal: connect Printrun, OctoPrint
+    /// or a terminal to the printed path (115200 baud is accepted; the
+    /// line is simulated).
+    Serve {
+        #[arg(long, value_enum, default_value = "prusa")]
+        machine: MachineKind,
+        /// Virtual time per real time (1: real speed).
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
+    },
+    /// Run a whole G-code file in virtual time; print the figures and write
+    /// the plots.
+    Simulate {
+        file: PathBuf,
+        #[arg(long, value_enum, default_value = "prusa")]
+        machine: MachineKind,
+        /// Layer to draw (index from 0; default: the middle one).
+        #[arg(long)]
+        layer: Option<usize>,
+        /// Where the PNG and SVG plots go.
+        #[arg(long, default_value = "ferrosim-out")]
+        out: PathBuf,
+        /// Simulate the host's serial line at this rate (default: no limit).
+        #[arg(long)]
+        baud: Option<u32>,
+        /// Skip the plots.
+        #[arg(long)]
+        no_plots: bool,
+    },
+    /// Replay a recorded encoder trace (hal-sim/traces/README.md format).
+    Replay {
+        trace: PathBuf,
+        /// Where the error plot goes (PNG and SVG).
+        #[arg(long, default_value = "ferrosim-out")]
+        out: PathBuf,
+    },
+}
+
+fn main() {
+    if let Err(error) = run(Cli::parse()) {
+        eprintln!("ferrosim: {error}");
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    match cli.command {
+        Command::Serve { machine, speed } => {
+            let mut printer = serve::VirtualPrinter::open(machine, speed)?;
+            println!("{}", printer.path);
+            eprintln!("ferrosim: virtual {machine:?} printer on {} at {speed}× real time; Ctrl-C stops it", printer.path);
+            printer.run(|_| false)
+        }
+        Command::Simulate { file, machine, layer, out, baud, no_plots } => {
+            let gcode = std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?;
+            let options = Options { machine, baud, ..Options::default() };
+            let bar = indicatif::ProgressBar::new(simulate::host_lines(&gcode).len() as u64);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} lines {msg}").map_err(|e| e.to_string())?,
+            );
+            let report = simulate::run(&gcode, &options, |sent, _| bar.set_position(sent as u64));
+            bar.finish_and_clear();
+            print!("{}", report.summary());
+            if !no_plots {
+                for path in plots::simulation_plots(&report, &out, layer)? {
+                    println!("wrote {}", path.display());
+                }
+            }
+            if report.timed_out {
+                return Err("the file did not finish".into());
+            }
+            Ok(())
+        }
+        Command::Replay { trace, out } => {
+            let text = std::fs::read_to_string(&trace).map_err(|e| format!("{}: {e}", trace.display()))?;
+            let replayed = replay::replay_text(&text)?;
+            print!("{}", replayed.summary());
+            std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
+            let stem = out.join(trace.file_stem().unwrap_or_default()).with_extension("");
+            for path in replayed.plot(&stem.with_file_name(format!("{}_error", stem.file_name().unwrap_or_default().to_string_lossy())))? {
+                println!("wrote {}", path.display());
+            }
+            Ok(())
+        }
+    }
+}
