@@ -43,6 +43,14 @@ enum Command {
         #[arg(long)]
         no_plots: bool,
     },
+    /// Write a synthetic print (a 40 mm square, perimeters of 1 mm segments
+    /// and infill, heated first) of about `minutes` to FILE, to try the
+    /// other commands on.
+    Synthetic {
+        file: PathBuf,
+        #[arg(long, default_value_t = 10.0)]
+        minutes: f64,
+    },
     /// Replay a recorded encoder trace (hal-sim/traces/README.md format).
     Replay {
         trace: PathBuf,
@@ -86,6 +94,9 @@ fn run(cli: Cli) -> Result<(), String> {
                 return Err("the file did not finish".into());
             }
             Ok(())
+        }
+        Command::Synthetic { file, minutes } => {
+            std::fs::write(&file, simulate::synthetic_print(minutes)).map_err(|e| format!("{}: {e}", file.display()))
         }
         Command::Replay { trace, out } => {
             let text = std::fs::read_to_string(&trace).map_err(|e| format!("{}: {e}", trace.display()))?;

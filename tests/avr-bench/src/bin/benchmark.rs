@@ -450,6 +450,20 @@ fn host_side_rows() -> Vec<Row> {
             anchor: "hal-sim plants, M303-tuned gains (hot end 40 W; SPEC §4 barrel)".into(),
         });
     }
+    let print = ferrosim::simulate::synthetic_print(60.0);
+    let simulated = ferrosim::simulate::run(&print, &ferrosim::simulate::Options::default(), |_, _| {});
+    let per_hour = simulated.wall_s / (simulated.print_time_s / 3600.0);
+    rows.push(Row {
+        key: "sim_seconds_per_print_hour",
+        value: if simulated.timed_out || !simulated.errors.is_empty() { Err(format!("{:?}", simulated.errors)) } else { Ok(per_hour) },
+        shown: format!(
+            "{per_hour:.2} s of one core per simulated print hour ({} lines, {} printed in {:.2} s; ferrosim)",
+            simulated.lines,
+            ferrosim::simulate::clock(simulated.print_time_s),
+            simulated.wall_s
+        ),
+        anchor: "target < 10 s".into(),
+    });
     let arm = std::panic::catch_unwind(|| {
         let flash = end_to_end::qemu_arm::Elf::read(&end_to_end::qemu_arm::skr_pro_elf()).flash_bytes();
         let cost = end_to_end::qemu_arm::measure_step_cost(&end_to_end::qemu_arm::skr_pro_bench_elf());
