@@ -961,22 +961,11 @@ impl Board {
     /// Main-loop passes (watchdog feed to feed) longer than `min_cycles`:
     /// their length and the functions sampled in them, most samples first.
     pub fn long_passes(&self, min_cycles: u64) -> Vec<(u64, Vec<(String, usize)>)> {
-        let feeds = &self.shared.watchdog_feeds_at;
-        feeds
+        self.shared
+            .watchdog_feeds_at
             .windows(2)
             .filter(|w| w[1] - w[0] > min_cycles)
-            .map(|w| {
-                let mut counts: std::collections::BTreeMap<String, usize> = Default::default();
-                for &(cycle, pc) in &self.shared.pc_samples {
-                    if cycle >= w[0] && cycle < w[1] {
-                        let name = self.symbol_at(pc).map(demangle).unwrap_or_else(|| format!("{pc:#x}"));
-                        *counts.entry(name).or_default() += 1;
-                    }
-                }
-                let mut counts: Vec<_> = counts.into_iter().collect();
-                counts.sort_by(|a, b| b.1.cmp(&a.1));
-                (w[1] - w[0], counts)
-            })
+            .map(|w| (w[1] - w[0], self.samples_between(w[0], w[1])))
             .collect()
     }
 
@@ -987,16 +976,7 @@ impl Board {
         let Some((start, end)) = feeds.windows(2).map(|w| (w[0], w[1])).max_by_key(|(a, b)| b - a) else {
             return (0, Vec::new());
         };
-        let mut counts: std::collections::BTreeMap<String, usize> = Default::default();
-        for &(cycle, pc) in &self.shared.pc_samples {
-            if cycle >= start && cycle < end {
-                let name = self.symbol_at(pc).map(demangle).unwrap_or_else(|| format!("{pc:#x}"));
-                *counts.entry(name).or_default() += 1;
-            }
-        }
-        let mut counts: Vec<_> = counts.into_iter().collect();
-        counts.sort_by(|a, b| b.1.cmp(&a.1));
-        (end - start, counts)
+        (end - start, self.samples_between(start, end))
     }
 
     pub fn record_isr_intervals(&mut self, on: bool) {
