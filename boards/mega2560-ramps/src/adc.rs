@@ -16,8 +16,6 @@
 //! heats.
 
 use avr_device::atmega2560::Peripherals;
-use avr_device::interrupt::Mutex;
-use core::cell::Cell;
 use firmware::thermal::{Oversampled, SampleAverager};
 
 use crate::pins;
@@ -37,17 +35,20 @@ const CHANNELS: [u8; 2] = [pins::HOTEND_THERMISTOR_CHANNEL, pins::BED_THERMISTOR
 const START_CONVERSION: u8 = 0b1100_1111;
 
 /// What the interrupt fills and the main loop empties.
-#[derive(Clone, Copy)]
 struct Sampling {
     averagers: [SampleAverager; 2],
     /// Index into [`CHANNELS`] of the conversion running.
     current: u8,
 }
 
-static SAMPLING: Mutex<Cell<Sampling>> = Mutex::new(Cell::new(Sampling {
+/// Written by the ADC interrupt; the main loop reads it with interrupts off
+/// (`Readings::take`), so the two never overlap. A plain `static mut`, not a
+/// `Mutex<Cell<_>>`: the interrupt re-enables interrupts at once (below) and
+/// must not copy the whole state twice.
+static mut SAMPLING: Sampling = Sampling {
     averagers: [SampleAverager::new(SAMPLES_PER_READING), SampleAverager::new(SAMPLES_PER_READING)],
     current: 0,
-}));
+};
 
 pub fn init(dp: &Peripherals) {
     select(dp, CHANNELS[0]);
@@ -73,19 +74,21 @@ fn select(dp: &Peripherals, channel: u8) {
 #[avr_device::interrupt(atmega2560)]
 fn ADC() {
     // SAFETY: the ADC registers are only written here, in `init` (before
-    // interrupts) and by `start_conversion` (inside another interrupt).
+    // interrupts) and by `start_conversion` (the tick, 1 ms apart from the
+    // conversion that raised this interrupt).
     let dp = unsafe { Peripherals::steal() };
     let value = dp.ADC.adc.read().bits();
-    avr_device::interrupt::free(|cs| {
-        let cell = SAMPLING.borrow(cs);
-        // `Sampling` is a few bytes: copy, change, put back.
-        let mut sampling = cell.get();
-        let index = usize::from(sampling.current & 1);
-        sampling.averagers[index].push(value);
-        sampling.current = (sampling.current + 1) & 1;
-        select(&dp, CHANNELS[usize::from(sampling.current)]);
-        cell.set(sampling);
-    });
+    // The step interrupt must not wait for this one: interrupts back on.
+    // Nothing else touches `SAMPLING` while this runs (the main loop only
+    // with interrupts off, and the next conversion ends 1 ms later).
+    // SAFETY: see above; this handler cannot re-enter itself.
+    unsafe { avr_device::interrupt::enable() };
+    // SAFETY: exclusive access, as argued above.
+    let sampling = unsafe { &mut *core::ptr::addr_of_mut!(SAMPLING) };
+    let index = usize::from(sampling.current & 1);
+    sampling.averagers[index].push(value);
+    sampling.current = (sampling.current + 1) & 1;
+    select(&dp, CHANNELS[usize::from(sampling.current)]);
 }
 
 /// Per-channel count of sample periods without a reading.
@@ -102,13 +105,13 @@ impl Readings {
     /// period: `None` when none is new yet, a reading of 0 (shorted) once
     /// a channel has had none for [`MISSING_PERIODS_LIMIT`] periods.
     pub fn take(&mut self) -> [Option<Oversampled>; 2] {
-        let fresh = avr_device::interrupt::free(|cs| {
-            let cell = SAMPLING.borrow(cs);
-            let mut sampling = cell.get();
-            let fresh = [sampling.averagers[0].take(), sampling.averagers[1].take()];
-            cell.set(sampling);
-            fresh
+        // Interrupts off only to take the two sums; the divisions after.
+        let sums = avr_device::interrupt::free(|_| {
+            // SAFETY: with interrupts off the ADC interrupt cannot run.
+            let sampling = unsafe { &mut *core::ptr::addr_of_mut!(SAMPLING) };
+            [sampling.averagers[0].take_sum(), sampling.averagers[1].take_sum()]
         });
+        let fresh = sums.map(|sum| sum.map(firmware::thermal::CompletedSum::average));
         let mut readings = [None; 2];
         for (index, reading) in fresh.into_iter().enumerate() {
             readings[index] = match reading {

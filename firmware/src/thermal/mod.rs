@@ -123,7 +123,7 @@ pub use guard::{ColdExtrusionGuard, ColdExtrusionReading, GuardConfig, HeaterGua
 pub use output::{OutputMode, SlowPwm, TimeProportioning};
 pub use pid::{Control, Gains, Law};
 pub use report::{write_temperatures, AutoReport, TemperatureWait, WaitConfig, WaitStatus};
-pub use thermistor::{Oversampled, SampleAverager, Thermistor};
+pub use thermistor::{CompletedSum, Oversampled, SampleAverager, Thermistor};
 
 /// A temperature in hundredths of a degree Celsius (`21050` is 210.50 °C):
 /// exact decimal printing, and integer arithmetic on every board.

@@ -171,9 +171,30 @@ impl SampleAverager {
 
     /// The latest completed average, once.
     pub fn take(&mut self) -> Option<Oversampled> {
-        let sum = self.ready.take()?;
+        self.take_sum().map(CompletedSum::average)
+    }
+
+    /// The latest completed sum, once, without the division: what a board
+    /// takes inside its critical section (a 32-bit division there would
+    /// hold the step interrupt off for tens of microseconds); the average
+    /// is worked out afterwards with [`CompletedSum::average`].
+    pub fn take_sum(&mut self) -> Option<CompletedSum> {
+        Some(CompletedSum { sum: self.ready.take()?, samples: self.samples })
+    }
+}
+
+/// A completed sum of conversions, not yet divided.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CompletedSum {
+    sum: u16,
+    samples: u8,
+}
+
+impl CompletedSum {
+    /// The average, as 16 × a 10-bit conversion.
+    pub fn average(self) -> Oversampled {
         let samples = u32::from(self.samples);
-        Some(Oversampled(((u32::from(sum) * 16 + samples / 2) / samples) as u16))
+        Oversampled(((u32::from(self.sum) * 16 + samples / 2) / samples) as u16)
     }
 }
 
