@@ -45,7 +45,7 @@ pub const MAX_SEGMENT_S: f32 = 0.005;
 /// longer segment is still exact, and the main loop prepares half as many.
 pub const MAX_CRUISE_SEGMENT_S: f32 = 0.010;
 /// Largest ratio of speeds at the two ends of an accelerating segment.
-pub const SPEED_RATIO: f32 = 1.2;
+pub const SPEED_RATIO: f32 = 1.5;
 /// Most segments [`Prep::fill`] queues per call.
 const SEGMENTS_PER_FILL: usize = 16;
 /// Segments queued ahead before [`Prep::fill`] goes one per call.
