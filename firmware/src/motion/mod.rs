@@ -489,7 +489,7 @@ impl<'q> Motion<'q> {
         let motion = unsafe {
             addr_of_mut!((*p).config).write(config);
             addr_of_mut!((*p).limits).write(config.motor_limits());
-            addr_of_mut!((*p).planner).write(Planner::new());
+            Planner::init_in(&mut *addr_of_mut!((*p).planner).cast::<MaybeUninit<Planner>>());
             addr_of_mut!((*p).prep).write(Prep::new());
             addr_of_mut!((*p).feeder).write(feeder);
             addr_of_mut!((*p).position).write([0.0; MOTORS]);
