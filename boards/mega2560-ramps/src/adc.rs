@@ -78,17 +78,19 @@ fn ADC() {
     // conversion that raised this interrupt).
     let dp = unsafe { Peripherals::steal() };
     let value = dp.ADC.adc.read().bits();
-    // The step interrupt must not wait for this one: interrupts back on.
-    // Nothing else touches `SAMPLING` while this runs (the main loop only
-    // with interrupts off, and the next conversion ends 1 ms later).
-    // SAFETY: see above; this handler cannot re-enter itself.
-    unsafe { avr_device::interrupt::enable() };
-    // SAFETY: exclusive access, as argued above.
+    // SAFETY: interrupts are still off: nothing else touches `SAMPLING`.
     let sampling = unsafe { &mut *core::ptr::addr_of_mut!(SAMPLING) };
+    // The multiplexer moves to the other thermistor before anything can
+    // start the next conversion (the tick, 1 ms after the last one).
     let index = usize::from(sampling.current & 1);
-    sampling.averagers[index].push(value);
     sampling.current = (sampling.current + 1) & 1;
     select(&dp, CHANNELS[usize::from(sampling.current)]);
+    // The step interrupt must not wait for the averaging: interrupts back
+    // on. Nothing else touches the averager meanwhile (the main loop only
+    // with interrupts off), and the next conversion ends a millisecond later.
+    // SAFETY: see above; this handler cannot re-enter.
+    unsafe { avr_device::interrupt::enable() };
+    sampling.averagers[index].push(value);
 }
 
 /// Per-channel count of sample periods without a reading.
