@@ -14,6 +14,8 @@
 
 mod adc;
 mod clock;
+#[cfg(feature = "display-hd44780")]
+mod display;
 mod eeprom;
 mod pins;
 mod pwm;
@@ -52,6 +54,8 @@ fn main() -> ! {
     let mut next_thermal_ms = 0u32;
     // Hot end and bed thermistors, averaged in the ADC interrupt.
     let mut readings = adc::Readings::new();
+    #[cfg(feature = "display-hd44780")]
+    let (mut lcd, mut next_screen_ms) = (display::init(), 0u32);
     let mut outputs = Outputs::default();
 
     // The loop never sleeps: QEMU's AVR machine does not wake from `sleep`
@@ -72,6 +76,11 @@ fn main() -> ! {
             let [hotend, bed] = readings.take();
             let _ = link.machine.on_thermal_samples(hotend, bed, &mut tx);
             link.machine.set_endstop_levels(pins::endstop_levels(&dp));
+        }
+        #[cfg(feature = "display-hd44780")]
+        if now.wrapping_sub(next_screen_ms) < u32::MAX / 2 {
+            next_screen_ms = now.wrapping_add(display::REFRESH_MS);
+            let _ = lcd.show(&link.machine.status_screen(), &mut display::BusyDelay);
         }
         apply_outputs(&dp, &link.machine, &mut outputs);
     }

@@ -33,7 +33,7 @@ pub struct Pin {
     pub bit: u8,
 }
 
-const fn pin(port: Port, bit: u8) -> Pin {
+pub const fn pin(port: Port, bit: u8) -> Pin {
     Pin { port, bit }
 }
 

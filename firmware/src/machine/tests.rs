@@ -320,3 +320,17 @@ fn m304_sets_the_bed_gains_which_m503_reports() {
     // The hot end keeps its own.
     assert_eq!(converse(&mut machine, 0, "M301\n"), "echo:M301 P22.20 I1.08 D114.00\nok\n");
 }
+
+#[test]
+fn the_status_screen_shows_state_z_and_heaters() {
+    let screen = |machine: &Machine| {
+        let bytes = machine.status_screen();
+        (std::string::String::from_utf8_lossy(&bytes[..16]).into_owned(), std::string::String::from_utf8_lossy(&bytes[16..]).into_owned())
+    };
+    let mut machine = new_machine();
+    assert_eq!(screen(&machine), ("Ready      Z0.00".into(), "T0/0 B0/0       ".into()));
+    converse(&mut machine, 0, "M104 S210\nG92 Z12.345\n");
+    assert_eq!(screen(&machine), ("Ready     Z12.35".into(), "T0/210 B0/0     ".into()));
+    converse(&mut machine, 0, "M112\n");
+    assert_eq!(screen(&machine).0, "Halted    Z12.35");
+}

@@ -126,6 +126,33 @@ impl<'q> Machine<'q> {
         self.bed = HeaterChannel::new(config, self.bed.gains());
     }
 
+    /// The 16×2 status screen (`drivers::status_screen`): what the machine
+    /// is doing, Z, and the heaters (`Printing    Z0.20` /
+    /// `T210/210 B60/60`).
+    pub fn status_screen(&self) -> [u8; 32] {
+        let state = if self.halted {
+            "Halted"
+        } else {
+            match self.running {
+                Running::Homing => "Homing",
+                Running::HeatWait { .. } => "Heating",
+                Running::Autotune { .. } => "PID tuning",
+                _ if !self.motion.is_idle() => "Printing",
+                _ => "Ready",
+            }
+        };
+        let temperature = |label, channel: &HeaterChannel| crate::drivers::status_screen::Temperature {
+            label,
+            measured: channel.measured(),
+            target: channel.target(),
+        };
+        crate::drivers::status_screen::format_status(
+            state,
+            Some((b'Z', self.modal.logical_position()[2])),
+            &[temperature(b'T', &self.hotend), temperature(b'B', &self.bed)],
+        )
+    }
+
     /// Duties for the heater outputs (hot end, bed), 0–255; 0 when halted.
     pub fn heater_duties(&self) -> (u8, u8) {
         if self.halted {

@@ -116,6 +116,8 @@ pub const ENDSTOP_NAMES: [&str; 6] = ["X_MIN", "X_MAX", "Y_MIN", "Y_MAX", "Z_MIN
 pub const HOTEND_PIN: Pin = pin(b'B', 4);
 pub const BED_PIN: Pin = pin(b'H', 5);
 pub const FAN_PIN: Pin = pin(b'H', 6);
+/// The RepRapDiscount display's E line on EXP1 (D17).
+pub const LCD_E_PIN: Pin = pin(b'H', 0);
 
 /// One recorded STEP edge.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -323,6 +325,8 @@ struct Shared {
     meters: Vec<(Pin, *mut ffi::avr_irq_t, DutyMeter)>,
     /// Level changes of the bed pin (D8), when asked for.
     bed_edges: Option<Vec<(u64, bool)>>,
+    /// The HD44780 on EXP1 as the firmware drives it.
+    lcd: Lcd,
     /// Per meter: the TCCRnA address and bit shift of the compare unit
     /// that can drive the pin (COMnx1:0).
     meter_compare: Vec<(u16, u8)>,
@@ -451,6 +455,7 @@ impl Board {
                 dir_high_is_positive: config.dir_high_is_positive,
                 meters: Vec::new(),
                 bed_edges: None,
+                lcd: Lcd::default(),
                 meter_compare: Vec::new(),
                 sensors: Vec::new(),
                 plant_period_cycles: (config.plant_period_s * f64::from(CPU_HZ)).round() as u64,
@@ -521,6 +526,9 @@ impl Board {
                 shared.meter_compare.push(compare);
                 ffi::avr_irq_register_notify(irq, Some(on_meter_pin), param);
             }
+            // The HD44780's E line (D17 = PH0): data is latched on its
+            // falling edge.
+            ffi::avr_irq_register_notify(port_irq(avr, LCD_E_PIN), Some(on_lcd_enable), param);
             // Thermistors.
             for sensor in config.sensors {
                 let meter = sensor
@@ -879,6 +887,11 @@ impl Board {
             .iter()
             .find(|s| s.config.adc_channel == adc_channel)
             .map(|s| s.counts)
+    }
+
+    /// The HD44780 on EXP1 as the firmware has written it.
+    pub fn lcd(&self) -> &Lcd {
+        &self.shared.lcd
     }
 
     /// Start (or stop) recording the bed pin's level changes.
@@ -1419,6 +1432,70 @@ unsafe extern "C" fn on_axis_pin(irq: *mut ffi::avr_irq_t, value: u32, param: *m
 /// firmware rewrites PORTH/PORTB in its main loop, so the level is taken
 /// from the timer's edges (flagged AVR_IOPORT_OUTPUT) while the compare
 /// unit is connected, and from port writes while it is not.
+/// A 16×2 HD44780 in 4-bit mode, as far as the firmware uses it: nibbles
+/// latched on E's falling edge (RS = PH1, D4–D7 = PA1/PA3/PA5/PA7),
+/// the set-DDRAM-address and clear commands, and characters.
+#[derive(Clone, Debug)]
+pub struct Lcd {
+    ddram: [u8; 128],
+    address: u8,
+    /// The high nibble of a byte in transfer, and its RS level.
+    high: Option<(u8, bool)>,
+    /// 8-bit mode until the function-set nibble 0x2 (power-on sequence).
+    four_bit: bool,
+    pub characters: u64,
+}
+
+impl Default for Lcd {
+    fn default() -> Self {
+        Self { ddram: [b' '; 128], address: 0, high: None, four_bit: false, characters: 0 }
+    }
+}
+
+impl Lcd {
+    fn latch(&mut self, nibble: u8, rs: bool) {
+        if !self.four_bit {
+            // Power-on: single nibbles 0x3, 0x3, 0x3, then 0x2 (4-bit).
+            if nibble == 0x2 {
+                self.four_bit = true;
+            }
+            return;
+        }
+        let Some((high, high_rs)) = self.high.take() else {
+            self.high = Some((nibble, rs));
+            return;
+        };
+        let byte = high << 4 | nibble;
+        if high_rs {
+            self.ddram[usize::from(self.address & 0x7F)] = byte;
+            self.address = self.address.wrapping_add(1) & 0x7F;
+            self.characters += 1;
+        } else if byte & 0x80 != 0 {
+            self.address = byte & 0x7F;
+        } else if byte == 0x01 {
+            self.ddram = [b' '; 128];
+            self.address = 0;
+        }
+    }
+
+    /// The two visible rows (DDRAM 0x00 and 0x40, 16 characters each).
+    pub fn rows(&self) -> [String; 2] {
+        [0x00usize, 0x40].map(|start| String::from_utf8_lossy(&self.ddram[start..start + 16]).into_owned())
+    }
+}
+
+unsafe extern "C" fn on_lcd_enable(_irq: *mut ffi::avr_irq_t, value: u32, param: *mut c_void) {
+    let shared = &mut *(param as *mut Shared);
+    if value & 1 != 0 {
+        return;
+    }
+    // PORTA (0x22) and PORTH (0x102) as the firmware last wrote them.
+    let data = *(*shared.avr).data.add(0x22);
+    let control = *(*shared.avr).data.add(0x102);
+    let nibble = (data >> 1 & 1) | (data >> 3 & 1) << 1 | (data >> 5 & 1) << 2 | (data >> 7 & 1) << 3;
+    shared.lcd.latch(nibble, control & 0b10 != 0);
+}
+
 unsafe extern "C" fn on_meter_pin(irq: *mut ffi::avr_irq_t, value: u32, param: *mut c_void) {
     const AVR_IOPORT_OUTPUT: u32 = 0x100;
     let shared = &mut *(param as *mut Shared);

@@ -781,3 +781,26 @@ fn one_stepper_holds_15000_steps_per_s_beside_the_other_interrupts() {
     let result = bench::step_rate(&mega2560_elf(), 1).unwrap();
     assert!(result.per_axis_hz >= 15_000.0, "{} steps/s: {:?}", result.per_axis_hz, result.limit);
 }
+
+/// The `display-hd44780` build shows the machine on the RepRapDiscount
+/// display (decoded from its EXP1 pins): state and Z, then the heaters,
+/// rewritten twice a second.
+#[test]
+fn the_display_build_shows_state_z_and_temperatures() {
+    let elf = avr_bench::build::build_variant(
+        &avr_bench::build::target_dir().join("machines/display"),
+        &["mega2560-ramps/display-hd44780"],
+        false,
+    )
+    .expect("the display build");
+    let mut config = RampsConfig::stock(115_200);
+    config.host = HostConfig::raw(115_200);
+    let mut board = bench::boot(&elf, config).expect("the firmware boots");
+    board.run_for_ms(700.0);
+    assert_eq!(board.lcd().rows(), ["Ready      Z0.00".to_string(), "T25/0 B25/0     ".to_string()]);
+    assert_eq!(replies(&mut board, &["M104 S210", "G92 Z12.345"]), ["ok", "ok"]);
+    board.run_for_ms(700.0);
+    let rows = board.lcd().rows();
+    assert_eq!(rows[0], "Ready     Z12.35");
+    assert!(rows[1].starts_with("T") && rows[1].contains("/210 B25/0"), "{rows:?}");
+}
