@@ -327,7 +327,7 @@ impl<'a> StepGenerator<'a> {
 
     /// The step-timer interrupt: fire the event computed last time, compute
     /// the next one.
-    #[inline]
+    #[inline(always)]
     pub fn on_timer(&mut self) -> TimerAction {
         if self.long_wait != 0 {
             return self.wait_longer();
