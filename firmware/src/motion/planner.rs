@@ -285,8 +285,14 @@ impl Planner {
             return Err(*motion);
         }
         let mut block = Block { watch: motion.watch, watch_release: motion.watch_release, ..Block::default() };
-        let mut speed = motion.speed;
-        let mut acceleration = motion.acceleration;
+        // A motor covers steps/L steps per mm of path: the path's speed and
+        // acceleration are capped so that each motor stays within its own
+        // limits, i.e. by the smallest limit·L/steps. The smallest ratio is
+        // found by cross-multiplying (a/b < c/d ⇔ a·d < c·b), so there is
+        // one division per limit instead of two per motor (each costs the
+        // AVR hundreds of cycles, for every line of a slicer stream).
+        let mut rate_limit: Option<(f32, f32)> = None;
+        let mut accel_limit: Option<(f32, f32)> = None;
         for motor in 0..MOTORS {
             let steps = motion.steps[motor].unsigned_abs().min(MAX_BLOCK_STEPS);
             if steps == 0 {
@@ -297,11 +303,20 @@ impl Planner {
             if motion.steps[motor] > 0 {
                 block.direction |= 1 << motor;
             }
-            // A motor covers steps/L steps per mm of path: cap the path's
-            // speed and acceleration so that it stays within its own limits.
-            let steps_per_mm = steps as f32 / motion.millimetres;
-            speed = speed.min(limits.max_rate[motor] / steps_per_mm);
-            acceleration = acceleration.min(limits.max_accel[motor] / steps_per_mm);
+            let steps = steps as f32;
+            let (rate, accel) = (limits.max_rate[motor], limits.max_accel[motor]);
+            if rate_limit.is_none_or(|(r, n)| rate * n < r * steps) {
+                rate_limit = Some((rate, steps));
+            }
+            if accel_limit.is_none_or(|(a, n)| accel * n < a * steps) {
+                accel_limit = Some((accel, steps));
+            }
+        }
+        let mut speed = motion.speed;
+        let mut acceleration = motion.acceleration;
+        if let (Some((rate, rate_steps)), Some((accel, accel_steps))) = (rate_limit, accel_limit) {
+            speed = speed.min(rate * motion.millimetres / rate_steps);
+            acceleration = acceleration.min(accel * motion.millimetres / accel_steps);
         }
         if block.events == 0 || !(motion.millimetres > 0.0) || !(speed > 0.0) || !(acceleration > 0.0) {
             return Ok(());
