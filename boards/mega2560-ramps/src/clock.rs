@@ -29,6 +29,11 @@ pub fn millis() -> u32 {
 fn TIMER3_COMPA() {
     // SAFETY: only the ADC's control register is written (see adc.rs).
     crate::adc::start_conversion(&unsafe { Peripherals::steal() });
+    // The step interrupt may come in from here on; the count below is
+    // still changed with interrupts off (the main loop reads it so), and
+    // this handler cannot re-enter: the next compare match is 1 ms away.
+    // SAFETY: see above.
+    unsafe { avr_device::interrupt::enable() };
     avr_device::interrupt::free(|cs| {
         let millis = MILLIS.borrow(cs);
         let now = millis.get().wrapping_add(1);
