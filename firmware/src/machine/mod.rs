@@ -304,13 +304,15 @@ impl<'q> Machine<'q> {
             Ok(body) => body,
             Err(rejection) => return self.protocol.write_rejection(rejection, out),
         };
-        let mut text = LineText::new();
-        // The body is a part of a line, so it always fits.
-        let _ = text.extend_from_slice(body);
-        if self.queue.push_back(text).is_err() {
+        // Queue an empty line and fill it in place: no line-sized copy.
+        if self.queue.push_back(LineText::new()).is_err() {
             // Only reachable if the board ignored can_accept_line(): say so
             // rather than drop the line silently.
             return self.protocol.write_rejection(crate::protocol::LineRejection::Damaged, out);
+        }
+        if let Some(text) = self.queue.back_mut() {
+            // The body is a part of a line, so it always fits.
+            let _ = text.extend_from_slice(body);
         }
         Ok(())
     }
