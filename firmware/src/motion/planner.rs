@@ -183,18 +183,7 @@ impl Planner {
     }
 
     pub const fn new() -> Self {
-        const EMPTY: Block = Block {
-            steps: [0; MOTORS],
-            events: 0,
-            direction: 0,
-            watch: 0,
-            watch_release: false,
-            millimetres: 0.0,
-            entry_speed_sqr: 0.0,
-            max_entry_speed_sqr: 0.0,
-            nominal_speed_sqr: 0.0,
-            acceleration: 0.0,
-        };
+        const EMPTY: Block = Planner::new_empty_block();
         Self {
             blocks: [EMPTY; PLANNER_SLOTS],
             head: 0,

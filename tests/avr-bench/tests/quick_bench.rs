@@ -20,6 +20,16 @@ fn boot_raw() -> Board {
     bench::boot(&mega2560_elf(), config).expect("the firmware boots")
 }
 
+/// Boot a variant of the firmware (built with `feature` into
+/// `target/machines/<dir>`, as the test command does) with a raw host.
+fn boot_variant(dir: &str, feature: &str) -> Board {
+    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join(dir), &[feature], false)
+        .unwrap_or_else(|e| panic!("the {feature} build: {e}"));
+    let mut config = RampsConfig::stock(115_200);
+    config.host = HostConfig::raw(115_200);
+    bench::boot(&elf, config).expect("the firmware boots")
+}
+
 /// Write PORTx from the test as an interrupt handler of the firmware
 /// would, but never while the main loop is inside `pins::make_output`:
 /// its non-atomic read-modify-write of PORTF (Y enable) would write the
@@ -709,15 +719,7 @@ fn a_hung_main_loop_is_reset_by_the_watchdog_with_everything_off() {
 /// a kill lowers the pin for good, though the window runs in the tick.
 #[test]
 fn the_ssr_bed_switches_in_200_ms_windows_with_slots_of_at_least_10_ms() {
-    let elf = avr_bench::build::build_variant(
-        &avr_bench::build::target_dir().join("machines/bed-ssr"),
-        &["mega2560-ramps/bed-ssr"],
-        false,
-    )
-    .expect("the bed-ssr build");
-    let mut config = RampsConfig::stock(115_200);
-    config.host = HostConfig::raw(115_200);
-    let mut board = bench::boot(&elf, config).expect("the firmware boots");
+    let mut board = boot_variant("bed-ssr", "mega2560-ramps/bed-ssr");
     // A few degrees short of the target: the PID asks for part power.
     board.set_plant_celsius(14, 59.5);
     board.record_bed_edges(true);
@@ -787,15 +789,7 @@ fn one_stepper_holds_15000_steps_per_s_beside_the_other_interrupts() {
 /// rewritten twice a second.
 #[test]
 fn the_display_build_shows_state_z_and_temperatures() {
-    let elf = avr_bench::build::build_variant(
-        &avr_bench::build::target_dir().join("machines/display"),
-        &["mega2560-ramps/display-hd44780"],
-        false,
-    )
-    .expect("the display build");
-    let mut config = RampsConfig::stock(115_200);
-    config.host = HostConfig::raw(115_200);
-    let mut board = bench::boot(&elf, config).expect("the firmware boots");
+    let mut board = boot_variant("display", "mega2560-ramps/display-hd44780");
     board.run_for_ms(700.0);
     assert_eq!(board.lcd().rows(), ["Ready      Z0.00".to_string(), "T25/0 B25/0     ".to_string()]);
     assert_eq!(replies(&mut board, &["M104 S210", "G92 Z12.345"]), ["ok", "ok"]);
