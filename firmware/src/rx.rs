@@ -28,8 +28,18 @@ pub const LOST_BYTES: u8 = 0;
 pub struct RxProducer<'a> {
     queue: Producer<'a, u8, RX_RING_SLOTS>,
     dropped: u8,
-    /// Bytes were lost and the marker is not in the ring yet.
+    /// Bytes of the line being received were lost and its marker is not in
+    /// the ring yet.
     marker_owed: bool,
+    /// Lines whose terminator was lost with them, each still owed to the
+    /// ring as a marker and a newline: every line the host sent gets its
+    /// reply (an error and `ok`), so a host counting `ok`s never waits for
+    /// one that cannot come.
+    lines_owed: u8,
+    /// The last byte seen (stored or lost) ended a line, so a terminator
+    /// right after it ends no line (`\r\n`, blank lines: the assembler
+    /// skips empty lines, and no reply is owed for them).
+    after_terminator: bool,
     emergency: EmergencyScanner,
 }
 
@@ -41,7 +51,19 @@ pub struct RxConsumer<'a> {
 /// Split a queue into its two ends.
 pub fn split(queue: &mut RxQueue) -> (RxProducer<'_>, RxConsumer<'_>) {
     let (producer, consumer) = queue.split();
-    (RxProducer { queue: producer, dropped: 0, marker_owed: false, emergency: EmergencyScanner::new() }, RxConsumer { queue: consumer })
+    let producer = RxProducer {
+        queue: producer,
+        dropped: 0,
+        marker_owed: false,
+        lines_owed: 0,
+        after_terminator: true,
+        emergency: EmergencyScanner::new(),
+    };
+    (producer, RxConsumer { queue: consumer })
+}
+
+fn is_terminator(byte: u8) -> bool {
+    byte == b'\n' || byte == b'\r'
 }
 
 impl RxProducer<'_> {
@@ -51,31 +73,58 @@ impl RxProducer<'_> {
     /// on at once (it sees every byte, even those the ring has no room for).
     pub fn push(&mut self, byte: u8, hardware_overrun: bool) -> Option<Emergency> {
         if hardware_overrun {
-            // The UART lost the byte before this one.
+            // The UART lost the byte before this one (what it was is unknown:
+            // if it ended a line, that line and this one are refused as one).
             self.dropped = self.dropped.saturating_add(1);
             self.marker_owed = true;
+            self.after_terminator = false;
         }
-        // The marker goes in before the first byte after the gap (it needs
-        // a slot of its own; until there is one, that byte is lost too).
-        if self.marker_owed && self.queue.enqueue(LOST_BYTES).is_ok() {
-            self.marker_owed = false;
+        // What is owed goes in before this byte, in the gap's place; until
+        // all of it fits, this byte is lost too.
+        let stored = self.settle_debts() && self.queue.enqueue(byte).is_ok();
+        if !stored {
+            self.lose(byte);
         }
-        if self.marker_owed || self.queue.enqueue(byte).is_err() {
-            self.dropped = self.dropped.saturating_add(1);
-            self.marker_owed = true;
-        }
+        self.after_terminator = is_terminator(byte);
         self.emergency.push(byte)
     }
 
-    /// Take (and reset) the count of bytes lost since the last call.
-    /// Called by the main loop inside a critical section.
-    /// Bytes lost since the last call. Also puts an owed marker into the
-    /// ring once it has room, so a gap at the end of a burst is marked
-    /// even if no byte follows it for a while.
-    pub fn take_dropped(&mut self) -> u8 {
+    /// Account for a byte the ring had no room for.
+    fn lose(&mut self, byte: u8) {
+        self.dropped = self.dropped.saturating_add(1);
+        if !is_terminator(byte) {
+            self.marker_owed = true;
+        } else if !self.after_terminator {
+            // A line ended in the gap: it is owed a marker and its end.
+            self.lines_owed = self.lines_owed.saturating_add(1);
+            self.marker_owed = false;
+        }
+    }
+
+    /// Put owed markers and line ends into the ring, oldest first, as far
+    /// as there is room; true when nothing is owed any more.
+    fn settle_debts(&mut self) -> bool {
+        while self.lines_owed > 0 {
+            // A marker and its newline go in together or not at all.
+            if self.queue.capacity() - self.queue.len() < 2 {
+                return false;
+            }
+            let _ = self.queue.enqueue(LOST_BYTES);
+            let _ = self.queue.enqueue(b'\n');
+            self.lines_owed -= 1;
+        }
         if self.marker_owed && self.queue.enqueue(LOST_BYTES).is_ok() {
             self.marker_owed = false;
         }
+        !self.marker_owed
+    }
+
+    /// Bytes lost since the last call (and reset the count). Called by the
+    /// main loop inside a critical section. Also settles what the ring is
+    /// owed once it has room, so a gap at the end of a burst is marked,
+    /// and the line it swallowed answered, even if no byte follows.
+    pub fn take_dropped(&mut self) -> u8 {
+        self.settle_debts();
         core::mem::take(&mut self.dropped)
     }
 }
@@ -124,6 +173,65 @@ mod tests {
         let tail: std::vec::Vec<u8> = core::iter::from_fn(|| c.pop()).collect();
         assert_eq!(&tail[tail.len() - 3..], &[LOST_BYTES, b'b', b'c']);
         assert_eq!(p.take_dropped(), 1);
+    }
+
+    fn fill_ring(p: &mut RxProducer<'_>) {
+        for _ in 0..RX_RING_SLOTS - 1 {
+            p.push(b'a', false);
+        }
+    }
+
+    fn drain(c: &mut RxConsumer<'_>) -> std::vec::Vec<u8> {
+        core::iter::from_fn(|| c.pop()).collect()
+    }
+
+    /// Lines that vanish whole into a full ring (their newline too) still
+    /// come out as one damaged line each, so each gets its reply.
+    #[test]
+    fn every_line_lost_to_a_full_ring_still_ends_in_the_ring() {
+        let mut q = RxQueue::new();
+        let (mut p, mut c) = split(&mut q);
+        fill_ring(&mut p);
+        for b in b"1\nG1 X2\r\nG1 X" {
+            p.push(*b, false); // all lost: two line ends and a line's start
+        }
+        drain(&mut c);
+        for b in b"3\nM105\n" {
+            p.push(*b, false);
+        }
+        assert_eq!(drain(&mut c), b"\0\n\0\n\03\nM105\n");
+        assert_eq!(p.take_dropped(), 13);
+    }
+
+    /// A gap at the end of a burst is closed by the main loop's call, with
+    /// no byte following it.
+    #[test]
+    fn a_lost_last_newline_is_restored_without_a_following_byte() {
+        let mut q = RxQueue::new();
+        let (mut p, mut c) = split(&mut q);
+        fill_ring(&mut p);
+        p.push(b'\n', false);
+        drain(&mut c);
+        assert_eq!(p.take_dropped(), 1);
+        assert_eq!(drain(&mut c), b"\0\n");
+    }
+
+    /// A lost terminator that ends no line (blank line, the `\n` of `\r\n`)
+    /// owes nothing: the host expects no reply for it.
+    #[test]
+    fn lost_blank_lines_owe_no_reply() {
+        let mut q = RxQueue::new();
+        let (mut p, mut c) = split(&mut q);
+        for _ in 0..RX_RING_SLOTS - 2 {
+            p.push(b'a', false);
+        }
+        p.push(b'\r', false); // stored: the ring is full after it
+        p.push(b'\n', false);
+        p.push(b'\n', false);
+        drain(&mut c);
+        assert_eq!(p.take_dropped(), 2);
+        p.push(b'M', false);
+        assert_eq!(drain(&mut c), b"M");
     }
 
     #[test]

@@ -207,6 +207,13 @@ impl ArmBoard {
         }
     }
 
+    /// Bytes in one write, as fast as QEMU takes them: a host (or a stalled
+    /// emulator catching up) that outruns the main loop.
+    pub fn send_burst(&mut self, bytes: &[u8]) {
+        let _ = self.input.write_all(bytes);
+        let _ = self.input.flush();
+    }
+
     /// Reply lines until one satisfies `last` (inclusive); panics with what
     /// was received after `timeout`.
     pub fn read_until(&mut self, timeout: Duration, last: impl Fn(&str) -> bool) -> Vec<String> {

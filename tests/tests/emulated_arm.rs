@@ -74,6 +74,36 @@ fn a_line_longer_than_the_buffer_is_an_error_and_the_board_keeps_answering() {
     assert_eq!(board.command("M114").last().unwrap(), "ok");
 }
 
+/// Lines arriving faster than the main loop takes them overflow the
+/// receive ring; the lines that lost bytes (their ends included) are
+/// refused, never executed, and every line still gets exactly one `ok`.
+#[test]
+fn a_burst_that_overflows_the_receive_ring_gets_one_ok_per_line() {
+    let mut board = booted_board();
+    let mut burst = Vec::new();
+    for _ in 0..40 {
+        burst.extend_from_slice(format!("G1 X1 ;{}\n", "x".repeat(60)).as_bytes());
+        burst.extend_from_slice(b"M114\n");
+    }
+    board.send_burst(&burst);
+    let mut oks = 0;
+    let mut replies = Vec::new();
+    while oks < 80 {
+        let lines = board.read_until(Duration::from_secs(10), |l| l == "ok");
+        oks += 1;
+        replies.extend(lines);
+    }
+    assert_eq!(board.command("M114").last().unwrap(), "ok");
+    let refused = replies.iter().filter(|l| l.as_str() == "Error:Serial receive overrun, line lost").count();
+    let halted = replies.iter().filter(|l| l.as_str() == "Error:Printer halted. kill() called!").count();
+    let positions = replies.iter().filter(|l| l.starts_with("X:0.00 Y:0.00")).count();
+    // Each line is answered by what it was: a refused line, a G1 refused
+    // by the halted board, or an M114.
+    println!("refused {refused}, halted {halted}, positions {positions}");
+    assert_eq!(refused + halted + positions, 80, "{replies:?}");
+    assert_eq!(replies.len(), 160, "{replies:?}");
+}
+
 #[test]
 fn a_numbered_line_with_a_bad_checksum_asks_for_a_resend() {
     let mut board = booted_board();
