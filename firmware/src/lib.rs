@@ -21,6 +21,8 @@
 //! - [`machines`]: the filament extrusion line and the powder-bed retrofit
 //!   (velocity-mode steppers, diameter loop, travel measurement, layer cycle);
 //! - [`drivers`]: small device drivers (HD44780 character LCD, status screen);
+//! - [`num`]: the numeric abstraction of the control laws (fixed point on
+//!   the AVR, f32 on an FPU), chosen by the board;
 //! - [`progmem`]: constant tables kept in flash on the AVR.
 #![no_std]
 #![deny(unsafe_op_in_unsafe_fn)]
@@ -38,6 +40,7 @@ pub mod line;
 pub mod machine;
 pub mod machines;
 pub mod motion;
+pub mod num;
 pub mod progmem;
 pub mod protocol;
 pub mod reply;

@@ -39,7 +39,7 @@ use firmware::closed_loop::nse5310::{LinearTracker, TrackerConfig, UNITS_PER_MM}
 use firmware::closed_loop::output::{StepRate, StepperScale};
 use firmware::closed_loop::reference::ReferencePath;
 use firmware::closed_loop::tuning::Strategy;
-use firmware::closed_loop::{AxisFault, EncoderAxis, FixedGains, Reading};
+use firmware::closed_loop::{AxisFault, EncoderAxis, LoopGains, Reading};
 use std::collections::VecDeque;
 use std::fmt::Write as _;
 
@@ -387,8 +387,8 @@ pub struct CircleRow {
 }
 
 /// Gains of `strategy` for θ and the loop period.
-pub fn gains_for(strategy: Strategy, loop_hz: u16) -> FixedGains {
-    strategy.fixed_gains(0.1, 1.0 / f32::from(loop_hz)).expect("the thesis' gains fit the tick")
+pub fn gains_for(strategy: Strategy, loop_hz: u16) -> LoopGains {
+    strategy.loop_gains(0.1, 1.0 / f32::from(loop_hz)).expect("the thesis' gains fit the tick")
 }
 
 /// The axis as the board builds it: NSE-5310 tracker, loop, 100 steps/mm.

@@ -18,7 +18,7 @@
 //! its position is `commanded_mm` (or 0).
 
 use crate::axis_plant::{AxisPlant, PlantConfig};
-use firmware::closed_loop::control::{AxisController, DriverStatus, FixedGains, FollowingErrorLimit, Reference};
+use firmware::closed_loop::control::{AxisController, DriverStatus, FollowingErrorLimit, LoopGains, Reference};
 use firmware::closed_loop::nse5310::{EncoderFault, LinearTracker, TrackerConfig, TrackerCounters, UNITS_PER_MM};
 use firmware::closed_loop::output::StepperScale;
 use firmware::closed_loop::reference::ReferencePath;
@@ -123,7 +123,7 @@ pub struct ReplayReport {
 pub fn replay(rows: &[TraceRow], tracker: TrackerConfig, following: FollowingErrorLimit) -> ReplayReport {
     let mut report = ReplayReport { positions_mm: Vec::new(), counters: TrackerCounters::default(), fault: None, max_error_mm: 0.0 };
     let mut encoder = LinearTracker::new(tracker);
-    let mut monitor = AxisController::new(FixedGains::OPEN_LOOP, i32::MAX, following);
+    let mut monitor: AxisController = AxisController::new(LoopGains::OPEN_LOOP, i32::MAX, following);
     let to_units = |mm: f64| (mm * f64::from(UNITS_PER_MM)).round() as i32;
     let mut homed = false;
     for (number, row) in rows.iter().enumerate() {
@@ -194,7 +194,7 @@ pub fn record(scenario: &Scenario) -> Vec<TraceRow> {
     let period = 1.0 / f64::from(scenario.loop_hz);
     let substeps = 4;
     let mut plant = AxisPlant::new(scenario.plant.clone(), scenario.start_mm, period / f64::from(substeps));
-    let gains = scenario.strategy.fixed_gains(0.1, period as f32).expect("gains");
+    let gains = scenario.strategy.loop_gains(0.1, period as f32).expect("gains");
     // The recorder never stops on a following error: it records what the
     // sensor said (the replayer decides). Encoder faults do stop the loop;
     // the motor then follows the reference open loop, as a naive firmware would.

@@ -28,7 +28,7 @@ use firmware::closed_loop::control::{AxisController, DriverStatus, FollowingErro
 use firmware::closed_loop::output::ActiveLevel;
 use firmware::closed_loop::quadrature::QuadratureDecoder;
 use firmware::closed_loop::tuning::relay_ziegler_nichols;
-use firmware::closed_loop::FixedGains;
+use firmware::closed_loop::LoopGains;
 use firmware::machines::powder_bed::{
     CarriageEnd, LayerCommand, LayerEvent, Platform, PlatformAction, PlatformDriver, PlatformSwitches, TravelFault, TravelLimits,
     TravelMeasurement, TravelReport, Vertical,
@@ -163,7 +163,7 @@ impl Carriage {
     /// counts/s.
     pub fn standard() -> Self {
         let gains = relay_ziegler_nichols(127.0, 10.0, 0.05).expect("relay gains");
-        let fixed = FixedGains::servo_pid(&gains, CARRIAGE_TICK_S as f32).expect("servo gains");
+        let fixed: LoopGains = LoopGains::servo_pid(&gains, CARRIAGE_TICK_S as f32).expect("servo gains");
         Self {
             plant: DcServoPlant::new(40.0, 0.03, 0.004, 0.0001),
             decoder: QuadratureDecoder::new(false, false, 0),

@@ -4,7 +4,7 @@
 //! Regenerate the shipped traces after a deliberate change with
 //! `REGENERATE_TRACES=1 cargo test -p hal-sim --test closed_loop_circle`.
 
-use firmware::closed_loop::control::{AxisController, DriverStatus, FixedGains, FollowingErrorLimit, Reference};
+use firmware::closed_loop::control::{AxisController, DriverStatus, FollowingErrorLimit, LoopGains, Reference};
 use firmware::closed_loop::nse5310::{EncoderFault, TrackerConfig, UNITS_PER_MM};
 use firmware::closed_loop::quadrature::QuadratureDecoder;
 use firmware::closed_loop::relay::{RelayAutotune, RelayStep};
@@ -277,7 +277,7 @@ fn relay_autotune_on_the_dc_servo_gives_gains_that_hold_and_move_the_axis() {
     let result = result.expect("relay finished");
     let gains = relay_ziegler_nichols(127.0, result.oscillation_amplitude as f32, result.period_ticks as f32 / 1000.0).unwrap();
     assert!(gains.kp > 0.0 && gains.ki > 0.0 && gains.kd > 0.0, "{gains:?}");
-    let fixed = FixedGains::servo_pid(&gains, 0.001).unwrap();
+    let fixed: LoopGains = LoopGains::servo_pid(&gains, 0.001).unwrap();
     let mut controller = AxisController::new(fixed, 255, FollowingErrorLimit { limit: 4000, hold_ticks: 1000 });
     // move to 1000 counts (5 revolutions) and hold
     let target = 1000;
@@ -292,7 +292,7 @@ fn relay_autotune_on_the_dc_servo_gives_gains_that_hold_and_move_the_axis() {
 fn a_bridge_fault_stops_the_servo_axis_and_latches() {
     let mut plant = servo_plant();
     let mut decoder = QuadratureDecoder::new(false, false, 0);
-    let fixed = FixedGains::servo_pid(&relay_ziegler_nichols(127.0, 10.0, 0.05).unwrap(), 0.001).unwrap();
+    let fixed: LoopGains = LoopGains::servo_pid(&relay_ziegler_nichols(127.0, 10.0, 0.05).unwrap(), 0.001).unwrap();
     let mut controller = AxisController::new(fixed, 255, FollowingErrorLimit { limit: 4000, hold_ticks: 1000 });
     let mut faults = Vec::new();
     let stopped_at = run_servo(&mut plant, &mut decoder, 1000, |count| {

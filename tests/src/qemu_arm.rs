@@ -277,6 +277,26 @@ impl StepCost {
     pub fn step_rate_hz(&self) -> u32 {
         (self.sysclk_hz / self.cycles_max.max(1)).min(self.timer_hz)
     }
+
+    /// One closed-loop law tick (robust PID) in `arithmetic` ("fixed" or
+    /// "f32"), less the bare counter reads: instructions on QEMU (TIM2
+    /// under `-icount shift=0`, scaled by the bench's calibration loop of
+    /// known length), core cycles on silicon (DWT).
+    pub fn loop_tick(&self, arithmetic: &str) -> f64 {
+        let number = |key: &str| -> f64 {
+            self.printed
+                .get(key)
+                .and_then(|v| v.parse::<f64>().ok())
+                .unwrap_or_else(|| panic!("bench did not print {key}: {:?}", self.printed))
+        };
+        let samples = number("loop_samples");
+        let ticks = (number(&format!("loop_{arithmetic}_sum")) - number("loop_bare_sum")) / samples;
+        if self.printed.get("counter").map(String::as_str) == Some("dwt_cycles") {
+            ticks
+        } else {
+            ticks * number("calibration_instructions") / number("calibration_ticks")
+        }
+    }
 }
 
 /// Cortex-M4 cycles of one executed instruction (ARM DDI 0439, table 3-1),
@@ -505,6 +525,8 @@ pub fn print_arm_benchmark() -> (u32, StepCost) {
     println!("arm_step_isr_cycles_min={}", cost.cycles_min);
     println!("arm_step_isr_cycles_max={}", cost.cycles_max);
     println!("arm_step_isr_peripheral_accesses={}", cost.peripheral_accesses);
+    println!("arm_loop_tick_instructions_fixed={:.0}", cost.loop_tick("fixed"));
+    println!("arm_loop_tick_instructions_f32={:.0}", cost.loop_tick("f32"));
     println!(
         "# counted on QEMU (-icount shift=0: exact instructions); cycles from the Cortex-M4 TRM timings, \
          entry {EXCEPTION_ENTRY_CYCLES} + return {EXCEPTION_RETURN_CYCLES}; rate = {} Hz / cycles_max, capped at the {} Hz step timer",

@@ -2,8 +2,15 @@
 //! netduinoplus2 (STM32F405) and answers over USART1 exactly as the Mega
 //! 2560 build does: the same core, another board.
 
-use end_to_end::qemu_arm::{measure_step_cost, print_arm_benchmark, skr_pro_bench_elf, skr_pro_elf, ArmBoard, Elf};
+use end_to_end::qemu_arm::{measure_step_cost, print_arm_benchmark, skr_pro_bench_elf, skr_pro_elf, ArmBoard, Elf, StepCost};
+use std::sync::OnceLock;
 use std::time::Duration;
+
+/// The bench ELF's figures, measured once per test process (a traced run).
+fn bench_cost() -> &'static StepCost {
+    static COST: OnceLock<StepCost> = OnceLock::new();
+    COST.get_or_init(|| measure_step_cost(&skr_pro_bench_elf()))
+}
 
 fn booted_board() -> ArmBoard {
     let mut board = ArmBoard::boot(&skr_pro_elf());
@@ -130,7 +137,7 @@ fn the_firmware_fits_the_flash_behind_the_bootloader() {
 
 #[test]
 fn one_step_event_costs_a_bounded_number_of_instructions() {
-    let cost = measure_step_cost(&skr_pro_bench_elf());
+    let cost = bench_cost().clone();
     println!("{cost:?}");
     assert_eq!(cost.printed.get("queued").map(String::as_str), Some("1"), "{cost:?}");
     // The hot path: about 125 instructions today, Klipper's is far shorter;
@@ -138,6 +145,21 @@ fn one_step_event_costs_a_bounded_number_of_instructions() {
     assert!((40..=250).contains(&cost.instructions), "{cost:?}");
     assert!(cost.cycles_min <= cost.cycles_max && cost.cycles_min >= cost.instructions, "{cost:?}");
     assert!(cost.step_rate_hz() > 100_000, "{cost:?}");
+}
+
+/// The numeric abstraction's choice for this board, measured rather than
+/// assumed: one tick of the closed-loop law (robust PID) in f32 on the
+/// FPU against Q16.16 fixed point, instructions counted on QEMU. The
+/// board builds the core with `fpu`, so `firmware::num::Native` is f32.
+#[test]
+fn f32_is_the_faster_loop_arithmetic_on_the_cortex_m4() {
+    let cost = bench_cost();
+    let (fixed, float) = (cost.loop_tick("fixed"), cost.loop_tick("f32"));
+    println!("loop tick: fixed {fixed:.0}, f32 {float:.0} instructions");
+    assert!(float > 20.0 && fixed > 20.0, "{cost:?}");
+    assert!(float < fixed, "fixed {fixed}, f32 {float}");
+    // 168 MHz: even the slower one is a few microseconds.
+    assert!(fixed < 600.0, "fixed {fixed}");
 }
 
 /// The benchmark keys for `cargo benchmark`:

@@ -33,7 +33,9 @@
 //! units/s (stepper axes: turn it into a step rate with
 //! [`StepperScale`](super::output::StepperScale)) or duty (servo axes).
 //!
-//! Fixed point: gains are Q16.16 ([`Q16`]); the integral is kept exactly
+//! Arithmetic: the law is generic over [`LoopArithmetic`] ([`crate::num`]):
+//! f32 on a board with an FPU, fixed point otherwise (the AVR). In fixed
+//! point, gains are Q16.16 ([`Q16`]); the integral is kept exactly
 //! (whole units/s + 16 fraction bits: tiny errors still integrate, nothing
 //! is rounded away); products go through [`mul_q16`], which uses one 32-bit
 //! multiply when bound comparisons show the product fits (an error under
@@ -43,120 +45,8 @@
 
 use super::nse5310::EncoderFault;
 use super::{AxisFault, Units};
-
-/// A signed Q16.16 fixed-point number (gains, coefficients).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Q16(pub i32);
-
-impl Q16 {
-    pub const ZERO: Q16 = Q16(0);
-    pub const ONE: Q16 = Q16(1 << 16);
-
-    /// Nearest Q16.16 value; `None` outside ±32767.
-    pub fn from_f32(value: f32) -> Option<Q16> {
-        let scaled = value * 65536.0;
-        if !(scaled > -2_147_418_112.0 && scaled < 2_147_418_112.0) {
-            return None;
-        }
-        // Round half away from zero without libm.
-        let rounded = if scaled >= 0.0 { scaled + 0.5 } else { scaled - 0.5 };
-        Some(Q16(rounded as i32))
-    }
-
-    pub fn to_f32(self) -> f32 {
-        self.0 as f32 / 65536.0
-    }
-}
-
-/// `value × gain`, rounded, saturated to the i32 range.
-pub fn mul_q16(value: i32, gain: Q16) -> i32 {
-    mul_shift::<16>(value, gain.0)
-}
-
-/// |a| × |b| as a 64-bit magnitude `(high word, low word)`, from four
-/// 16 × 16 → 32-bit products: on the AVR each is one `__umulhisi3`
-/// (≈ 20 cycles), where an `i64` multiply would be compiler-builtins'
-/// generic `__muldi3` (≈ 1000).
-#[inline]
-fn wide_magnitude(a: u32, b: u32) -> (u32, u32) {
-    let (a_high, a_low) = (u32::from((a >> 16) as u16), u32::from(a as u16));
-    let (b_high, b_low) = (u32::from((b >> 16) as u16), u32::from(b as u16));
-    let low_low = a_low * b_low;
-    let (middle, middle_carry) = (a_low * b_high).overflowing_add(a_high * b_low);
-    let (low, low_carry) = low_low.overflowing_add(middle << 16);
-    // The true product is below 2^64, so the high word cannot overflow.
-    let high = (a_high * b_high)
-        .wrapping_add(middle >> 16)
-        .wrapping_add(u32::from(middle_carry) << 16)
-        .wrapping_add(u32::from(low_carry));
-    (high, low)
-}
-
-/// Whether |a| × |b| < 2^31, by bound comparisons only (no multiply, no
-/// leading-zero count): the three shapes the loop meets (an error times a
-/// gain, a velocity times a decay, a velocity times a step scale).
-#[inline(always)]
-fn fits_i32(a: u32, b: u32) -> bool {
-    (a < 1 << 11 && b < 1 << 20) || (a < 1 << 15 && b < 1 << 16) || (a < 1 << 19 && b < 1 << 12)
-}
-
-/// `value × factor / 2^SHIFT` rounded half away from zero, saturated.
-/// One 32-bit multiply (libgcc's `__mulsi3`, ≈ 40 cycles on the AVR) when
-/// the product provably fits (bound comparisons, never a checked multiply:
-/// see the README on `__mulosi4`); otherwise four 16-bit partial products,
-/// still no 64-bit arithmetic.
-#[inline]
-pub fn mul_shift<const SHIFT: u32>(value: i32, factor: i32) -> i32 {
-    let half = 1i32 << (SHIFT - 1);
-    if fits_i32(value.unsigned_abs(), factor.unsigned_abs()) {
-        // |product| < 2^31 and SHIFT ≥ 1, so ± half cannot overflow.
-        let product = value * factor;
-        return if product >= 0 { (product + half) >> SHIFT } else { -((half - product) >> SHIFT) };
-    }
-    mul_shift_wide::<SHIFT>(value, factor)
-}
-
-#[inline(never)]
-fn mul_shift_wide<const SHIFT: u32>(value: i32, factor: i32) -> i32 {
-    let half = 1u32 << (SHIFT - 1);
-    let negative = (value < 0) != (factor < 0);
-    let (high, low) = wide_magnitude(value.unsigned_abs(), factor.unsigned_abs());
-    let (low, carry) = low.overflowing_add(half);
-    let high = high.wrapping_add(u32::from(carry));
-    let magnitude = if high >> SHIFT != 0 { u32::MAX } else { (high << (32 - SHIFT)) | (low >> SHIFT) };
-    if negative {
-        if magnitude > 1 << 31 {
-            i32::MIN
-        } else {
-            (magnitude as i32).wrapping_neg()
-        }
-    } else if magnitude > i32::MAX as u32 {
-        i32::MAX
-    } else {
-        magnitude as i32
-    }
-}
-
-/// `value × factor` in Q16 as (floor of the product / 2^16, the 16
-/// fraction bits), saturated: the integral's exact increment.
-fn mul_q16_split(value: i32, factor: i32) -> (i32, u16) {
-    if fits_i32(value.unsigned_abs(), factor.unsigned_abs()) {
-        let product = value * factor;
-        // The arithmetic shift is the floor; the low bits are the fraction.
-        return (product >> 16, product as u16);
-    }
-    let negative = (value < 0) != (factor < 0);
-    let (high, low) = wide_magnitude(value.unsigned_abs(), factor.unsigned_abs());
-    let whole = if high >> 15 != 0 { i32::MAX as u32 } else { (high << 16) | (low >> 16) };
-    let fraction = low as u16;
-    if !negative {
-        (whole as i32, fraction)
-    } else if fraction == 0 {
-        (-(whole as i32), 0)
-    } else {
-        (-(whole as i32) - 1, 0u16.wrapping_sub(fraction))
-    }
-}
+use crate::num::{LoopArithmetic, Native};
+pub use crate::num::{mul_q16, mul_shift, Q16};
 
 /// What the derivative acts on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -168,31 +58,35 @@ pub enum DerivativeOn {
     Measurement,
 }
 
-/// Gains for one sample period, in fixed point. Built in the main loop by
+/// Gains for one sample period, in the law's arithmetic `A` (Q16.16 or
+/// f32, see [`crate::num`]). Built in the main loop by
 /// [`tuning`](super::tuning); the tick only multiplies.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct FixedGains {
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoopGains<A: LoopArithmetic = Native> {
     /// On the reference velocity (1: the step generator follows vd).
-    pub feedforward: Q16,
+    pub feedforward: A::Gain,
     /// On the error, 1/s (K0 + Kp for the robust PID).
-    pub proportional: Q16,
+    pub proportional: A::Gain,
     /// Ki·T: added to the integral per tick per unit of error, 1/s.
-    pub integral_per_tick: Q16,
+    pub integral_per_tick: A::Gain,
     /// Kd/(Tf + T), 1/s per unit of change per tick.
-    pub derivative: Q16,
+    pub derivative: A::Gain,
     /// Tf/(Tf + T): how much of the derivative term survives a tick.
-    pub derivative_decay: Q16,
+    pub derivative_decay: A::Gain,
     pub derivative_on: DerivativeOn,
 }
 
-impl FixedGains {
+/// The gains in fixed point (what the AVR runs, whatever the board).
+pub type FixedGains = LoopGains<crate::num::FixedPoint>;
+
+impl<A: LoopArithmetic> LoopGains<A> {
     /// Open loop: the velocity command is the reference velocity.
-    pub const OPEN_LOOP: FixedGains = FixedGains {
-        feedforward: Q16::ONE,
-        proportional: Q16::ZERO,
-        integral_per_tick: Q16::ZERO,
-        derivative: Q16::ZERO,
-        derivative_decay: Q16::ZERO,
+    pub const OPEN_LOOP: Self = LoopGains {
+        feedforward: A::ONE,
+        proportional: A::ZERO,
+        integral_per_tick: A::ZERO,
+        derivative: A::ZERO,
+        derivative_decay: A::ZERO,
         derivative_on: DerivativeOn::Error,
     };
 }
@@ -219,16 +113,15 @@ impl FollowingErrorLimit {
 
 /// One axis' loop state and gains (≤ 64 bytes on the host, see the tests).
 #[derive(Clone, Copy, Debug)]
-pub struct AxisController {
-    gains: FixedGains,
+pub struct AxisController<A: LoopArithmetic = Native> {
+    gains: LoopGains<A>,
     /// |u| never exceeds this (units/s or duty).
     output_limit: i32,
     following: FollowingErrorLimit,
     over_limit_ticks: u16,
-    /// The integral, units/s: whole part (floor) and 16 fraction bits, the
-    /// exact sum of (Ki·T in Q16) × error.
-    integral: i32,
-    integral_fraction: u16,
+    /// The integral, units/s (fixed point: whole part and 16 fraction
+    /// bits, the exact sum of (Ki·T in Q16) × error).
+    integral: A::Integral,
     derivative: i32,
     previous_signal: i32,
     primed: bool,
@@ -254,10 +147,10 @@ pub struct DriverStatus {
     pub bridge_fault: bool,
 }
 
-impl AxisController {
+impl<A: LoopArithmetic> AxisController<A> {
     /// `output_limit`: the largest |u| (e.g. the axis' max speed in units/s,
     /// or the PWM's max duty); at most 2^23.
-    pub const fn new(gains: FixedGains, output_limit: i32, following: FollowingErrorLimit) -> Self {
+    pub const fn new(gains: LoopGains<A>, output_limit: i32, following: FollowingErrorLimit) -> Self {
         let output_limit = if output_limit > (1 << 23) - 1 {
             (1 << 23) - 1
         } else if output_limit < 0 {
@@ -270,8 +163,7 @@ impl AxisController {
             output_limit,
             following,
             over_limit_ticks: 0,
-            integral: 0,
-            integral_fraction: 0,
+            integral: A::EMPTY_INTEGRAL,
             derivative: 0,
             previous_signal: 0,
             primed: false,
@@ -317,43 +209,34 @@ impl AxisController {
             self.previous_signal = signal;
             self.primed = true;
         }
-        if self.gains.derivative.0 != 0 {
+        if self.gains.derivative != A::ZERO {
             let change = signal.saturating_sub(self.previous_signal);
             self.derivative =
-                mul_q16(self.derivative, self.gains.derivative_decay).saturating_add(mul_q16(change, self.gains.derivative));
+                A::scale(self.derivative, self.gains.derivative_decay).saturating_add(A::scale(change, self.gains.derivative));
         }
         self.previous_signal = signal;
 
         let mut known = self.derivative;
-        if self.gains.proportional.0 != 0 {
-            known = known.saturating_add(mul_q16(error, self.gains.proportional));
+        if self.gains.proportional != A::ZERO {
+            known = known.saturating_add(A::scale(error, self.gains.proportional));
         }
         let feedforward = self.gains.feedforward;
-        if feedforward == Q16::ONE {
+        if feedforward == A::ONE {
             known = known.saturating_add(reference.velocity);
-        } else if feedforward.0 != 0 {
-            known = known.saturating_add(mul_q16(reference.velocity, feedforward));
+        } else if feedforward != A::ZERO {
+            known = known.saturating_add(A::scale(reference.velocity, feedforward));
         }
-        let integral_gain = self.gains.integral_per_tick.0;
-        if integral_gain != 0 {
-            let before = known.saturating_add(self.integral);
+        let integral_gain = self.gains.integral_per_tick;
+        if integral_gain != A::ZERO {
+            let before = known.saturating_add(A::whole(self.integral));
             let pushing_up = before >= self.output_limit && error > 0;
             let pushing_down = before <= -self.output_limit && error < 0;
             if !pushing_up && !pushing_down {
-                let (whole, fraction) = mul_q16_split(error, integral_gain);
-                let (fraction, carry) = self.integral_fraction.overflowing_add(fraction);
-                self.integral_fraction = fraction;
-                self.integral = self.integral.saturating_add(whole).saturating_add(i32::from(carry));
-                if self.integral >= self.output_limit {
-                    self.integral = self.output_limit;
-                    self.integral_fraction = 0;
-                } else if self.integral < -self.output_limit {
-                    self.integral = -self.output_limit;
-                    self.integral_fraction = 0;
-                }
+                A::integrate(&mut self.integral, error, integral_gain);
+                A::bound(&mut self.integral, self.output_limit);
             }
         }
-        let output = known.saturating_add(self.integral);
+        let output = known.saturating_add(A::whole(self.integral));
         // Not `clamp`: it carries a panic path for min > max.
         Ok(if output > self.output_limit {
             self.output_limit
@@ -384,23 +267,21 @@ impl AxisController {
     pub fn reset(&mut self) {
         self.fault = None;
         self.over_limit_ticks = 0;
-        self.integral = 0;
-        self.integral_fraction = 0;
+        self.integral = A::EMPTY_INTEGRAL;
         self.derivative = 0;
         self.primed = false;
     }
 
     /// Switch strategy or gains (from the main loop, inside a critical
     /// section on the AVR). Resets the loop's memory.
-    pub fn set_gains(&mut self, gains: FixedGains) {
+    pub fn set_gains(&mut self, gains: LoopGains<A>) {
         self.gains = gains;
-        self.integral = 0;
-        self.integral_fraction = 0;
+        self.integral = A::EMPTY_INTEGRAL;
         self.derivative = 0;
         self.primed = false;
     }
 
-    pub fn gains(&self) -> FixedGains {
+    pub fn gains(&self) -> LoopGains<A> {
         self.gains
     }
 
@@ -418,25 +299,44 @@ impl AxisController {
 
     /// The integral term, units/s (for reports and tests).
     pub fn integral(&self) -> i32 {
-        self.integral
+        A::whole(self.integral)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::num::FixedPoint;
 
     const FOLLOW: FollowingErrorLimit = FollowingErrorLimit { limit: 2048, hold_ticks: 10 };
 
-    fn gains(kp: f32, ki_tick: f32, kd: f32, decay: f32, on: DerivativeOn) -> FixedGains {
-        FixedGains {
-            feedforward: Q16::ONE,
-            proportional: Q16::from_f32(kp).unwrap(),
-            integral_per_tick: Q16::from_f32(ki_tick).unwrap(),
-            derivative: Q16::from_f32(kd).unwrap(),
-            derivative_decay: Q16::from_f32(decay).unwrap(),
+    fn gains<A: LoopArithmetic>(kp: f32, ki_tick: f32, kd: f32, decay: f32, on: DerivativeOn) -> LoopGains<A> {
+        LoopGains {
+            feedforward: A::ONE,
+            proportional: A::gain(kp).unwrap(),
+            integral_per_tick: A::gain(ki_tick).unwrap(),
+            derivative: A::gain(kd).unwrap(),
+            derivative_decay: A::gain(decay).unwrap(),
             derivative_on: on,
         }
+    }
+
+    /// Runs a behaviour for both arithmetics: what the law promises holds
+    /// in fixed point (AVR) and in f32 (FPU boards) alike.
+    macro_rules! for_both {
+        ($($name:ident),* $(,)?) => {$(
+            mod $name {
+                use crate::num::{FixedPoint, Float};
+                #[test]
+                fn fixed_point() {
+                    super::$name::<FixedPoint>();
+                }
+                #[test]
+                fn float() {
+                    super::$name::<Float>();
+                }
+            }
+        )*};
     }
 
     fn at(position: i32, velocity: i32) -> Reference {
@@ -445,74 +345,33 @@ mod tests {
 
     const OK: DriverStatus = DriverStatus { alarm: false, bridge_fault: false };
 
-    #[test]
-    fn mul_q16_rounds_and_saturates() {
-        assert_eq!(mul_q16(1000, Q16::from_f32(4.3).unwrap()), 4300);
-        assert_eq!(mul_q16(-1000, Q16::from_f32(4.3).unwrap()), -4300);
-        assert_eq!(mul_q16(3, Q16(1 << 15)), 2); // 1.5 rounds up
-        assert_eq!(mul_q16(1_000_000, Q16::from_f32(5.0).unwrap()), 5_000_000);
-        assert_eq!(mul_q16(i32::MAX, Q16::from_f32(100.0).unwrap()), i32::MAX);
-        assert_eq!(mul_q16(i32::MIN, Q16::from_f32(100.0).unwrap()), i32::MIN);
-        assert_eq!(mul_shift::<8>(10_240, 3200), 128_000);
-        assert_eq!(mul_shift::<8>(-10_240, 3200), -128_000);
-    }
-
-    #[test]
-    fn the_wide_multiply_agrees_with_64_bit_arithmetic() {
-        let values = [0i32, 1, -1, 2047, -2048, 65_535, 65_536, -65_537, 1 << 20, -(1 << 23) + 3, 123_456_789, i32::MAX, i32::MIN];
-        for &a in &values {
-            for &b in &values {
-                let exact = i64::from(a) * i64::from(b);
-                let rounded = if exact >= 0 { (exact + (1 << 15)) >> 16 } else { -((-exact + (1 << 15)) >> 16) };
-                let expected = rounded.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
-                assert_eq!(mul_shift::<16>(a, b), expected, "{a} × {b}");
-                if exact.abs() < (1i64 << 46) {
-                    let (whole, fraction) = mul_q16_split(a, b);
-                    assert_eq!(i64::from(whole) * 65_536 + i64::from(fraction), exact, "{a} × {b}");
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn q16_from_f32_rejects_out_of_range_and_nan() {
-        assert_eq!(Q16::from_f32(1.0), Some(Q16::ONE));
-        assert_eq!(Q16::from_f32(40000.0), None);
-        assert_eq!(Q16::from_f32(f32::NAN), None);
-    }
-
-    #[test]
-    fn open_loop_commands_the_reference_velocity_only() {
-        let mut c = AxisController::new(FixedGains::OPEN_LOOP, 409_600, FOLLOW);
+    fn open_loop_commands_the_reference_velocity_only<A: LoopArithmetic>() {
+        let mut c = AxisController::<A>::new(LoopGains::OPEN_LOOP, 409_600, FOLLOW);
         assert_eq!(c.tick(at(100, 10_240), Ok(0), OK), Ok(10_240));
         assert_eq!(c.tick(at(100, -10_240), Ok(50), OK), Ok(-10_240));
     }
 
-    #[test]
-    fn p_plus_feedforward_is_velocity_plus_kp_times_error() {
-        let mut c = AxisController::new(gains(4.3, 0.0, 0.0, 0.0, DerivativeOn::Error), 409_600, FOLLOW);
+    fn p_plus_feedforward_is_velocity_plus_kp_times_error<A: LoopArithmetic>() {
+        let mut c = AxisController::<A>::new(gains(4.3, 0.0, 0.0, 0.0, DerivativeOn::Error), 409_600, FOLLOW);
         // xd − x = 1000 units, vd = 10240 units/s (5 mm/s): u = 10240 + 4300
         assert_eq!(c.tick(at(1000, 10_240), Ok(0), OK), Ok(14_540));
     }
 
-    #[test]
-    fn output_saturates_at_the_limit() {
-        let mut c = AxisController::new(gains(5.0, 0.0, 0.0, 0.0, DerivativeOn::Error), 1000, FOLLOW);
+    fn output_saturates_at_the_limit<A: LoopArithmetic>() {
+        let mut c = AxisController::<A>::new(gains(5.0, 0.0, 0.0, 0.0, DerivativeOn::Error), 1000, FOLLOW);
         assert_eq!(c.tick(at(1000, 0), Ok(0), OK), Ok(1000));
         assert_eq!(c.tick(at(-1000, 0), Ok(0), OK), Ok(-1000));
     }
 
-    #[test]
-    fn integral_accumulates_ki_t_times_error_each_tick() {
-        let mut c = AxisController::new(gains(0.0, 0.5, 0.0, 0.0, DerivativeOn::Error), 100_000, FOLLOW);
+    fn integral_accumulates_ki_t_times_error_each_tick<A: LoopArithmetic>() {
+        let mut c = AxisController::<A>::new(gains(0.0, 0.5, 0.0, 0.0, DerivativeOn::Error), 100_000, FOLLOW);
         assert_eq!(c.tick(at(100, 0), Ok(0), OK), Ok(50));
         assert_eq!(c.tick(at(100, 0), Ok(0), OK), Ok(100));
         assert_eq!(c.integral(), 100);
     }
 
-    #[test]
-    fn integral_stops_growing_while_the_output_is_saturated_anti_windup() {
-        let mut c = AxisController::new(gains(1.0, 0.5, 0.0, 0.0, DerivativeOn::Error), 1000, FOLLOW);
+    fn integral_stops_growing_while_the_output_is_saturated_anti_windup<A: LoopArithmetic>() {
+        let mut c = AxisController::<A>::new(gains(1.0, 0.5, 0.0, 0.0, DerivativeOn::Error), 1000, FOLLOW);
         for _ in 0..1000 {
             assert_eq!(c.tick(at(2000, 0), Ok(0), OK), Ok(1000));
         }
@@ -525,7 +384,7 @@ mod tests {
     #[test]
     fn small_errors_still_integrate_exactly() {
         // Ki·T = 0.01: one unit of error adds 0.01 units/s per tick.
-        let mut c = AxisController::new(gains(0.0, 0.01, 0.0, 0.0, DerivativeOn::Error), 100_000, FOLLOW);
+        let mut c = AxisController::<FixedPoint>::new(gains(0.0, 0.01, 0.0, 0.0, DerivativeOn::Error), 100_000, FOLLOW);
         for _ in 0..1000 {
             c.tick(at(1, 0), Ok(0), OK).unwrap();
         }
@@ -533,11 +392,10 @@ mod tests {
         assert_eq!(c.integral(), 9);
     }
 
-    #[test]
-    fn derivative_on_error_filters_a_ramp_to_kd_times_slope() {
+    fn derivative_on_error_filters_a_ramp_to_kd_times_slope<A: LoopArithmetic>() {
         // Kd/(Tf+T) = 1, decay 0.5: a ramp of 10 units per tick converges
         // to 10 / (1 − 0.5) = 20.
-        let mut c = AxisController::new(gains(0.0, 0.0, 1.0, 0.5, DerivativeOn::Error), 100_000, FOLLOW);
+        let mut c = AxisController::<A>::new(gains(0.0, 0.0, 1.0, 0.5, DerivativeOn::Error), 100_000, FOLLOW);
         let mut out = 0;
         for k in 0..40 {
             out = c.tick(at(10 * k, 0), Ok(0), OK).unwrap();
@@ -545,18 +403,16 @@ mod tests {
         assert_eq!(out, 20);
     }
 
-    #[test]
-    fn derivative_on_measurement_ignores_reference_steps() {
-        let mut c = AxisController::new(gains(0.0, 0.0, 1.0, 0.5, DerivativeOn::Measurement), 100_000, FOLLOW);
+    fn derivative_on_measurement_ignores_reference_steps<A: LoopArithmetic>() {
+        let mut c = AxisController::<A>::new(gains(0.0, 0.0, 1.0, 0.5, DerivativeOn::Measurement), 100_000, FOLLOW);
         c.tick(at(0, 0), Ok(0), OK).unwrap();
         assert_eq!(c.tick(at(1000, 0), Ok(0), OK), Ok(0));
         // the axis moving up by 10 brakes
         assert_eq!(c.tick(at(1000, 0), Ok(10), OK), Ok(-10));
     }
 
-    #[test]
-    fn following_error_above_limit_for_longer_than_hold_is_a_fault() {
-        let mut c = AxisController::new(gains(1.0, 0.0, 0.0, 0.0, DerivativeOn::Error), 100_000, FOLLOW);
+    fn following_error_above_limit_for_longer_than_hold_is_a_fault<A: LoopArithmetic>() {
+        let mut c = AxisController::<A>::new(gains(1.0, 0.0, 0.0, 0.0, DerivativeOn::Error), 100_000, FOLLOW);
         for _ in 0..10 {
             assert!(c.tick(at(3000, 0), Ok(0), OK).is_ok());
         }
@@ -567,9 +423,8 @@ mod tests {
         assert!(c.tick(at(0, 0), Ok(0), OK).is_ok());
     }
 
-    #[test]
-    fn a_short_excursion_above_the_limit_recovers_without_fault() {
-        let mut c = AxisController::new(gains(1.0, 0.0, 0.0, 0.0, DerivativeOn::Error), 100_000, FOLLOW);
+    fn a_short_excursion_above_the_limit_recovers_without_fault<A: LoopArithmetic>() {
+        let mut c = AxisController::<A>::new(gains(1.0, 0.0, 0.0, 0.0, DerivativeOn::Error), 100_000, FOLLOW);
         for _ in 0..10 {
             assert!(c.tick(at(3000, 0), Ok(0), OK).is_ok());
         }
@@ -579,19 +434,17 @@ mod tests {
         }
     }
 
-    #[test]
-    fn an_error_over_four_times_the_limit_is_a_fault_at_once() {
-        let mut c = AxisController::new(FixedGains::OPEN_LOOP, 100_000, FOLLOW);
+    fn an_error_over_four_times_the_limit_is_a_fault_at_once<A: LoopArithmetic>() {
+        let mut c = AxisController::<A>::new(LoopGains::OPEN_LOOP, 100_000, FOLLOW);
         assert_eq!(c.tick(at(4 * 2048 + 4, 0), Ok(0), OK), Err(AxisFault::FollowingError { error: 8196 }));
     }
 
-    #[test]
-    fn driver_alarm_bridge_fault_and_encoder_fault_stop_the_axis() {
-        let mut c = AxisController::new(FixedGains::OPEN_LOOP, 100_000, FOLLOW);
+    fn driver_alarm_bridge_fault_and_encoder_fault_stop_the_axis<A: LoopArithmetic>() {
+        let mut c = AxisController::<A>::new(LoopGains::OPEN_LOOP, 100_000, FOLLOW);
         assert_eq!(c.tick(at(0, 0), Ok(0), DriverStatus { alarm: true, bridge_fault: false }), Err(AxisFault::DriverAlarm));
-        let mut c = AxisController::new(FixedGains::OPEN_LOOP, 100_000, FOLLOW);
+        let mut c = AxisController::<A>::new(LoopGains::OPEN_LOOP, 100_000, FOLLOW);
         assert_eq!(c.tick(at(0, 0), Ok(0), DriverStatus { alarm: false, bridge_fault: true }), Err(AxisFault::BridgeFault));
-        let mut c = AxisController::new(FixedGains::OPEN_LOOP, 100_000, FOLLOW);
+        let mut c = AxisController::<A>::new(LoopGains::OPEN_LOOP, 100_000, FOLLOW);
         assert_eq!(c.tick(at(0, 0), Err(EncoderFault::Stuck), OK), Err(AxisFault::Encoder(EncoderFault::Stuck)));
     }
 
@@ -599,4 +452,18 @@ mod tests {
     fn the_loop_state_is_small() {
         assert!(core::mem::size_of::<AxisController>() <= 64, "{}", core::mem::size_of::<AxisController>());
     }
+
+    for_both!(
+        open_loop_commands_the_reference_velocity_only,
+        p_plus_feedforward_is_velocity_plus_kp_times_error,
+        output_saturates_at_the_limit,
+        integral_accumulates_ki_t_times_error_each_tick,
+        integral_stops_growing_while_the_output_is_saturated_anti_windup,
+        derivative_on_error_filters_a_ramp_to_kd_times_slope,
+        derivative_on_measurement_ignores_reference_steps,
+        following_error_above_limit_for_longer_than_hold_is_a_fault,
+        a_short_excursion_above_the_limit_recovers_without_fault,
+        an_error_over_four_times_the_limit_is_a_fault_at_once,
+        driver_alarm_bridge_fault_and_encoder_fault_stop_the_axis,
+    );
 }

@@ -66,8 +66,8 @@
 //! the queue, like `M410`) and refuse moves until `G28`. After `G28` call
 //! `axis.rehome(home_units)` and `path.restart_at(...)`. `M112` stops the
 //! axes through `controller.stop`. Tuning (`M821`) computes
-//! [`FixedGains`] with
-//! [`Strategy::fixed_gains`](tuning::Strategy::fixed_gains) in the main loop
+//! [`LoopGains`] with
+//! [`Strategy::loop_gains`](tuning::Strategy::loop_gains) in the main loop
 //! and installs them with `controller.set_gains` inside a critical section
 //! while the axis is idle.
 //!
@@ -107,7 +107,7 @@ pub mod relay;
 pub mod tuning;
 
 pub use axis::{EncoderAxis, Reading};
-pub use control::{AxisController, DriverStatus, FixedGains, FollowingErrorLimit, Reference, Q16};
+pub use control::{AxisController, DriverStatus, FixedGains, FollowingErrorLimit, LoopGains, Reference, Q16};
 pub use nse5310::{EncoderFault, LinearTracker, TrackerConfig};
 pub use tuning::Strategy;
 

@@ -1,12 +1,14 @@
 //! Gain computation, in the main loop (f32 allowed here, never in the tick):
 //! the Normey-Rico robust PID tuner of SPEC §1, the relay (Åström–Hägglund,
 //! Ziegler–Nichols) rules of SPEC §5, and the conversion of continuous gains
-//! into the tick's fixed-point [`FixedGains`] for one sample period.
+//! into the tick's [`LoopGains`] (Q16.16 or f32, [`crate::num`]) for one
+//! sample period.
 //!
 //! Comparisons are written `!(x > 0.0)` on purpose: they reject NaN too.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use super::control::{DerivativeOn, FixedGains, Q16};
+use super::control::{DerivativeOn, LoopGains, Q16};
+use crate::num::LoopArithmetic;
 
 /// Why gains could not be computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -86,26 +88,26 @@ pub fn relay_ziegler_nichols(relay_amplitude: f32, oscillation_amplitude: f32, p
     Ok(RelayGains { ku, kp: 0.6 * ku, ki: 1.2 * ku / period_s, kd: 0.075 * ku * period_s })
 }
 
-fn q16(value: f32) -> Result<Q16, TuningError> {
-    Q16::from_f32(value).ok_or(TuningError::GainOutOfRange)
+fn gain<A: LoopArithmetic>(value: f32) -> Result<A::Gain, TuningError> {
+    A::gain(value).ok_or(TuningError::GainOutOfRange)
 }
 
-impl FixedGains {
+impl<A: LoopArithmetic> LoopGains<A> {
     /// u = ẋd + Kp·e.
-    pub fn p_feedforward(kp: f32) -> Result<FixedGains, TuningError> {
-        Ok(FixedGains { proportional: q16(kp)?, ..FixedGains::OPEN_LOOP })
+    pub fn p_feedforward(kp: f32) -> Result<Self, TuningError> {
+        Ok(LoopGains { proportional: gain::<A>(kp)?, ..Self::OPEN_LOOP })
     }
 
     /// The robust PID with the ẋd feedforward and K0 on the error (ours,
     /// see [`control`](super::control)), discretised for `period_s`:
     /// backward Euler for the integral and the filtered derivative.
-    pub fn robust_pid(pid: &RobustPid, period_s: f32) -> Result<FixedGains, TuningError> {
+    pub fn robust_pid(pid: &RobustPid, period_s: f32) -> Result<Self, TuningError> {
         Self::parallel(1.0, pid.k0 + pid.kp, pid.kp / pid.ti, pid.kp * pid.td, pid.tf, period_s, DerivativeOn::Error)
     }
 
     /// A parallel PID u = Kff·vd + Kp·e + Ki∫e + Kd·s/(1 + Tf·s)(·), for
     /// `period_s`. `ki` in 1/s² (or duty/(unit·s)), `kd` in s.
-    pub fn parallel(feedforward: f32, kp: f32, ki: f32, kd: f32, tf: f32, period_s: f32, derivative_on: DerivativeOn) -> Result<FixedGains, TuningError> {
+    pub fn parallel(feedforward: f32, kp: f32, ki: f32, kd: f32, tf: f32, period_s: f32, derivative_on: DerivativeOn) -> Result<Self, TuningError> {
         if !(period_s > 0.0) || !(tf >= 0.0) {
             return Err(TuningError::NotPositive);
         }
@@ -113,19 +115,19 @@ impl FixedGains {
         if !(integral_per_tick.abs() < 8.0) {
             return Err(TuningError::GainOutOfRange);
         }
-        Ok(FixedGains {
-            feedforward: q16(feedforward)?,
-            proportional: q16(kp)?,
-            integral_per_tick: q16(integral_per_tick)?,
-            derivative: q16(kd / (tf + period_s))?,
-            derivative_decay: q16(tf / (tf + period_s))?,
+        Ok(LoopGains {
+            feedforward: gain::<A>(feedforward)?,
+            proportional: gain::<A>(kp)?,
+            integral_per_tick: gain::<A>(integral_per_tick)?,
+            derivative: gain::<A>(kd / (tf + period_s))?,
+            derivative_decay: gain::<A>(tf / (tf + period_s))?,
             derivative_on,
         })
     }
 
     /// SPEC §5's servo PID from relay gains: derivative on the measurement,
     /// derivative filter Tf = Td/10 (ours), no feedforward.
-    pub fn servo_pid(gains: &RelayGains, period_s: f32) -> Result<FixedGains, TuningError> {
+    pub fn servo_pid(gains: &RelayGains, period_s: f32) -> Result<Self, TuningError> {
         let td = if gains.kp > 0.0 { gains.kd / gains.kp } else { 0.0 };
         Self::parallel(0.0, gains.kp, gains.ki, gains.kd, td / 10.0, period_s, DerivativeOn::Measurement)
     }
@@ -149,16 +151,16 @@ pub enum Strategy {
 impl Strategy {
     /// The tick's gains for `dead_time_s` (θ, for the robust PID) and the
     /// loop's `period_s`.
-    pub fn fixed_gains(self, dead_time_s: f32, period_s: f32) -> Result<FixedGains, TuningError> {
+    pub fn loop_gains<A: LoopArithmetic>(self, dead_time_s: f32, period_s: f32) -> Result<LoopGains<A>, TuningError> {
         match self {
-            Strategy::OpenLoop => Ok(FixedGains::OPEN_LOOP),
-            Strategy::PFeedforward { kp_milli } => FixedGains::p_feedforward(f32::from(kp_milli) / 1000.0),
+            Strategy::OpenLoop => Ok(LoopGains::OPEN_LOOP),
+            Strategy::PFeedforward { kp_milli } => LoopGains::p_feedforward(f32::from(kp_milli) / 1000.0),
             Strategy::RobustPid { gamma_milli } => {
-                FixedGains::robust_pid(&normey_rico(dead_time_s, f32::from(gamma_milli) / 1000.0)?, period_s)
+                LoopGains::robust_pid(&normey_rico(dead_time_s, f32::from(gamma_milli) / 1000.0)?, period_s)
             }
             Strategy::ServoPid { kp, ki, kd } => {
                 let gains = RelayGains { ku: 0.0, kp: kp.to_f32(), ki: ki.to_f32(), kd: kd.to_f32() };
-                FixedGains::servo_pid(&gains, period_s)
+                LoopGains::servo_pid(&gains, period_s)
             }
         }
     }
@@ -167,6 +169,8 @@ impl Strategy {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::closed_loop::control::FixedGains;
+    use crate::num::FixedPoint;
 
     fn close(actual: f32, expected: f32, tolerance: f32) -> bool {
         (actual - expected).abs() <= tolerance
@@ -221,7 +225,7 @@ mod tests {
     fn robust_pid_at_1_khz_becomes_these_fixed_gains() {
         // γ 0.5: K0 + Kp = 6.715729, Ki·T = 1.715729/0.1 × 0.001,
         // Kd/(Tf + T) = 1.715729 × 0.05 / 0.051, Tf/(Tf + T) = 0.05/0.051.
-        let g = Strategy::RobustPid { gamma_milli: 500 }.fixed_gains(0.1, 0.001).unwrap();
+        let g = Strategy::RobustPid { gamma_milli: 500 }.loop_gains::<FixedPoint>(0.1, 0.001).unwrap();
         assert_eq!(g.feedforward, Q16::ONE);
         assert!(close(g.proportional.to_f32(), 6.715729, 2e-5));
         assert!(close(g.integral_per_tick.to_f32(), 0.01715729, 2e-5));
@@ -232,9 +236,9 @@ mod tests {
 
     #[test]
     fn p_feedforward_and_open_loop_gains() {
-        let g = Strategy::PFeedforward { kp_milli: 4300 }.fixed_gains(0.1, 0.001).unwrap();
+        let g = Strategy::PFeedforward { kp_milli: 4300 }.loop_gains::<FixedPoint>(0.1, 0.001).unwrap();
         assert_eq!((g.feedforward, g.proportional, g.integral_per_tick), (Q16::ONE, Q16::from_f32(4.3).unwrap(), Q16::ZERO));
-        assert_eq!(Strategy::OpenLoop.fixed_gains(0.1, 0.001), Ok(FixedGains::OPEN_LOOP));
+        assert_eq!(Strategy::OpenLoop.loop_gains::<FixedPoint>(0.1, 0.001), Ok(FixedGains::OPEN_LOOP));
     }
 
     #[test]

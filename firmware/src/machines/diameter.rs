@@ -35,6 +35,7 @@
 //! [`ClosedLoopPi`] adapts the closed-loop module's fixed-point loop law.
 
 use crate::closed_loop::control::{AxisController, DerivativeOn, DriverStatus, FixedGains, FollowingErrorLimit, Reference, Q16};
+use crate::num::FixedPoint;
 
 /// What the diameter loop needs from a sampled PI controller. The loop
 /// calls it once per measurement; all values in the loop's units (error in
@@ -307,7 +308,9 @@ impl<P: PiLaw> DiameterLoop<P> {
 /// the integral alone.
 #[derive(Clone, Copy, Debug)]
 pub struct ClosedLoopPi {
-    controller: AxisController,
+    /// Fixed point on every board: a 1 Hz law, and its exact integral
+    /// keeps the thesis' figures reproducible bit for bit.
+    controller: AxisController<FixedPoint>,
     centre_mrpm: i32,
     bias_mrpm: i32,
     kp: f32,

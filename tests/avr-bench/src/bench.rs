@@ -657,3 +657,42 @@ pub fn heat_run(elf: &Path, target: u32, seconds: f64) -> Result<(Board, Vec<Str
 
 /// `Y`/`Z` re-exported for callers that build trials by hand.
 pub const TRIAL_AXES: [usize; 3] = [X, Y, Z];
+
+/// One closed-loop law tick on the ATmega2560 in each arithmetic of
+/// `firmware::num`, cycles (mean, min, max over 256 ticks).
+#[derive(Clone, Debug)]
+pub struct LoopTickCycles {
+    pub fixed: (f64, f64, f64),
+    pub float: (f64, f64, f64),
+}
+
+/// The loop benchmark ELF built beside the firmware (same cargo run).
+pub fn loop_bench_elf(firmware_elf: &Path) -> std::path::PathBuf {
+    firmware_elf.with_file_name("mega2560-loop-bench.elf")
+}
+
+/// Run `mega2560-loop-bench` on simavr and read its figures (see
+/// `boards/mega2560-ramps/src/bin/loop_bench.rs`).
+pub fn loop_tick_cycles(bench_elf: &Path) -> Result<LoopTickCycles, String> {
+    let mut board = Board::load(bench_elf, RampsConfig::stock(115_200))?;
+    let done = |board: &Board| board.host().replies.iter().any(|r| r.text == "done" || r.text.starts_with("Error:"));
+    let end = board.cycle() + 10 * u64::from(CPU_HZ);
+    while board.cycle() < end && !done(&board) && board.halted_reason().is_none() {
+        board.run_for_ms(10.0);
+    }
+    let printed: std::collections::HashMap<String, f64> = board
+        .host()
+        .replies
+        .iter()
+        .filter_map(|r| r.text.split_once('='))
+        .filter_map(|(k, v)| Some((k.to_string(), v.parse::<f64>().ok()?)))
+        .collect();
+    let get = |key: &str| {
+        printed.get(key).copied().ok_or_else(|| format!("the loop bench printed no {key}: {:?}", board.host().transcript()))
+    };
+    let triple = |name: &str| -> Result<(f64, f64, f64), String> {
+        let key = format!("avr_loop_tick_cycles_{name}");
+        Ok((get(&key)?, get(&format!("{key}_min"))?, get(&format!("{key}_max"))?))
+    };
+    Ok(LoopTickCycles { fixed: triple("fixed")?, float: triple("f32")? })
+}

@@ -25,13 +25,22 @@
 //! length and reports instructions. `tests/src/qemu_arm.rs` turns those into
 //! a cycle figure with a stated model.
 //!
+//! Second part: one tick of the closed-loop position law (robust PID,
+//! γ 0.5, 1 kHz, `AxisController::tick`) in each arithmetic of
+//! `firmware::num`, timed the same way (`t0; tick; t1` less the bare
+//! reads), so the board's choice of `Native` (f32 here) rests on figures.
+//!
 //! Output, one `key=value` per line on USART1, then `done`.
 #![no_std]
 #![no_main]
 
 use cortex_m::peripheral::{DWT, NVIC};
 use cortex_m_rt::entry;
+use core::hint::black_box;
+use firmware::closed_loop::control::{AxisController, DriverStatus, FollowingErrorLimit, LoopGains, Reference};
+use firmware::closed_loop::tuning::Strategy;
 use firmware::motion::stepper::{Segment, StepBlock, StepperConfig, TIMER_HZ};
+use firmware::num::{FixedPoint, Float, LoopArithmetic};
 use firmware::rx::{self, RxQueue};
 use skr_pro::pac::{self, interrupt, Interrupt};
 use skr_pro::{clock, pins, serial, stepper};
@@ -112,6 +121,44 @@ fn measure(counter: Counter, pend: bool) -> Stats {
     stats
 }
 
+/// Law ticks measured per arithmetic.
+const LOOP_SAMPLES: u32 = 256;
+const NO_FAULT: DriverStatus = DriverStatus { alarm: false, bridge_fault: false };
+
+/// Counter ticks of the two reads alone, summed over `LOOP_SAMPLES`.
+#[inline(never)]
+fn law_bare(counter: Counter) -> u64 {
+    let mut sum = 0u64;
+    for _ in 0..LOOP_SAMPLES {
+        let start = read(counter);
+        let end = black_box(read(counter));
+        sum += u64::from(end.wrapping_sub(start));
+    }
+    sum
+}
+
+/// Counter ticks of `LOOP_SAMPLES` robust-PID ticks in arithmetic `A` (a
+/// 5 mm/s ramp, the following error wandering over ±0.05 mm), reads
+/// included.
+#[inline(never)]
+fn law_cost<A: LoopArithmetic>(counter: Counter) -> u64 {
+    let gains: LoopGains<A> =
+        Strategy::RobustPid { gamma_milli: 500 }.loop_gains::<A>(0.1, 0.001).unwrap_or(LoopGains::OPEN_LOOP);
+    let mut controller = AxisController::<A>::new(gains, 200 * 2048, FollowingErrorLimit::printer_default(1000));
+    let mut sum = 0u64;
+    for k in 0..LOOP_SAMPLES as i32 {
+        let position = k * 10;
+        let reference = black_box(Reference { position, velocity: 10_240 });
+        let measured = black_box(Ok(position - ((k % 64) * 3 - 96)));
+        let start = read(counter);
+        let output = controller.tick(reference, measured, NO_FAULT);
+        let end = read(counter);
+        let _ = black_box(output);
+        sum += u64::from(end.wrapping_sub(start));
+    }
+    sum
+}
+
 #[entry]
 fn main() -> ! {
     pins::init();
@@ -160,6 +207,9 @@ fn main() -> ! {
     let bare = measure(counter, false);
     let isr = measure(counter, true);
     let calibration = calibration_loop(counter);
+    let loop_bare = law_bare(counter);
+    let loop_fixed = law_cost::<FixedPoint>(counter);
+    let loop_float = law_cost::<Float>(counter);
 
     let _ = uwrite!(tx, "bench:start\n");
     let _ = uwrite!(tx, "counter={}\n", if counter == Counter::Cycles { "dwt_cycles" } else { "tim2_ticks" });
@@ -180,6 +230,8 @@ fn main() -> ! {
     let _ = uwrite!(tx, "bare_min={}\nbare_max={}\nbare_sum={}\n", bare.min, bare.max, bare.sum);
     let _ = uwrite!(tx, "isr_min={}\nisr_max={}\nisr_sum={}\n", isr.min, isr.max, isr.sum);
     let _ = uwrite!(tx, "calibration_instructions={}\ncalibration_ticks={}\n", 2 * CALIBRATION_LOOPS, calibration);
+    let _ = uwrite!(tx, "loop_samples={}\nloop_bare_sum={}\n", LOOP_SAMPLES, loop_bare);
+    let _ = uwrite!(tx, "loop_fixed_sum={}\nloop_f32_sum={}\n", loop_fixed, loop_float);
     if counter == Counter::Cycles {
         let cycles = (isr.sum - bare.sum) / u64::from(SAMPLES);
         let _ = uwrite!(tx, "arm_step_isr_cycles={}\n", cycles as u32);
