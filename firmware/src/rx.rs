@@ -81,7 +81,7 @@ impl RxProducer<'_> {
         }
         // What is owed goes in before this byte, in the gap's place; until
         // all of it fits, this byte is lost too.
-        let stored = self.settle_debts() && self.queue.enqueue(byte).is_ok();
+        let stored = self.nothing_owed() && self.queue.enqueue(byte).is_ok();
         if !stored {
             self.lose(byte);
         }
@@ -90,6 +90,8 @@ impl RxProducer<'_> {
     }
 
     /// Account for a byte the ring had no room for.
+    #[cold]
+    #[inline(never)]
     fn lose(&mut self, byte: u8) {
         self.dropped = self.dropped.saturating_add(1);
         if !is_terminator(byte) {
@@ -101,8 +103,22 @@ impl RxProducer<'_> {
         }
     }
 
+    /// True when nothing is owed to the ring, after settling what fits.
+    /// Inline and two flag tests when nothing is owed: it runs with
+    /// interrupts off (the RX interrupt, and the main loop's critical
+    /// section), where every cycle delays the next step.
+    #[inline(always)]
+    fn nothing_owed(&mut self) -> bool {
+        if self.lines_owed == 0 && !self.marker_owed {
+            return true;
+        }
+        self.settle_debts()
+    }
+
     /// Put owed markers and line ends into the ring, oldest first, as far
     /// as there is room; true when nothing is owed any more.
+    #[cold]
+    #[inline(never)]
     fn settle_debts(&mut self) -> bool {
         while self.lines_owed > 0 {
             // A marker and its newline go in together or not at all.
@@ -124,7 +140,7 @@ impl RxProducer<'_> {
     /// owed once it has room, so a gap at the end of a burst is marked,
     /// and the line it swallowed answered, even if no byte follows.
     pub fn take_dropped(&mut self) -> u8 {
-        self.settle_debts();
+        self.nothing_owed();
         core::mem::take(&mut self.dropped)
     }
 }

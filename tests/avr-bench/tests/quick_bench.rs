@@ -781,6 +781,7 @@ fn the_hot_end_pid_gives_part_power_near_the_target() {
 #[test]
 fn one_stepper_holds_15000_steps_per_s_beside_the_other_interrupts() {
     let result = bench::step_rate(&mega2560_elf(), 1).unwrap();
+    println!("one stepper: {} steps/s on time; {:?}", result.per_axis_hz, result.limit);
     assert!(result.per_axis_hz >= 15_000.0, "{} steps/s: {:?}", result.per_axis_hz, result.limit);
 }
 

@@ -253,6 +253,28 @@ fn main() {
         });
     }
 
+    eprintln!("benchmark: one closed-loop law tick, fixed point against soft float …");
+    let loop_anchor = "the numeric abstraction (firmware::num): the AVR runs the laws in fixed point".to_string();
+    match bench::loop_tick_cycles(&bench::loop_bench_elf(&elf)) {
+        Ok(cycles) => {
+            for (key, (mean, min, max), what) in [
+                ("avr_loop_tick_cycles_fixed", cycles.fixed, "Q16.16"),
+                ("avr_loop_tick_cycles_f32", cycles.float, "soft-float f32"),
+            ] {
+                rows.push(Row {
+                    key,
+                    value: Ok(mean),
+                    shown: format!("{} cycles ({:.0} µs, {what}; {min:.0}–{max:.0}; robust PID tick)", group(mean), mean / 16.0),
+                    anchor: loop_anchor.clone(),
+                });
+            }
+        }
+        Err(e) => {
+            rows.push(missing("avr_loop_tick_cycles_fixed", &e, loop_anchor.clone()));
+            rows.push(missing("avr_loop_tick_cycles_f32", &e, loop_anchor));
+        }
+    }
+
     eprintln!("benchmark: host-side figures (closed-loop circle, extrusion line, thermal loops, SKR Pro on QEMU) …");
     rows.extend(host_side_rows());
 
@@ -467,10 +489,21 @@ fn host_side_rows() -> Vec<Row> {
     let arm = std::panic::catch_unwind(|| {
         let flash = end_to_end::qemu_arm::Elf::read(&end_to_end::qemu_arm::skr_pro_elf()).flash_bytes();
         let cost = end_to_end::qemu_arm::measure_step_cost(&end_to_end::qemu_arm::skr_pro_bench_elf());
-        (flash, cost.step_rate_hz(), cost.cycles_max)
+        (flash, cost.step_rate_hz(), cost.cycles_max, cost.loop_tick("fixed"), cost.loop_tick("f32"))
     });
     match arm {
-        Ok((flash, rate, cycles)) => {
+        Ok((flash, rate, cycles, loop_fixed, loop_float)) => {
+            for (key, value, what) in [
+                ("arm_loop_tick_instructions_fixed", loop_fixed, "Q16.16"),
+                ("arm_loop_tick_instructions_f32", loop_float, "f32 on the FPU"),
+            ] {
+                rows.push(Row {
+                    key,
+                    value: Ok(value.round()),
+                    shown: format!("{value:.0} instructions ({what}; robust PID tick, QEMU -icount)"),
+                    anchor: "the numeric abstraction (firmware::num): the SKR Pro runs the laws in f32".into(),
+                });
+            }
             rows.push(Row {
                 key: "arm_flash_bytes",
                 value: Ok(f64::from(flash)),
@@ -486,8 +519,9 @@ fn host_side_rows() -> Vec<Row> {
         }
         Err(_) => {
             let reason = "the SKR Pro could not be measured on QEMU (see the panic above)";
-            rows.push(missing("arm_flash_bytes", reason, String::new()));
-            rows.push(missing("arm_step_rate_1_stepper_hz", reason, String::new()));
+            for key in ["arm_flash_bytes", "arm_step_rate_1_stepper_hz", "arm_loop_tick_instructions_fixed", "arm_loop_tick_instructions_f32"] {
+                rows.push(missing(key, reason, String::new()));
+            }
         }
     }
     rows
