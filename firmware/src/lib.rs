@@ -16,6 +16,7 @@
 //! - [`machine`]: the command queue, the executor and the modal state;
 //! - [`settings`]: tunable values (`M92`, `M201`–`M205`, ...), `M503`;
 //! - [`storage`]: `M500`/`M501` images in non-volatile memory, two slots + CRC;
+//! - [`flash_pages`]: that memory on a flash-only chip (pages appended in a sector);
 //! - [`thermal`]: thermistors and heaters;
 //! - [`closed_loop`]: encoders (NSE-5310, quadrature) and closed position loops;
 //! - [`machines`]: the filament extrusion line and the powder-bed retrofit
@@ -34,6 +35,7 @@ extern crate std;
 pub mod closed_loop;
 pub mod drivers;
 pub mod emergency;
+pub mod flash_pages;
 pub mod gcode;
 pub mod host_link;
 pub mod line;

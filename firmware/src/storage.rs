@@ -45,6 +45,21 @@ pub trait NonVolatile {
     fn read(&mut self, address: usize) -> u8;
     /// Write one byte (may take milliseconds on EEPROM).
     fn write(&mut self, address: usize, value: u8);
+    /// Make every write so far durable; false if the medium failed. EEPROM
+    /// is durable byte by byte (nothing to do); a flash store writes its
+    /// page here ([`crate::flash_pages`]).
+    fn commit(&mut self) -> bool {
+        true
+    }
+}
+
+/// Why settings were not saved.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SaveError {
+    /// The storage is smaller than two slots.
+    TooSmall,
+    /// The medium refused the write (flash that does not program).
+    WriteFailed,
 }
 
 /// Why stored settings were not loaded.
@@ -68,9 +83,9 @@ pub struct Stored {
 }
 
 /// Save `settings` into the slot not holding the newest image.
-pub fn save(storage: &mut (impl NonVolatile + ?Sized), settings: &Settings) -> Result<Stored, LoadError> {
+pub fn save(storage: &mut (impl NonVolatile + ?Sized), settings: &Settings) -> Result<Stored, SaveError> {
     if storage.capacity() < STORAGE_NEEDED {
-        return Err(LoadError::TooSmall);
+        return Err(SaveError::TooSmall);
     }
     let (newest_slot, sequence) = match newest(storage) {
         Some((slot, sequence)) => (Some(slot), sequence.wrapping_add(1)),
@@ -88,6 +103,9 @@ pub fn save(storage: &mut (impl NonVolatile + ?Sized), settings: &Settings) -> R
         if storage.read(base + index) != image[index] {
             storage.write(base + index, image[index]);
         }
+    }
+    if !storage.commit() {
+        return Err(SaveError::WriteFailed);
     }
     Ok(Stored { bytes: SLOT_LEN, crc: u16::from_le_bytes([image[7], image[8]]) })
 }

@@ -59,7 +59,7 @@ fn main() -> ! {
     let mut tx = serial::Tx;
     let mut rx = serial::Rx { consumer };
     let mut link = HostLink::new(Machine::new(Motion::new(config, feeder)));
-    let mut settings = storage::RamStorage::new();
+    let mut settings = storage::open();
     let _ = link.machine.write_banner(&mut tx);
     let _ = link.machine.load_settings(&mut settings, &mut tx);
     let mut next_thermal_ms = 0u32;

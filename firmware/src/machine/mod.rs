@@ -365,7 +365,8 @@ impl<'q> Machine<'q> {
     fn save_settings<W: uWrite + ?Sized>(&self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
         match storage::save(storage, &self.settings) {
             Ok(stored) => ufmt::uwrite!(out, "echo:Settings Stored ({} bytes; crc {})\n", stored.bytes, stored.crc),
-            Err(_) => out.write_str("Error:EEPROM too small for the settings\n"),
+            Err(storage::SaveError::TooSmall) => out.write_str("Error:EEPROM too small for the settings\n"),
+            Err(storage::SaveError::WriteFailed) => out.write_str("Error:Settings not stored: the storage did not take the write\n"),
         }
     }
 
