@@ -9,7 +9,14 @@
 //!   a line that starts with an axis word repeats the modal motion (Grbl);
 //! - a letter with no number is a flag (`G28 X`); commands that need a value
 //!   report [`ParseError::WordWithoutValue`] when they read it;
-//! - `M117`/`M118` take the rest of the line as text.
+//! - `M117`/`M118` take the rest of the line as text;
+//! - CAM output puts several codes on one line (`G17 G90`, `G91 G0 Z5`,
+//!   `S10000 M3`, Grbl's "block"): the codes that only set a mode
+//!   ([`is_mode_setting`]: plane, units, distance, feed mode, work
+//!   coordinates, cancels, spindle and coolant) go into
+//!   [`Command::settings`], applied before the command; the one code that
+//!   acts (a motion, `G28`, `G92`, `M2`, …) is the command. A line of only
+//!   `%` (a CAM program's start/end marker) is empty.
 //!
 //! Line numbers (`N`) and checksums (`*`) belong to the host protocol and are
 //! removed by [`crate::protocol`] before this parser sees the line.
@@ -22,6 +29,8 @@ pub use number::{Decimal, NumberError};
 
 /// Most parameter words one command may carry (`G1 X Y Z E F` is 5).
 pub const MAX_WORDS: usize = 12;
+/// Most mode-setting codes one line may carry besides its command.
+pub const MAX_SETTINGS: usize = 6;
 
 /// Why a line is not valid G-code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -45,6 +54,18 @@ pub enum ParseError {
     BadCommandNumber,
     /// Only comments and spaces: nothing to execute.
     Empty,
+    /// More mode-setting codes on one line than [`MAX_SETTINGS`].
+    TooManyCodes,
+}
+
+/// Codes that only set a mode (Grbl's non-motion modal groups, and spindle
+/// and coolant): several may share a line with one command.
+pub fn is_mode_setting(code: Code) -> bool {
+    match code {
+        Code::G(n) => matches!(n, 17..=21 | 40 | 49 | 54..=59 | 61 | 64 | 80 | 90 | 91 | 93 | 94),
+        Code::M(n) => matches!(n, 3..=5 | 7..=9),
+        _ => false,
+    }
 }
 
 /// A parameter word; `value` is `None` for a bare flag (`G28 X`).
@@ -72,11 +93,14 @@ pub enum Code {
 pub struct Command {
     pub code: Code,
     words: heapless::Vec<Word, MAX_WORDS>,
+    /// Mode-setting codes that came on the same line, in line order; they
+    /// apply before `code` (see the module docs).
+    pub settings: heapless::Vec<Code, MAX_SETTINGS>,
 }
 
 impl Command {
     pub fn new(code: Code) -> Self {
-        Self { code, words: heapless::Vec::new() }
+        Self { code, words: heapless::Vec::new(), settings: heapless::Vec::new() }
     }
 
     /// Add a word (tests and generated commands).
@@ -108,6 +132,9 @@ impl Command {
 
 /// Parse one line (without `N` and `*checksum`) into a command.
 pub fn parse(text: &[u8]) -> Result<Command, ParseError> {
+    if text.iter().filter(|b| **b != b' ' && **b != b'\t').eq(b"%".iter()) {
+        return Err(ParseError::Empty);
+    }
     let mut lexer = Lexer { text, index: 0 };
     let first = lexer.next_word()?.ok_or(ParseError::Empty)?;
     let code = match first.letter {
@@ -133,12 +160,58 @@ pub fn parse(text: &[u8]) -> Result<Command, ParseError> {
         command.words.push(first).map_err(|_| ParseError::TooManyWords)?;
     }
     while let Some(word) = lexer.next_word()? {
+        if let Some(extra) = command_code(word) {
+            take_code(&mut command, extra)?;
+            continue;
+        }
         if command.has(word.letter) {
             return Err(ParseError::DuplicateWord(word.letter));
         }
         command.words.push(word).map_err(|_| ParseError::TooManyWords)?;
     }
     Ok(command)
+}
+
+/// A `G`/`M` word that names a code (whole, non-negative).
+fn command_code(word: Word) -> Option<Code> {
+    let value = word.value?;
+    if value.fraction_digits() != 0 || value.is_negative() {
+        return None;
+    }
+    let number = u16::try_from(value.mantissa()).ok()?;
+    match word.letter {
+        b'G' => Some(Code::G(number)),
+        b'M' => Some(Code::M(number)),
+        _ => None,
+    }
+}
+
+/// A second code on the line: a mode setting joins `settings` (`S10000 M3`
+/// is the modal line `S10000` with `M3` applied first); a code that acts
+/// becomes the command when the line had none and no axis word (`F300
+/// G28`), or when the first code only set a mode (`G91 G0 Z5`). Two codes
+/// that both act (`G28 G92`) keep Marlin's reading: the second is an
+/// ignored word.
+fn take_code(command: &mut Command, extra: Code) -> Result<(), ParseError> {
+    if is_mode_setting(extra) {
+        return command.settings.push(extra).map_err(|_| ParseError::TooManyCodes);
+    }
+    if command.code == Code::Modal && !command.words.iter().any(|w| matches!(w.letter, b'X' | b'Y' | b'Z' | b'E' | b'A' | b'B' | b'C')) {
+        command.code = extra;
+    } else if is_mode_setting(command.code) {
+        command.settings.push(command.code).map_err(|_| ParseError::TooManyCodes)?;
+        command.code = extra;
+    } else {
+        let letter = if matches!(extra, Code::G(_)) { b'G' } else { b'M' };
+        if !command.has(letter) {
+            let number = match extra {
+                Code::G(n) | Code::M(n) => n,
+                _ => 0,
+            };
+            command.words.push(Word { letter, value: Some(Decimal::from_int(i32::from(number))) }).map_err(|_| ParseError::TooManyWords)?;
+        }
+    }
+    Ok(())
 }
 
 /// Only the command code of a line (its first word), for lines whose

@@ -95,3 +95,36 @@ fn m117_keeps_its_text() {
 fn tool_changes_parse() {
     assert_eq!(parse(b"T1").unwrap().code, Code::T(1));
 }
+
+#[test]
+fn cam_lines_carry_mode_settings_beside_their_command() {
+    let c = parse(b"G17 G90 G21").unwrap();
+    assert_eq!((c.code, c.settings.as_slice()), (Code::G(17), &[Code::G(90), Code::G(21)][..]));
+    // The code that acts is the command, wherever it stands.
+    let c = parse(b"G91 G0 Z5").unwrap();
+    assert_eq!((c.code, c.settings.as_slice()), (Code::G(0), &[Code::G(91)][..]));
+    assert_eq!(c.words().len(), 1);
+    let c = parse(b"G1 X10 F300 G90").unwrap();
+    assert_eq!((c.code, c.settings.as_slice()), (Code::G(1), &[Code::G(90)][..]));
+    assert_eq!(c.words().len(), 2);
+    // The spindle word before its code: a modal line with M3 applied first.
+    let c = parse(b"S10000 M3").unwrap();
+    assert_eq!((c.code, c.settings.as_slice()), (Code::Modal, &[Code::M(3)][..]));
+    let c = parse(b"G28 G91 Z0").unwrap();
+    assert_eq!((c.code, c.settings.as_slice()), (Code::G(28), &[Code::G(91)][..]));
+}
+
+#[test]
+fn a_second_acting_code_stays_an_ignored_word_as_in_marlin() {
+    let c = parse(b"G28 G92").unwrap();
+    assert_eq!(c.code, Code::G(28));
+    assert!(c.settings.is_empty());
+    assert_eq!(c.value(b'G').unwrap(), Some(Decimal::from_int(92)));
+}
+
+#[test]
+fn a_percent_line_is_empty_and_too_many_codes_are_an_error() {
+    assert_eq!(parse(b"%"), Err(ParseError::Empty));
+    assert_eq!(parse(b" % "), Err(ParseError::Empty));
+    assert_eq!(parse(b"G17 G90 G21 G94 G40 G49 G80 G54"), Err(ParseError::TooManyCodes));
+}

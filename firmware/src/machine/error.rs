@@ -1,6 +1,6 @@
 //! Why a well-formed line could not be executed.
 
-use crate::gcode::ParseError;
+use crate::gcode::{Code, ParseError};
 use crate::motion::arc::ArcError;
 use crate::motion::kinematics::KinematicsError;
 use crate::motion::MotionError;
@@ -26,6 +26,11 @@ pub enum CommandError {
     /// The command belongs to another kind of machine (`M665` on a
     /// Cartesian printer).
     NotThisMachine,
+    /// A mode this firmware does not run (`G55`, `G93`); moves wait until
+    /// the supported one is back.
+    UnsupportedMode(Code),
+    /// An arc outside the XY plane (`G18`/`G19` active).
+    ArcPlane,
 }
 
 impl From<ParseError> for CommandError {
@@ -47,6 +52,8 @@ impl CommandError {
             Self::Motion(error) => write_motion_error(error, out),
             Self::PositionLost => crate::flash_str!("Position unknown after a motion stop: home with G28 first").write_to(out),
             Self::NotThisMachine => crate::flash_str!("Not available on this machine").write_to(out),
+            Self::UnsupportedMode(code) => write_unsupported_mode(code, out),
+            Self::ArcPlane => crate::flash_str!("Arcs run in the XY plane (G17) only").write_to(out),
         }?;
         out.write_str("\n")
     }
@@ -69,6 +76,15 @@ fn write_motion_error<W: uWrite + ?Sized>(error: MotionError, out: &mut W) -> Re
     text.write_to(out)
 }
 
+fn write_unsupported_mode<W: uWrite + ?Sized>(code: Code, out: &mut W) -> Result<(), W::Error> {
+    let (number, back) = match code {
+        Code::G(93) => (93, 94),
+        Code::G(n) => (n, 54),
+        _ => (0, 54),
+    };
+    ufmt::uwrite!(out, "G{} is not supported: moves are refused until G{}", number, back)
+}
+
 fn write_parse_error<W: uWrite + ?Sized>(error: ParseError, out: &mut W) -> Result<(), W::Error> {
     match error {
         ParseError::BadNumber(letter) => ufmt::uwrite!(out, "Bad number after {}", char::from(letter)),
@@ -80,5 +96,6 @@ fn write_parse_error<W: uWrite + ?Sized>(error: ParseError, out: &mut W) -> Resu
         ParseError::TooManyWords => out.write_str("Too many words"),
         ParseError::BadCommandNumber => out.write_str("Bad command number"),
         ParseError::Empty => out.write_str("Empty command"),
+        ParseError::TooManyCodes => out.write_str("Too many codes on one line"),
     }
 }

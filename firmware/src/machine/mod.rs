@@ -34,7 +34,7 @@ use crate::thermal::channel::{BED, HOTEND_0};
 use crate::thermal::{AutoReport, Autotune, ColdExtrusionGuard, Gains, HeaterChannel, TemperatureWait, WaitConfig};
 use thermal::HeaterSlot;
 use error::CommandError;
-use modal::{Distance, ModalState, Units, AXES, AXIS_LETTERS};
+use modal::{Distance, ModalState, MotionMode, Plane, Units, AXES, AXIS_LETTERS};
 use ufmt::uWrite;
 
 /// Lines the command queue holds (Marlin's BUFSIZE is 4).
@@ -449,7 +449,55 @@ impl<'q> Machine<'q> {
                 _ => return Ok(Outcome::Failed(error.into())),
             },
         };
+        for &code in command.settings.iter() {
+            if self.halted {
+                return Ok(Outcome::Failed(CommandError::Halted));
+            }
+            if let Err(error) = self.apply_setting(code, out)? {
+                return Ok(Outcome::Failed(error));
+            }
+        }
         self.dispatch(&command, text, now_ms, storage, out)
+    }
+
+    /// A code that only sets a mode (`gcode::is_mode_setting`), alone or
+    /// as one of several on a CAM line (`G17 G90 G94`).
+    #[inline(never)]
+    fn apply_setting<W: uWrite + ?Sized>(&mut self, code: Code, out: &mut W) -> Result<Result<(), CommandError>, W::Error> {
+        let modal = &mut self.modal;
+        match code {
+            Code::G(17) => modal.plane = Plane::Xy,
+            Code::G(18) => modal.plane = Plane::Zx,
+            Code::G(19) => modal.plane = Plane::Yz,
+            Code::G(20) => modal.units = Units::Inches,
+            Code::G(21) => modal.units = Units::Millimetres,
+            Code::G(90) => self.set_distance(Distance::Absolute),
+            Code::G(91) => self.set_distance(Distance::Relative),
+            // The only work coordinate system, and the only feed mode.
+            Code::G(54) if matches!(modal.unsupported, Some(Code::G(55..=59))) => modal.unsupported = None,
+            Code::G(94) if modal.unsupported == Some(Code::G(93)) => modal.unsupported = None,
+            Code::G(55..=59 | 93) => {
+                modal.unsupported = Some(code);
+                return Ok(Err(CommandError::UnsupportedMode(code)));
+            }
+            // Spindle and coolant: this machine has neither, so "off" holds.
+            Code::M(3 | 4 | 7 | 8) => {
+                let Code::M(number) = code else { return Ok(Ok(())) };
+                ufmt::uwrite!(out, "echo:M{} ignored: no spindle or coolant on this machine\n", number)?;
+            }
+            // Nothing of these is ever active: no cutter or tool-length
+            // compensation, no canned cycles; path blending is the planner's.
+            _ => {}
+        }
+        Ok(Ok(()))
+    }
+
+    /// `M2`/`M30`: the program is over (Grbl): back to the default modes.
+    fn end_program(&mut self) {
+        self.set_distance(Distance::Absolute);
+        self.modal.plane = Plane::Xy;
+        self.modal.unsupported = None;
+        self.modal.motion_mode = MotionMode::Linear;
     }
 
     /// Run a parsed command. Out of line from `execute` so that the parsed
@@ -475,10 +523,11 @@ impl<'q> Machine<'q> {
             Code::G(2 | 3) => self.arc_move(command, out),
             Code::G(4) => return Ok(self.dwell(command)),
             Code::G(28) => return Ok(self.home(command)),
-            Code::G(20) => Ok(self.modal.units = Units::Inches),
-            Code::G(21) => Ok(self.modal.units = Units::Millimetres),
-            Code::G(90) => Ok(self.set_distance(Distance::Absolute)),
-            Code::G(91) => Ok(self.set_distance(Distance::Relative)),
+            code if gcode::is_mode_setting(code) => self.apply_setting(code, out)?,
+            Code::M(2 | 30) => {
+                self.end_program();
+                return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false }));
+            }
             Code::G(92) => self.modal.set_logical_position(command),
             Code::M(82) => Ok(self.modal.extruder_distance = Distance::Absolute),
             Code::M(83) => Ok(self.modal.extruder_distance = Distance::Relative),
@@ -648,10 +697,10 @@ impl<'q> Machine<'q> {
 /// are echoed as unknown.
 fn is_known(code: Code) -> bool {
     match code {
-        Code::G(n) => matches!(n, 0..=4 | 10 | 11 | 20 | 21 | 28 | 90..=92),
+        Code::G(n) => matches!(n, 0..=4 | 10 | 11 | 17..=21 | 28 | 40 | 49 | 54..=59 | 61 | 64 | 80 | 90..=94),
         Code::M(n) => matches!(
             n,
-            17 | 18 | 82..=84 | 92 | 104..=110 | 112 | 114..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221 | 301..=304 | 400 | 410
+            2..=5 | 7..=9 | 30 | 17 | 18 | 82..=84 | 92 | 104..=110 | 112 | 114..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221 | 301..=304 | 400 | 410
                 | 500..=503 | 665 | 666
         ),
         Code::T(_) | Code::Modal => true,

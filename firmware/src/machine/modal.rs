@@ -15,7 +15,7 @@
 //! (1 in = 25 400 µm). Feed rates are in µm/s.
 
 use super::error::CommandError;
-use crate::gcode::{Command, Decimal};
+use crate::gcode::{Command, Decimal, Code};
 
 /// Axes a move names, in this order.
 pub const AXIS_LETTERS: [u8; 4] = [b'X', b'Y', b'Z', b'E'];
@@ -67,6 +67,24 @@ pub struct ModalState {
     pub position: Position,
     /// `G92` shift: logical = machine + offset.
     pub offset: Position,
+    /// `G17`/`G18`/`G19`: the plane of arcs.
+    pub plane: Plane,
+    /// A mode this firmware does not run (`G55`–`G59` work coordinates,
+    /// `G93` inverse-time feed) was asked for: moves are refused until it
+    /// is switched back (`G54`, `G94`) or the program ends (`M2`/`M30`),
+    /// so no move runs in a mode other than the one the program meant.
+    pub unsupported: Option<Code>,
+}
+
+/// The plane arcs are cut in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Plane {
+    /// `G17` (the default).
+    Xy,
+    /// `G18`.
+    Zx,
+    /// `G19`.
+    Yz,
 }
 
 impl Default for ModalState {
@@ -85,6 +103,8 @@ impl ModalState {
             feed_um_per_s: 25_000,
             position: [0; AXES],
             offset: [0; AXES],
+            plane: Plane::Xy,
+            unsupported: None,
         }
     }
 

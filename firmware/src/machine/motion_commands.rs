@@ -21,7 +21,7 @@
 //! `Error:` until the machine is homed again.
 
 use super::error::CommandError;
-use super::modal::{MotionMode, AXES};
+use super::modal::{MotionMode, Plane, AXES};
 use super::{Machine, Outcome, Running};
 use crate::gcode::{Code, Command};
 use crate::motion::kinematics::MachineKinematics;
@@ -181,6 +181,9 @@ impl<'q> Machine<'q> {
         command: &Command,
         out: &mut W,
     ) -> Result<(), CommandError> {
+        if self.modal.plane != Plane::Xy {
+            return Err(CommandError::ArcPlane);
+        }
         let clockwise = match command.code {
             Code::G(2) => true,
             Code::G(3) => false,
@@ -224,6 +227,9 @@ impl<'q> Machine<'q> {
     ) -> Result<[i32; AXES], CommandError> {
         if self.position_lost {
             return Err(CommandError::PositionLost);
+        }
+        if let Some(mode) = self.modal.unsupported {
+            return Err(CommandError::UnsupportedMode(mode));
         }
         if let (MachineKinematics::Cartesian(_), Some(limits), false) = (
             self.motion.config.kinematics,

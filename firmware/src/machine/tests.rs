@@ -334,3 +334,60 @@ fn the_status_screen_shows_state_z_and_heaters() {
     converse(&mut machine, 0, "M112\n");
     assert_eq!(screen(&machine).0, "Halted    Z12.35");
 }
+
+/// CAM programs (Fusion 360, FreeCAD and others for Grbl) put several
+/// modes on one line, open and close with `%`, and end with `M2`/`M30`.
+#[test]
+fn cam_preambles_set_their_modes_and_get_one_ok_per_line() {
+    let mut machine = new_machine();
+    assert_eq!(converse(&mut machine, 0, "%\nG90 G94\nG17\nG21\nG17 G91\n"), "ok\nok\nok\nok\nok\n");
+    assert_eq!(machine.modal().distance, Distance::Relative);
+    assert_eq!(converse(&mut machine, 0, "G54\nG40 G49 G80\nM5\nM9\nG90 G17 G21\n"), "ok\nok\nok\nok\nok\n");
+    assert_eq!(machine.modal().distance, Distance::Absolute);
+    assert_eq!(converse(&mut machine, 0, "S10000 M3\n"), "echo:M3 ignored: no spindle or coolant on this machine\nok\n");
+}
+
+#[test]
+fn a_mode_set_on_a_move_line_applies_to_that_move() {
+    let mut machine = new_machine();
+    assert_eq!(converse(&mut machine, 0, "G92 X10\nG91 G0 X5\n"), "ok\nok\n");
+    assert_eq!(machine.modal().logical_position()[0], 15_000);
+    assert_eq!(converse(&mut machine, 0, "G0 X5 G90\n"), "ok\n");
+    assert_eq!(machine.modal().logical_position()[0], 5_000);
+}
+
+/// Work coordinates other than G54 and inverse-time feed are not run; a
+/// program that asks for them gets an error, and its moves are refused
+/// (not run in the wrong frame) until it switches back.
+#[test]
+fn unsupported_modes_are_refused_and_hold_moves_until_switched_back() {
+    let mut machine = new_machine();
+    assert_eq!(converse(&mut machine, 0, "G55\n"), "Error:G55 is not supported: moves are refused until G54\nok\n");
+    assert_eq!(converse(&mut machine, 0, "G1 X5\n"), "Error:G55 is not supported: moves are refused until G54\nok\n");
+    assert_eq!(machine.modal().logical_position()[0], 0);
+    assert_eq!(converse(&mut machine, 0, "G54\nG1 X5\n"), "ok\nok\n");
+    assert_eq!(machine.modal().logical_position()[0], 5_000);
+    assert_eq!(converse(&mut machine, 0, "G93 G1 X6\n"), "Error:G93 is not supported: moves are refused until G94\nok\n");
+    assert_eq!(machine.modal().logical_position()[0], 5_000);
+    assert_eq!(converse(&mut machine, 0, "G94\nG1 X6\n"), "ok\nok\n");
+    assert_eq!(machine.modal().logical_position()[0], 6_000);
+}
+
+#[test]
+fn arcs_outside_the_xy_plane_are_refused() {
+    let mut machine = new_machine();
+    assert_eq!(converse(&mut machine, 0, "G18\nG2 X10 Z0 I5 K0\n"), "ok\nError:Arcs run in the XY plane (G17) only\nok\n");
+    assert_eq!(machine.modal().logical_position(), [0; AXES]);
+    assert_eq!(converse(&mut machine, 0, "G17\n"), "ok\n");
+    assert_eq!(machine.modal().plane, modal::Plane::Xy);
+}
+
+#[test]
+fn m2_and_m30_end_the_program_and_restore_the_default_modes() {
+    let mut machine = new_machine();
+    assert_eq!(converse(&mut machine, 0, "G91\nG18\nG55\nM30\n"), "ok\nok\nError:G55 is not supported: moves are refused until G54\nok\nok\n");
+    assert_eq!(machine.modal().distance, Distance::Absolute);
+    assert_eq!(machine.modal().plane, modal::Plane::Xy);
+    assert_eq!(machine.modal().unsupported, None);
+    assert_eq!(converse(&mut machine, 0, "M2\n"), "ok\n");
+}
