@@ -264,3 +264,22 @@ fn with_m120_a_switch_hit_mid_move_stops_everything_until_homed() {
     let output = board.run_gcode("M121\nG1 X50\nG1 X10\nM400\n", 10_000);
     assert_eq!(output.replace("echo:busy: processing\n", ""), "ok\nok\nok\nok\n");
 }
+
+/// A FreeCAD Grbl-post program (preamble with two modes per line, a
+/// profile with an arc, `M05`/`M2` postamble), streamed whole: every line
+/// answers `ok`, no `Error:`, and the motors land on the exact steps.
+#[test]
+fn a_cam_program_for_grbl_runs_to_its_exact_end_point() {
+    let mut board = homed();
+    let program = "%\n(Exported by FreeCAD)\nG17 G90\nG21\n(begin operation: Profile)\nG0 Z5.000\nG0 X10.000 Y10.000\n\
+                   G1 Z0.500 F60.000\nG1 X20.000 Y10.000 F300.000\nG1 X20.000 Y20.000\nG2 X10.000 Y20.000 I-5.000 J0.000\n\
+                   G1 X10.000 Y10.000\nG91 G0 Z4.5\nG90\nM05\nG17 G90\nM2\n%\n";
+    let output = board.run_gcode(program, 120_000);
+    let lines = program.lines().count();
+    // M2 waits for the moves: busy keep-alives meanwhile, as for M400.
+    let replies: String = output.lines().filter(|l| *l != "echo:busy: processing").map(|l| format!("{l}\n")).collect();
+    assert_eq!(replies, "ok\n".repeat(lines), "{output}");
+    // X 10 mm, Y 10 mm at 100 steps/mm; Z 5 mm at 400.
+    assert_eq!(board.steps.positions()[..3], [1000, 1000, 2000]);
+    assert_eq!(board.steps.setup_violations, 0);
+}
