@@ -283,3 +283,19 @@ fn a_cam_program_for_grbl_runs_to_its_exact_end_point() {
     assert_eq!(board.steps.positions()[..3], [1000, 1000, 2000]);
     assert_eq!(board.steps.setup_violations, 0);
 }
+
+/// Arcs in the ZX (G18) and YZ (G19) planes, as 3D CAM toolpaths use
+/// them: centres from the plane's offset words (K I, J K), exact ends.
+#[test]
+fn g18_and_g19_arcs_land_on_their_exact_end_points() {
+    let mut board = homed();
+    let output = board.run_gcode(
+        "G1 X10 Z10 F600\nG18 G2 X20 Z10 I5 K0\nG2 X10 J5\nG19 G3 Y10 Z10 J5 K0\nM400\nM114\n",
+        60_000,
+    );
+    assert_eq!(
+        output,
+        "ok\nok\nError:Missing R word\nok\nok\nok\nX:20.00 Y:10.00 Z:10.00 E:0.00 Count X:2000 Y:1000 Z:4000\nok\n"
+    );
+    assert_eq!(board.steps.positions()[..3], [2000, 1000, 4000]);
+}

@@ -29,8 +29,6 @@ pub enum CommandError {
     /// A mode this firmware does not run (`G55`, `G93`); moves wait until
     /// the supported one is back.
     UnsupportedMode(Code),
-    /// An arc outside the XY plane (`G18`/`G19` active).
-    ArcPlane,
 }
 
 impl From<ParseError> for CommandError {
@@ -53,7 +51,6 @@ impl CommandError {
             Self::PositionLost => crate::flash_str!("Position unknown after a motion stop: home with G28 first").write_to(out),
             Self::NotThisMachine => crate::flash_str!("Not available on this machine").write_to(out),
             Self::UnsupportedMode(code) => write_unsupported_mode(code, out),
-            Self::ArcPlane => crate::flash_str!("Arcs run in the XY plane (G17) only").write_to(out),
         }?;
         out.write_str("\n")
     }

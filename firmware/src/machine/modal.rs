@@ -76,16 +76,7 @@ pub struct ModalState {
     pub unsupported: Option<Code>,
 }
 
-/// The plane arcs are cut in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Plane {
-    /// `G17` (the default).
-    Xy,
-    /// `G18`.
-    Zx,
-    /// `G19`.
-    Yz,
-}
+pub use crate::motion::Plane;
 
 impl Default for ModalState {
     fn default() -> Self {

@@ -21,7 +21,8 @@
 //! `Error:` until the machine is homed again.
 
 use super::error::CommandError;
-use super::modal::{MotionMode, Plane, AXES};
+use super::modal::{MotionMode, AXES};
+use crate::motion::Plane;
 use super::{Machine, Outcome, Running};
 use crate::gcode::{Code, Command};
 use crate::motion::kinematics::MachineKinematics;
@@ -181,9 +182,6 @@ impl<'q> Machine<'q> {
         command: &Command,
         out: &mut W,
     ) -> Result<(), CommandError> {
-        if self.modal.plane != Plane::Xy {
-            return Err(CommandError::ArcPlane);
-        }
         let clockwise = match command.code {
             Code::G(2) => true,
             Code::G(3) => false,
@@ -197,7 +195,14 @@ impl<'q> Machine<'q> {
                 .map(|value| self.modal.length_um(letter, value))
                 .transpose()
         };
-        let (i, j, r) = (offset(b'I')?, offset(b'J')?, offset(b'R')?);
+        // The centre's offset along the plane's two axes (Grbl: I J, K I, J K).
+        let plane = self.modal.plane;
+        let (first, second) = match plane {
+            Plane::Xy => (b'I', b'J'),
+            Plane::Zx => (b'K', b'I'),
+            Plane::Yz => (b'J', b'K'),
+        };
+        let (i, j, r) = (offset(first)?, offset(second)?, offset(b'R')?);
         let centre = match (i, j, r) {
             (None, None, Some(r)) => ArcCentre::Radius(r),
             (None, None, None) => return Err(CommandError::Missing(b'R')),
@@ -214,7 +219,7 @@ impl<'q> Machine<'q> {
         let target = self.prepare_target(target, out)?;
         let result = self
             .motion
-            .arc_to(target, centre, clockwise, self.modal.feed_um_per_s);
+            .arc_to(plane, target, centre, clockwise, self.modal.feed_um_per_s);
         self.commit_move(target, result)
     }
 

@@ -373,10 +373,12 @@ fn unsupported_modes_are_refused_and_hold_moves_until_switched_back() {
     assert_eq!(machine.modal().logical_position()[0], 6_000);
 }
 
+/// In G18 the centre comes from K and I (Grbl): a J offset is not one.
 #[test]
-fn arcs_outside_the_xy_plane_are_refused() {
+fn a_g18_arc_reads_its_centre_from_k_and_i() {
     let mut machine = new_machine();
-    assert_eq!(converse(&mut machine, 0, "G18\nG2 X10 Z0 I5 K0\n"), "ok\nError:Arcs run in the XY plane (G17) only\nok\n");
+    assert_eq!(converse(&mut machine, 0, "G18\nG2 X10 J5\n"), "ok\nError:Missing R word\nok\n");
+    assert_eq!(machine.modal().plane, modal::Plane::Zx);
     assert_eq!(machine.modal().logical_position(), [0; AXES]);
     assert_eq!(converse(&mut machine, 0, "G17\n"), "ok\n");
     assert_eq!(machine.modal().plane, modal::Plane::Xy);

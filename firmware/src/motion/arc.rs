@@ -1,5 +1,12 @@
-//! Arcs (`G2` clockwise, `G3` counter-clockwise) in the XY plane, cut into
-//! straight chords that stay within a tolerance of the true circle.
+//! Arcs (`G2` clockwise, `G3` counter-clockwise) in the XY, ZX or YZ plane
+//! (`G17`/`G18`/`G19`), cut into straight chords that stay within a
+//! tolerance of the true circle.
+//!
+//! The plane's two axes and its linear (helix) axis are Grbl's: G17 (X, Y;
+//! Z), G18 (Z, X; Y), G19 (Y, Z; X), each a right-handed frame, so
+//! "clockwise" means clockwise seen from the positive end of the linear
+//! axis in all three. The cutter permutes its points into that frame and
+//! back; the maths below is written for the first two coordinates.
 //!
 //! The cutter is an iterator of line end points, computed one at a time (no
 //! arrays: the AVR has no RAM for them). Z and E move linearly along the
@@ -23,6 +30,45 @@ use super::math::{atan2, sin_cos, sqrt, PI};
 /// X, Y, Z, E in mm.
 pub type Point = [f32; 4];
 
+/// The plane of an arc.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Plane {
+    /// `G17` (the default): X, Y; helix along Z.
+    Xy,
+    /// `G18`: Z, X; helix along Y.
+    Zx,
+    /// `G19`: Y, Z; helix along X.
+    Yz,
+}
+
+impl Plane {
+    /// Indices of the plane's first and second axis and of its linear axis.
+    pub const fn axes(self) -> [usize; 3] {
+        match self {
+            Plane::Xy => [0, 1, 2],
+            Plane::Zx => [2, 0, 1],
+            Plane::Yz => [1, 2, 0],
+        }
+    }
+
+    /// A point in the plane's frame: (first, second, linear, E).
+    fn to_frame(self, p: Point) -> Point {
+        let [a, b, l] = self.axes();
+        [p[a], p[b], p[l], p[3]]
+    }
+
+    /// The inverse of [`Self::to_frame`].
+    fn from_frame(self, q: Point) -> Point {
+        let [a, b, l] = self.axes();
+        let mut p = [0.0; 4];
+        p[a] = q[0];
+        p[b] = q[1];
+        p[l] = q[2];
+        p[3] = q[3];
+        p
+    }
+}
+
 /// Why an arc cannot be cut.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ArcError {
@@ -41,15 +87,22 @@ pub struct ArcCutter {
     radius: f32,
     start_angle: f32,
     sweep: f32,
+    /// Start and target in the plane's frame.
     start: Point,
     target: Point,
+    /// The target as given (returned exactly as the last point).
+    exact_target: Point,
+    plane: Plane,
     chords: u32,
     done: u32,
 }
 
 impl ArcCutter {
-    /// `G2`/`G3` with `I`/`J`: the centre is `start + offset`.
-    pub fn with_centre(start: Point, target: Point, offset: [f32; 2], clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
+    /// `G2`/`G3` with the centre's offset from the start in the plane's two
+    /// axes (`I J` in G17, `K I` in G18, `J K` in G19).
+    pub fn with_centre(plane: Plane, start: Point, target: Point, offset: [f32; 2], clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
+        let exact_target = target;
+        let (start, target) = (plane.to_frame(start), plane.to_frame(target));
         let centre = [start[0] + offset[0], start[1] + offset[1]];
         let radius = sqrt(offset[0] * offset[0] + offset[1] * offset[1]);
         if !(radius > 0.0) {
@@ -60,12 +113,14 @@ impl ArcCutter {
         if mismatch > 0.5 || (mismatch > 0.005 && mismatch > 0.001 * radius) {
             return Err(ArcError::RadiusMismatch);
         }
-        Ok(Self::new(start, target, centre, radius, clockwise, tolerance))
+        Ok(Self { centre, radius, start_angle: 0.0, sweep: 0.0, start, target, exact_target, plane, chords: 0, done: 0 }.cut(clockwise, tolerance))
     }
 
     /// `G2`/`G3` with `R`: the centre is where a circle of radius |R|
     /// passes through both points; R < 0 picks the arc over half a turn.
-    pub fn with_radius(start: Point, target: Point, radius: f32, clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
+    pub fn with_radius(plane: Plane, start: Point, target: Point, radius: f32, clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
+        let exact_target = target;
+        let (start, target) = (plane.to_frame(start), plane.to_frame(target));
         let (dx, dy) = (target[0] - start[0], target[1] - start[1]);
         let chord = sqrt(dx * dx + dy * dy);
         let r = radius.abs();
@@ -83,10 +138,15 @@ impl ArcCutter {
             side = -side;
         }
         let centre = [start[0] + dx / 2.0 + side * rise * uy, start[1] + dy / 2.0 - side * rise * ux];
-        Ok(Self::new(start, target, centre, r, clockwise, tolerance))
+        Ok(Self { centre, radius: r, start_angle: 0.0, sweep: 0.0, start, target, exact_target, plane, chords: 0, done: 0 }.cut(clockwise, tolerance))
     }
 
-    fn new(start: Point, target: Point, centre: [f32; 2], radius: f32, clockwise: bool, tolerance: f32) -> Self {
+    /// The sweep and the number of chords of an arc whose centre, radius
+    /// and end points are set. (Few arguments on purpose: beyond 18 bytes
+    /// of them the AVR back end passes the rest on the stack, which it
+    /// miscompiles on the ATmega2560, see `size-check.sh`.)
+    fn cut(mut self, clockwise: bool, tolerance: f32) -> Self {
+        let (start, target, centre, radius) = (self.start, self.target, self.centre, self.radius);
         let start_angle = atan2(start[1] - centre[1], start[0] - centre[0]);
         let end_angle = atan2(target[1] - centre[1], target[0] - centre[0]);
         let mut sweep = end_angle - start_angle;
@@ -103,7 +163,10 @@ impl ArcCutter {
         let chords = (sweep.abs() * radius / chord).max(1.0);
         // Round up, saturating far beyond any real arc.
         let chords = (chords.min(1.0e6) as u32 + 1).min(1_000_000);
-        Self { centre, radius, start_angle, sweep, start, target, chords, done: 0 }
+        self.start_angle = start_angle;
+        self.sweep = sweep;
+        self.chords = chords;
+        self
     }
 
     /// Chords in this arc.
@@ -134,16 +197,16 @@ impl Iterator for ArcCutter {
         }
         self.done += 1;
         if self.done == self.chords {
-            return Some(self.target);
+            return Some(self.exact_target);
         }
         let fraction = self.done as f32 / self.chords as f32;
         let (sin, cos) = sin_cos(self.start_angle + self.sweep * fraction);
-        Some([
+        Some(self.plane.from_frame([
             self.centre[0] + self.radius * cos,
             self.centre[1] + self.radius * sin,
             self.start[2] + (self.target[2] - self.start[2]) * fraction,
             self.start[3] + (self.target[3] - self.start[3]) * fraction,
-        ])
+        ]))
     }
 }
 
@@ -159,7 +222,7 @@ mod tests {
     #[test]
     fn quarter_circle_clockwise_with_centre() {
         // (0,10) → (10,0) around the origin, clockwise: a quarter turn.
-        let arc = ArcCutter::with_centre([0.0, 10.0, 0.0, 0.0], [10.0, 0.0, 2.0, 1.0], [0.0, -10.0], true, 0.002).unwrap();
+        let arc = ArcCutter::with_centre(Plane::Xy, [0.0, 10.0, 0.0, 0.0], [10.0, 0.0, 2.0, 1.0], [0.0, -10.0], true, 0.002).unwrap();
         assert!((arc.sweep() + PI / 2.0).abs() < 1e-5);
         let chords = arc.chords();
         let points: Vec<Point> = arc.clone().collect();
@@ -180,7 +243,7 @@ mod tests {
 
     #[test]
     fn full_circle_when_end_equals_start() {
-        let arc = ArcCutter::with_centre([10.0, 0.0, 0.0, 0.0], [10.0, 0.0, 0.0, 0.0], [-10.0, 0.0], false, 0.01).unwrap();
+        let arc = ArcCutter::with_centre(Plane::Xy, [10.0, 0.0, 0.0, 0.0], [10.0, 0.0, 0.0, 0.0], [-10.0, 0.0], false, 0.01).unwrap();
         assert!((arc.sweep() - 2.0 * PI).abs() < 1e-5);
         let points: Vec<Point> = arc.collect();
         // Counter-clockwise from (10, 0): first points have y > 0.
@@ -194,29 +257,61 @@ mod tests {
         let target = [10.0, 0.0, 0.0, 0.0];
         // R 10 clockwise from (0,0) to (10,0): the short arc bulges to +Y,
         // centre below the chord.
-        let arc = ArcCutter::with_radius(start, target, 10.0, true, 0.002).unwrap();
+        let arc = ArcCutter::with_radius(Plane::Xy, start, target, 10.0, true, 0.002).unwrap();
         assert!((arc.centre()[0] - 5.0).abs() < 1e-5 && arc.centre()[1] < 0.0);
         assert!(arc.sweep() < 0.0 && arc.sweep() > -PI);
         let mid = arc.clone().nth(arc.chords() as usize / 2).unwrap();
         assert!(mid[1] > 0.0);
         // R −10: the long way round.
-        let long = ArcCutter::with_radius(start, target, -10.0, true, 0.002).unwrap();
+        let long = ArcCutter::with_radius(Plane::Xy, start, target, -10.0, true, 0.002).unwrap();
         assert!(long.sweep() < -PI);
         assert!(long.centre()[1] > 0.0);
         // Counter-clockwise short arc bulges to −Y.
-        let ccw = ArcCutter::with_radius(start, target, 10.0, false, 0.002).unwrap();
+        let ccw = ArcCutter::with_radius(Plane::Xy, start, target, 10.0, false, 0.002).unwrap();
         let mid = ccw.clone().nth(ccw.chords() as usize / 2).unwrap();
         assert!(mid[1] < 0.0);
-        assert_eq!(ArcCutter::with_radius(start, target, 4.0, true, 0.002), Err(ArcError::RadiusTooSmall));
-        assert_eq!(ArcCutter::with_radius(start, start, 4.0, true, 0.002), Err(ArcError::RadiusTooSmall));
+        assert_eq!(ArcCutter::with_radius(Plane::Xy, start, target, 4.0, true, 0.002), Err(ArcError::RadiusTooSmall));
+        assert_eq!(ArcCutter::with_radius(Plane::Xy, start, start, 4.0, true, 0.002), Err(ArcError::RadiusTooSmall));
     }
 
     #[test]
     fn mismatched_radii_and_zero_radius_are_refused() {
         let start = [0.0, 10.0, 0.0, 0.0];
-        assert_eq!(ArcCutter::with_centre(start, [11.0, 0.0, 0.0, 0.0], [0.0, -10.0], true, 0.002), Err(ArcError::RadiusMismatch));
-        assert_eq!(ArcCutter::with_centre(start, [10.0, 0.0, 0.0, 0.0], [0.0, 0.0], true, 0.002), Err(ArcError::ZeroRadius));
+        assert_eq!(ArcCutter::with_centre(Plane::Xy, start, [11.0, 0.0, 0.0, 0.0], [0.0, -10.0], true, 0.002), Err(ArcError::RadiusMismatch));
+        assert_eq!(ArcCutter::with_centre(Plane::Xy, start, [10.0, 0.0, 0.0, 0.0], [0.0, 0.0], true, 0.002), Err(ArcError::ZeroRadius));
         // Within 0.1 % of the radius is accepted (slicer rounding).
-        assert!(ArcCutter::with_centre(start, [10.008, 0.0, 0.0, 0.0], [0.0, -10.0], true, 0.002).is_ok());
+        assert!(ArcCutter::with_centre(Plane::Xy, start, [10.008, 0.0, 0.0, 0.0], [0.0, -10.0], true, 0.002).is_ok());
+    }
+
+    /// G18: the arc turns in Z and X, the helix runs along Y; clockwise
+    /// seen from +Y. From (X0, Z10) around the origin to (X10, Z0): in the
+    /// (Z, X) frame that is (10, 0) → (0, 10), a quarter turn
+    /// counter-clockwise, so G2 goes the long way (three quarters).
+    #[test]
+    fn a_g18_arc_turns_in_z_and_x_and_ends_exactly() {
+        let start = [0.0, 0.0, 10.0, 0.0];
+        let target = [10.0, 5.0, 0.0, 0.0];
+        let ccw = ArcCutter::with_centre(Plane::Zx, start, target, [-10.0, 0.0], false, 0.002).unwrap();
+        assert!((ccw.sweep() - PI / 2.0).abs() < 1e-5, "{}", ccw.sweep());
+        let points: Vec<Point> = ccw.collect();
+        assert_eq!(*points.last().unwrap(), target);
+        for p in &points {
+            assert!(((p[0] * p[0] + p[2] * p[2]).sqrt() - 10.0).abs() < 1e-4, "{p:?}");
+            assert!(p[1] >= 0.0 && p[1] <= 5.0, "Y is the helix axis: {p:?}");
+        }
+        let cw = ArcCutter::with_centre(Plane::Zx, start, target, [-10.0, 0.0], true, 0.002).unwrap();
+        assert!((cw.sweep() + 1.5 * PI).abs() < 1e-5, "{}", cw.sweep());
+    }
+
+    /// G19: Y and Z, helix along X.
+    #[test]
+    fn a_g19_arc_turns_in_y_and_z() {
+        let arc = ArcCutter::with_radius(Plane::Yz, [3.0, 0.0, 0.0, 0.0], [3.0, 10.0, 0.0, 0.0], 5.0, false, 0.002).unwrap();
+        let points: Vec<Point> = arc.collect();
+        assert!(points.iter().all(|p| p[0] == 3.0));
+        let mid = points[points.len() / 2];
+        // Counter-clockwise from +X: from (Y0, Z0) to (Y10, Z0) the short
+        // way passes below, through Z -5.
+        assert!((mid[1] - 5.0).abs() < 0.5 && (mid[2] + 5.0).abs() < 0.1, "{mid:?}");
     }
 }

@@ -81,7 +81,7 @@
 //!   `M203`, `M204`, `M205 J`; they apply to moves accepted after the
 //!   change (blocks already planned keep their speeds). Errors (`Unreachable`, `OutsideSoftLimits`,
 //!   `NotHomed`) mean nothing moved: answer `Error:` and keep the position.
-//! - `G2`/`G3`: `motion.arc_to(target_um, ArcCentre::Offset([i, j]) or
+//! - `G2`/`G3`: `motion.arc_to(plane, target_um, ArcCentre::Offset([i, j]) or
 //!   ArcCentre::Radius(r), clockwise, feed_um_per_s)`, all µm.
 //! - `G28 [X][Y][Z]`: `motion.home(mask)` (bit i: motor i; 0 = all), then
 //!   wait (busy keep-alive) until `!motion.is_homing()`; `take_error()` tells
@@ -115,6 +115,7 @@ pub mod stepper;
 mod tests;
 
 use arc::{ArcCutter, ArcError};
+pub use arc::Plane;
 use homing::{AxisHoming, Homing, HomingConfig, HomingStep};
 #[cfg(feature = "arm")]
 use kinematics::Arm;
@@ -662,16 +663,16 @@ impl<'q> Motion<'q> {
 
     /// `G2` (clockwise) / `G3` to a machine position (µm) around a centre.
     #[inline(never)]
-    pub fn arc_to(&mut self, target_um: [i32; MOTORS], centre: ArcCentre, clockwise: bool, feed_um_per_s: i32) -> Result<(), MotionError> {
+    pub fn arc_to(&mut self, plane: Plane, target_um: [i32; MOTORS], centre: ArcCentre, clockwise: bool, feed_um_per_s: i32) -> Result<(), MotionError> {
         let target = target_um.map(|um| um as f32 / 1000.0);
         self.check_accepting()?;
         self.check_target(target)?;
         let tolerance = self.config.arc_tolerance;
         let arc = match centre {
             ArcCentre::Offset([i, j]) => {
-                ArcCutter::with_centre(self.position, target, [i as f32 / 1000.0, j as f32 / 1000.0], clockwise, tolerance)
+                ArcCutter::with_centre(plane, self.position, target, [i as f32 / 1000.0, j as f32 / 1000.0], clockwise, tolerance)
             }
-            ArcCentre::Radius(r) => ArcCutter::with_radius(self.position, target, r as f32 / 1000.0, clockwise, tolerance),
+            ArcCentre::Radius(r) => ArcCutter::with_radius(plane, self.position, target, r as f32 / 1000.0, clockwise, tolerance),
         }
         .map_err(MotionError::Arc)?;
         let feed = feed_um_per_s as f32 / 1000.0 * self.config.feed_factor;

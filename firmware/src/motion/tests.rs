@@ -73,7 +73,7 @@ impl Rig {
             }
             let result = match command {
                 Command::Line(target, feed) => self.motion.line_to(target.map(um), um(feed)),
-                Command::Arc(target, centre, clockwise, feed) => self.motion.arc_to(target.map(um), centre, clockwise, um(feed)),
+                Command::Arc(target, centre, clockwise, feed) => self.motion.arc_to(crate::motion::Plane::Xy, target.map(um), centre, clockwise, um(feed)),
                 Command::Home(mask) => self.motion.home(mask),
             };
             self.commands.pop_front();
