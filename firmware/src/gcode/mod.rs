@@ -16,7 +16,9 @@
 //!   coordinates, cancels, spindle and coolant) go into
 //!   [`Command::settings`], applied before the command; the one code that
 //!   acts (a motion, `G28`, `G92`, `M2`, …) is the command. A line of only
-//!   `%` (a CAM program's start/end marker) is empty.
+//!   `%` (a CAM program's start/end marker) is empty. `G53` (this line's
+//!   move in machine coordinates) travels the same way, though it holds for
+//!   its own line only.
 //!
 //! Line numbers (`N`) and checksums (`*`) belong to the host protocol and are
 //! removed by [`crate::protocol`] before this parser sees the line.
@@ -62,7 +64,7 @@ pub enum ParseError {
 /// and coolant): several may share a line with one command.
 pub fn is_mode_setting(code: Code) -> bool {
     match code {
-        Code::G(n) => matches!(n, 17..=21 | 40 | 49 | 54..=59 | 61 | 64 | 80 | 90 | 91 | 93 | 94),
+        Code::G(n) => matches!(n, 17..=21 | 40 | 49 | 53..=59 | 61 | 64 | 80 | 90 | 91 | 93 | 94),
         Code::M(n) => matches!(n, 3..=5 | 7..=9),
         _ => false,
     }

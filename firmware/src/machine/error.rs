@@ -29,6 +29,8 @@ pub enum CommandError {
     /// A mode this firmware does not run (`G55`, `G93`); moves wait until
     /// the supported one is back.
     UnsupportedMode(Code),
+    /// `G53` with an arc (Grbl: machine coordinates for `G0`/`G1` only).
+    MachineFrameArc,
 }
 
 impl From<ParseError> for CommandError {
@@ -51,6 +53,7 @@ impl CommandError {
             Self::PositionLost => crate::flash_str!("Position unknown after a motion stop: home with G28 first").write_to(out),
             Self::NotThisMachine => crate::flash_str!("Not available on this machine").write_to(out),
             Self::UnsupportedMode(code) => write_unsupported_mode(code, out),
+            Self::MachineFrameArc => crate::flash_str!("G53 moves with G0 or G1 only").write_to(out),
         }?;
         out.write_str("\n")
     }

@@ -454,10 +454,13 @@ impl<'q> Machine<'q> {
                 return Ok(Outcome::Failed(CommandError::Halted));
             }
             if let Err(error) = self.apply_setting(code, out)? {
+                self.modal.machine_frame = false;
                 return Ok(Outcome::Failed(error));
             }
         }
-        self.dispatch(&command, text, now_ms, storage, out)
+        let outcome = self.dispatch(&command, text, now_ms, storage, out);
+        self.modal.machine_frame = false;
+        outcome
     }
 
     /// A code that only sets a mode (`gcode::is_mode_setting`), alone or
@@ -469,6 +472,8 @@ impl<'q> Machine<'q> {
             Code::G(17) => modal.plane = Plane::Xy,
             Code::G(18) => modal.plane = Plane::Zx,
             Code::G(19) => modal.plane = Plane::Yz,
+            // This line's move in machine coordinates (G0/G1 only, Grbl).
+            Code::G(53) => modal.machine_frame = true,
             Code::G(20) => modal.units = Units::Inches,
             Code::G(21) => modal.units = Units::Millimetres,
             Code::G(90) => self.set_distance(Distance::Absolute),
@@ -697,7 +702,7 @@ impl<'q> Machine<'q> {
 /// are echoed as unknown.
 fn is_known(code: Code) -> bool {
     match code {
-        Code::G(n) => matches!(n, 0..=4 | 10 | 11 | 17..=21 | 28 | 40 | 49 | 54..=59 | 61 | 64 | 80 | 90..=94),
+        Code::G(n) => matches!(n, 0..=4 | 10 | 11 | 17..=21 | 28 | 40 | 49 | 53..=59 | 61 | 64 | 80 | 90..=94),
         Code::M(n) => matches!(
             n,
             2..=5 | 7..=9 | 30 | 17 | 18 | 82..=84 | 92 | 104..=110 | 112 | 114..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221 | 301..=304 | 400 | 410

@@ -74,6 +74,9 @@ pub struct ModalState {
     /// is switched back (`G54`, `G94`) or the program ends (`M2`/`M30`),
     /// so no move runs in a mode other than the one the program meant.
     pub unsupported: Option<Code>,
+    /// `G53` on the line being executed: its target is in machine
+    /// coordinates (no `G92` shift) and absolute. Cleared after the line.
+    pub machine_frame: bool,
 }
 
 pub use crate::motion::Plane;
@@ -96,6 +99,7 @@ impl ModalState {
             offset: [0; AXES],
             plane: Plane::Xy,
             unsupported: None,
+            machine_frame: false,
         }
     }
 
@@ -149,6 +153,7 @@ impl ModalState {
             let um = self.length_um(letter, value)?;
             let distance = if letter == b'E' { self.extruder_distance } else { self.distance };
             let machine = match distance {
+                _ if self.machine_frame && letter != b'E' => i64::from(um),
                 Distance::Absolute => i64::from(um) - i64::from(self.offset[axis]),
                 Distance::Relative => i64::from(self.position[axis]) + i64::from(um),
             };

@@ -182,6 +182,9 @@ impl<'q> Machine<'q> {
         command: &Command,
         out: &mut W,
     ) -> Result<(), CommandError> {
+        if self.modal.machine_frame {
+            return Err(CommandError::MachineFrameArc);
+        }
         let clockwise = match command.code {
             Code::G(2) => true,
             Code::G(3) => false,

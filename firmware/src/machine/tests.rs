@@ -393,3 +393,19 @@ fn m2_and_m30_end_the_program_and_restore_the_default_modes() {
     assert_eq!(machine.modal().unsupported, None);
     assert_eq!(converse(&mut machine, 0, "M2\n"), "ok\n");
 }
+
+/// G53: this line's target in machine coordinates, whatever G92 shifted
+/// or G91 set; the next line is back in the program's frame.
+#[test]
+fn g53_moves_in_machine_coordinates_for_its_own_line() {
+    let mut machine = new_machine();
+    assert_eq!(converse(&mut machine, 0, "G1 X20 Z5 F600\nG92 X0 Z0\nG91\n"), "ok\nok\nok\n");
+    assert_eq!(converse(&mut machine, 0, "G53 G0 Z10\n"), "ok\n");
+    assert_eq!(machine.modal().position[..3], [20_000, 0, 10_000]);
+    assert_eq!(machine.modal().logical_position()[..3], [0, 0, 5_000]);
+    // Back to relative, shifted coordinates.
+    assert_eq!(converse(&mut machine, 0, "G0 Z1\n"), "ok\n");
+    assert_eq!(machine.modal().position[2], 11_000);
+    assert_eq!(converse(&mut machine, 0, "G53 G2 X1 I1\n"), "Error:G53 moves with G0 or G1 only\nok\n");
+    assert_eq!(machine.modal().position[..3], [20_000, 0, 11_000]);
+}
