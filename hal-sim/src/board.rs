@@ -71,6 +71,24 @@ pub struct SimBoard {
     rx: SimRx,
     now_ms: u32,
     output: String,
+    /// The extrusion line's two velocity step timers, when the machine is
+    /// the line ([`SimBoard::extrusion_line`]).
+    pub line: Option<LineTimersSim>,
+}
+
+/// The extrusion line's step timers as the Mega runs them (Timer5 compare
+/// A: the screw, B: the puller): each the interrupt's own copy of the
+/// firmware's velocity stepper, following the model after every ramp
+/// update, with its rising STEP edges counted.
+#[derive(Clone, Debug, Default)]
+pub struct LineTimersSim {
+    pub isr: [firmware::machines::velocity::VelocityStepper; 2],
+    /// Timer tick of each timer's next compare (`None`: stopped).
+    next_edge: [Option<u64>; 2],
+    /// Rising STEP edges per motor (screw, puller).
+    pub steps: [u64; 2],
+    /// Ticks of the last rising edge of each (for speed measurements).
+    pub last_rise: [u64; 2],
 }
 
 struct SimRx {
@@ -149,9 +167,22 @@ impl SimBoard {
             rx: SimRx { consumer, dropped: 0, emergencies: Pending::NONE },
             now_ms: 0,
             output: String::new(),
+            line: None,
         };
         let _ = board.link.machine.write_banner(&mut Output(&mut board.output));
         let _ = board.link.machine.load_settings(&mut board.eeprom, &mut Output(&mut board.output));
+        board
+    }
+
+    /// A booted extrusion line (SPEC §4): the barrel plant of SPEC §4 on
+    /// heater 0 read through its 4.8 kΩ divider, the screw and the puller
+    /// on velocity step timers. The banner has been read.
+    pub fn extrusion_line() -> Self {
+        let mut board = Self::new();
+        board.link.machine.become_extrusion_line();
+        board.hotend_plant = HeaterPlant::new(PlantModel::BARREL_PUBLISHED);
+        board.line = Some(LineTimersSim::default());
+        board.take_output();
         board
     }
 
@@ -190,12 +221,54 @@ impl SimBoard {
                 _ => {}
             }
             let _ = self.link.service(&mut self.rx, &mut self.eeprom, self.now_ms, &mut out);
+            if self.line.is_some() {
+                let Ok(timers) = self.link.machine.poll_line(self.now_ms, &mut out);
+                self.apply_line_timers(timers);
+            }
             if self.link.machine.is_halted() {
                 self.generator.halt(StepFault::Stopped);
             }
             self.run_heaters();
             self.now_ms = self.now_ms.wrapping_add(1);
-            self.run_steps_until(u64::from(self.now_ms) * u64::from(stepper::TIMER_HZ / 1000));
+            let tick = u64::from(self.now_ms) * u64::from(stepper::TIMER_HZ / 1000);
+            self.run_line_until(tick);
+            self.run_steps_until(tick);
+        }
+    }
+
+    /// The board's part of [`Machine::poll_line`]: the timers' copies
+    /// follow the models; a start arms the compare, a stop disarms it.
+    fn apply_line_timers(&mut self, timers: firmware::machine::line::LineTimers) {
+        use firmware::machines::velocity::TimerChange;
+        let Some(line) = self.line.as_mut() else { return };
+        let Some(model) = self.link.machine.extrusion_line() else { return };
+        let now = self.steps.now;
+        for (index, (change, model)) in [(timers.screw, &model.extruder), (timers.puller, &model.puller)].into_iter().enumerate() {
+            line.isr[index].follow(model);
+            match change {
+                TimerChange::Start { first_ticks } => line.next_edge[index] = Some(now + u64::from(first_ticks)),
+                TimerChange::Stop => line.next_edge[index] = None,
+                TimerChange::None => {}
+            }
+        }
+    }
+
+    /// The two compare interrupts of the line's step timers up to `tick`.
+    fn run_line_until(&mut self, tick: u64) {
+        let Some(line) = self.line.as_mut() else { return };
+        for index in 0..2 {
+            while let Some(at) = line.next_edge[index].filter(|&at| at <= tick) {
+                match line.isr[index].on_timer() {
+                    Some(edge) => {
+                        if edge.step_high {
+                            line.steps[index] += 1;
+                            line.last_rise[index] = at;
+                        }
+                        line.next_edge[index] = Some(at + u64::from(edge.next_ticks));
+                    }
+                    None => line.next_edge[index] = None,
+                }
+            }
         }
     }
 
@@ -209,14 +282,16 @@ impl SimBoard {
             self.bed_plant.step(f64::from(bed) / 255.0);
         }
         if self.now_ms % 100 == 0 {
-            let read = |sensor: Thermistor, plant: &HeaterPlant| {
+            // The line's barrel thermistor has SPEC §4's 4.8 kΩ pull-up.
+            let hotend_circuit = if self.line.is_some() { ThermistorCircuit::SPEC_4K8 } else { ThermistorCircuit::RAMPS };
+            let read = |sensor: Thermistor, plant: &HeaterPlant, circuit: ThermistorCircuit| {
                 Oversampled(match sensor {
-                    Thermistor::Plant => (ThermistorCircuit::RAMPS.adc(plant.temperature_c()) * 16.0).round() as u16,
+                    Thermistor::Plant => (circuit.adc(plant.temperature_c()) * 16.0).round() as u16,
                     Thermistor::Count(count) => count.min(1023) * 16,
                 })
             };
-            let hotend = read(self.hotend_sensor, &self.hotend_plant);
-            let bed = read(self.bed_sensor, &self.bed_plant);
+            let hotend = read(self.hotend_sensor, &self.hotend_plant, hotend_circuit);
+            let bed = read(self.bed_sensor, &self.bed_plant, ThermistorCircuit::RAMPS);
             let _ = self.link.machine.on_thermal_samples(Some(hotend), Some(bed), &mut Output(&mut self.output));
         }
     }

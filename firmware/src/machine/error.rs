@@ -31,6 +31,8 @@ pub enum CommandError {
     UnsupportedMode(Code),
     /// `G53` with an arc (Grbl: machine coordinates for `G0`/`G1` only).
     MachineFrameArc,
+    /// A diameter PI gain above zero (the loop is reverse acting).
+    DiameterGainSign,
 }
 
 impl From<ParseError> for CommandError {
@@ -54,6 +56,7 @@ impl CommandError {
             Self::NotThisMachine => crate::flash_str!("Not available on this machine").write_to(out),
             Self::UnsupportedMode(code) => write_unsupported_mode(code, out),
             Self::MachineFrameArc => crate::flash_str!("G53 moves with G0 or G1 only").write_to(out),
+            Self::DiameterGainSign => crate::flash_str!("Diameter gains must be <= 0 (reverse acting)").write_to(out),
         }?;
         out.write_str("\n")
     }

@@ -20,6 +20,8 @@ pub mod error;
 pub mod modal;
 mod motion_commands;
 mod thermal;
+#[cfg(feature = "extrusion-line")]
+pub mod line;
 
 use crate::gcode::{self, Code, Command, ParseError};
 use crate::motion::{Motion, MotionConfig, StepFeeder};
@@ -108,6 +110,10 @@ pub struct Machine<'q> {
     position_lost: bool,
     /// The machine's own defaults (`M502`, and when no stored image loads).
     defaults: Settings,
+    /// The extrusion line's state, when this machine is one
+    /// ([`Machine::become_extrusion_line`]).
+    #[cfg(feature = "extrusion-line")]
+    line: Option<line::LineState>,
 }
 
 /// How one M-code changes the settings (`M92`, `M201`, …).
@@ -180,6 +186,8 @@ impl<'q> Machine<'q> {
             addr_of_mut!((*p).cold_extrusion).write(ColdExtrusionGuard::HOTEND);
             addr_of_mut!((*p).position_lost).write(false);
             addr_of_mut!((*p).defaults).write(settings);
+            #[cfg(feature = "extrusion-line")]
+            addr_of_mut!((*p).line).write(None);
         }
     }
 
@@ -209,6 +217,8 @@ impl<'q> Machine<'q> {
             motion: _,
             position_lost: _,
             defaults: _,
+            #[cfg(feature = "extrusion-line")]
+            line: _,
         } = self;
     }
 
@@ -522,6 +532,13 @@ impl<'q> Machine<'q> {
         // it refuses everything that would act.
         if self.halted && is_known(command.code) && !matches!(command.code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410)) {
             return Ok(Outcome::Failed(CommandError::Halted));
+        }
+        #[cfg(feature = "extrusion-line")]
+        if let Some(result) = self.line_command(command, out)? {
+            return Ok(match result {
+                Ok(()) => Outcome::Done,
+                Err(error) => Outcome::Failed(error),
+            });
         }
         let result = match command.code {
             Code::G(0 | 1) | Code::Modal => self.linear_move(command, out),

@@ -331,6 +331,22 @@ impl VelocityStepper {
         (total >> 8).clamp(1, MAX_HALF_PERIOD_TICKS) as u16
     }
 
+    /// The interrupt's own copy of a stepper takes the speed of the main
+    /// loop's `model` after an [`update`](Self::update) (inside a critical
+    /// section): speed and period always; the edge phase too when it
+    /// starts, so its first edge is the model's `TimerChange::Start`. The
+    /// step count and STEP level stay the interrupt's, so no edge is lost
+    /// or doubled.
+    pub fn follow(&mut self, model: &VelocityStepper) {
+        if self.half_period_q8 == 0 && model.half_period_q8 != 0 {
+            self.phase_q8 = model.phase_q8;
+            self.step_high = model.step_high;
+        }
+        self.target_mrpm = model.target_mrpm;
+        self.current_mrpm = model.current_mrpm;
+        self.half_period_q8 = model.half_period_q8;
+    }
+
     /// The compare fired (interrupt): the new STEP level and the time to
     /// the next edge; `None` once stopped (disable the interrupt).
     pub fn on_timer(&mut self) -> Option<Edge> {
