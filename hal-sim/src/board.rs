@@ -240,7 +240,7 @@ impl SimBoard {
     /// follow the models; a start arms the compare, a stop disarms it.
     fn apply_line_timers(&mut self, timers: firmware::machine::line::LineTimers) {
         use firmware::machines::velocity::TimerChange;
-        let Some(line) = self.line.as_mut() else { return };
+        let Some(line) = self.line.as_mut().filter(|_| timers.changed) else { return };
         let Some(model) = self.link.machine.extrusion_line() else { return };
         let now = self.steps.now;
         for (index, (change, model)) in [(timers.screw, &model.extruder), (timers.puller, &model.puller)].into_iter().enumerate() {

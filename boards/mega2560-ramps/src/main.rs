@@ -17,10 +17,12 @@ mod clock;
 #[cfg(feature = "display-hd44780")]
 mod display;
 mod eeprom;
+#[cfg(feature = "machine-extrusion-line")]
+mod line;
 mod pins;
 mod pwm;
 mod serial;
-#[cfg(feature = "bed-ssr")]
+#[cfg(any(feature = "bed-ssr", feature = "machine-extrusion-line"))]
 mod ssr;
 mod stepping;
 mod watchdog;
@@ -71,6 +73,11 @@ fn main() -> ! {
             _ => {}
         }
         let _ = link.service(&mut rx, &mut eeprom, now, &mut tx);
+        #[cfg(feature = "machine-extrusion-line")]
+        {
+            let Ok(timers) = link.machine.poll_line(now, &mut tx);
+            line::apply(&dp, timers, link.machine.extrusion_line());
+        }
         if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
             next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
             let [hotend, bed] = readings.take();
@@ -111,6 +118,11 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
     link.machine.use_bed_config(&firmware::thermal::channel::BED_SSR);
     #[cfg(feature = "bed-bang-bang")]
     link.machine.use_bed_config(&firmware::thermal::channel::BED_BANG_BANG);
+    #[cfg(feature = "machine-extrusion-line")]
+    {
+        link.machine.become_extrusion_line();
+        line::init(dp);
+    }
     for endstop in pins::ENDSTOPS {
         pins::make_input_pulled_up(dp, endstop);
     }
@@ -139,13 +151,21 @@ fn machine_config() -> MotionConfig {
 #[cfg(all(feature = "bed-ssr", feature = "bed-bang-bang"))]
 compile_error!("choose one bed: bed-ssr or bed-bang-bang");
 
-#[cfg(all(feature = "machine-delta", feature = "machine-arm"))]
-compile_error!("choose one machine: machine-delta or machine-arm");
+#[cfg(any(
+    all(feature = "machine-delta", feature = "machine-arm"),
+    all(feature = "machine-delta", feature = "machine-extrusion-line"),
+    all(feature = "machine-arm", feature = "machine-extrusion-line")
+))]
+compile_error!("choose one machine: machine-delta, machine-arm or machine-extrusion-line");
+
+#[cfg(all(feature = "machine-extrusion-line", any(feature = "bed-ssr", feature = "bed-bang-bang")))]
+compile_error!("the extrusion line has no bed: its SSR is the barrel's");
 
 /// What the outputs were last set to (`None`: not yet), so that the main
 /// loop writes a pin only when its value changes: each write holds the
 /// step interrupt off for a moment.
 #[derive(Default)]
+#[cfg_attr(feature = "machine-extrusion-line", allow(dead_code))]
 struct Outputs {
     drivers_enabled: Option<bool>,
     fan_duty: Option<u8>,
@@ -156,29 +176,43 @@ struct Outputs {
 fn apply_outputs(dp: &Peripherals, machine: &Machine, last: &mut Outputs) {
     if machine.is_halted() {
         stepping::halt();
-        #[cfg(feature = "bed-ssr")]
+        #[cfg(any(feature = "bed-ssr", feature = "machine-extrusion-line"))]
         ssr::stop();
+        #[cfg(feature = "machine-extrusion-line")]
+        line::stop(dp);
         pins::all_outputs_safe(dp);
         *last = Outputs { drivers_enabled: Some(false), fan_duty: Some(0), heater_duties: Some((0, 0)) };
         return;
     }
-    let enabled = machine.steppers_enabled();
-    if last.drivers_enabled != Some(enabled) {
-        pins::set_steppers_enabled(dp, enabled);
-        last.drivers_enabled = Some(enabled);
+    // The line's drivers are its own (line.rs).
+    #[cfg(not(feature = "machine-extrusion-line"))]
+    {
+        let enabled = machine.steppers_enabled();
+        if last.drivers_enabled != Some(enabled) {
+            pins::set_steppers_enabled(dp, enabled);
+            last.drivers_enabled = Some(enabled);
+        }
     }
     let fan = machine.fan_duty();
     if last.fan_duty != Some(fan) {
+        // The extrusion line's fans are on D8 (its D9 is the barrel's SSR).
+        #[cfg(not(feature = "machine-extrusion-line"))]
         pwm::set(dp, pwm::Output::Fan, fan);
+        #[cfg(feature = "machine-extrusion-line")]
+        pwm::set(dp, pwm::Output::Bed, fan);
         last.fan_duty = Some(fan);
     }
     let heaters = machine.heater_duties();
     if last.heater_duties != Some(heaters) {
+        #[cfg(not(feature = "machine-extrusion-line"))]
         pwm::set(dp, pwm::Output::Hotend, heaters.0);
-        #[cfg(not(feature = "bed-ssr"))]
+        #[cfg(not(any(feature = "bed-ssr", feature = "machine-extrusion-line")))]
         pwm::set(dp, pwm::Output::Bed, heaters.1);
         #[cfg(feature = "bed-ssr")]
         ssr::set_duty(heaters.1);
+        // The barrel is heater 0, behind its SSR on D9.
+        #[cfg(feature = "machine-extrusion-line")]
+        ssr::set_duty(heaters.0);
         last.heater_duties = Some(heaters);
     }
 }
@@ -189,6 +223,8 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
     // SAFETY: interrupts are off; nothing else runs from here on.
     let dp = unsafe { Peripherals::steal() };
     stepping::stop_timer(&dp);
+    #[cfg(feature = "machine-extrusion-line")]
+    line::stop(&dp);
     pins::all_outputs_safe(&dp);
     watchdog::stop(&dp);
     let mut tx = serial::Tx;

@@ -150,6 +150,7 @@ pub fn read(dp: &Peripherals, pin: Pin) -> bool {
 }
 
 /// Drive every stepper driver's enable (active low).
+#[cfg_attr(feature = "machine-extrusion-line", allow(dead_code))]
 pub fn set_steppers_enabled(dp: &Peripherals, enabled: bool) {
     for enable in STEPPER_ENABLES {
         make_output(dp, enable, !enabled);

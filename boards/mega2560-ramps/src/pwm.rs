@@ -17,6 +17,7 @@
 use avr_device::atmega2560::Peripherals;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "machine-extrusion-line", allow(dead_code))]
 pub enum Output {
     Hotend,
     #[cfg_attr(feature = "bed-ssr", allow(dead_code))]

@@ -80,6 +80,8 @@ fn USART0_RX() {
             // registers, and interrupts are off inside this handler.
             let dp = unsafe { avr_device::atmega2560::Peripherals::steal() };
             crate::stepping::stop_timer(&dp);
+            #[cfg(feature = "machine-extrusion-line")]
+            crate::line::stop(&dp);
             crate::pins::all_outputs_safe(&dp);
         }
         let pending = EMERGENCIES.borrow(cs);

@@ -1,4 +1,6 @@
-//! The bed behind a solid-state relay (cargo feature `bed-ssr`).
+//! A heater behind a solid-state relay: the bed on D8 (cargo feature
+//! `bed-ssr`), or the extrusion line's barrel on D9
+//! (`machine-extrusion-line`).
 //!
 //! A zero-crossing SSR switches whole mains half-cycles, so a MOSFET's
 //! kilohertz PWM is useless to it: the bed's duty becomes a 200 ms
@@ -23,6 +25,12 @@ struct Window {
     duty: u8,
     running: bool,
 }
+
+/// The relay's pin.
+#[cfg(not(feature = "machine-extrusion-line"))]
+const PIN: crate::pins::Pin = crate::pins::BED;
+#[cfg(feature = "machine-extrusion-line")]
+const PIN: crate::pins::Pin = crate::pins::FAN;
 
 static BED: Mutex<Cell<Window>> = Mutex::new(Cell::new(Window { pwm: SlowPwm::new(), duty: 0, running: false }));
 
@@ -49,5 +57,5 @@ pub fn on_tick(dp: &Peripherals, cs: CriticalSection, now_ms: u32) {
     }
     let level = window.pwm.level(&TimeProportioning::SSR, now_ms, window.duty);
     cell.set(window);
-    crate::pins::make_output_in(dp, cs, crate::pins::BED, level);
+    crate::pins::make_output_in(dp, cs, PIN, level);
 }

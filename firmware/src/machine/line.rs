@@ -62,10 +62,13 @@ pub struct LineState {
 pub struct LineTimers {
     pub screw: TimerChange,
     pub puller: TimerChange,
+    /// The models changed this pass (a ramp update, a stop, a halt): only
+    /// then must the interrupts' copies follow them.
+    pub changed: bool,
 }
 
 impl LineTimers {
-    pub const NONE: LineTimers = LineTimers { screw: TimerChange::None, puller: TimerChange::None };
+    pub const NONE: LineTimers = LineTimers { screw: TimerChange::None, puller: TimerChange::None, changed: false };
 }
 
 /// `S10.5` rpm → milli-rpm.
@@ -115,13 +118,13 @@ impl Machine<'_> {
         let Some(state) = self.line.as_mut() else { return Ok(LineTimers::NONE) };
         if halted {
             let (screw, puller) = state.line.halt();
-            return Ok(LineTimers { screw, puller });
+            return Ok(LineTimers { screw, puller, changed: true });
         }
         let mut timers = LineTimers::NONE;
         if now_ms.wrapping_sub(state.next_ramp_ms) < u32::MAX / 2 {
             state.next_ramp_ms = now_ms.wrapping_add(RAMP_PERIOD_MS);
             let (screw, puller) = state.line.update(&LINE_CONFIG);
-            timers = LineTimers { screw, puller };
+            timers = LineTimers { screw, puller, changed: true };
         }
         if now_ms.wrapping_sub(state.next_second_ms) < u32::MAX / 2 {
             state.next_second_ms = state.next_second_ms.wrapping_add(1000);
@@ -132,6 +135,7 @@ impl Machine<'_> {
             if let Some(cold) = report.screw_stopped {
                 cold.write_stopped(out)?;
                 timers.screw = TimerChange::Stop;
+                timers.changed = true;
             }
         }
         Ok(timers)
@@ -144,7 +148,8 @@ impl Machine<'_> {
         let Some(state) = self.line.as_mut() else { return Ok(None) };
         let line = &mut state.line;
         let result = match command.code {
-            Code::G(0..=3 | 28 | 92) | Code::Modal => Err(CommandError::NotThisMachine),
+            // No planner moves, and the drivers are the line's own.
+            Code::G(0..=3 | 28 | 92) | Code::Modal | Code::M(17 | 18 | 84) => Err(CommandError::NotThisMachine),
             Code::M(3) => match required(command, b'S').and_then(|value| mrpm(value, b'S')) {
                 Err(error) => Err(error),
                 Ok(speed) => match line.set_screw(&LINE_CONFIG, speed, &reading) {
@@ -166,9 +171,9 @@ impl Machine<'_> {
                 let speed = required(command, b'S').and_then(|value| mrpm(value, b'S'));
                 match speed.and_then(|speed| line.set_puller_manual(&LINE_CONFIG, speed).map(|()| speed).map_err(speed_error)) {
                     Ok(speed) => {
-                        out.write_str("echo:Puller manual ")?;
+                        crate::flash_str!("echo:Puller manual ").write_to(out)?;
                         write_milli(out, speed)?;
-                        out.write_str(" rpm\n")?;
+                        crate::flash_str!(" rpm\n").write_to(out)?;
                         Ok(())
                     }
                     Err(error) => Err(error),
@@ -178,14 +183,14 @@ impl Machine<'_> {
             Code::M(404) => set_point(line, command, out)?,
             Code::M(405) => {
                 line.set_automatic(&LINE_CONFIG, true);
-                out.write_str("echo:Diameter control on\n")?;
+                crate::flash_str!("echo:Diameter control on\n").write_to(out)?;
                 Ok(())
             }
             Code::M(406) => {
                 line.set_automatic(&LINE_CONFIG, false);
-                out.write_str("echo:Diameter control off, puller ")?;
+                crate::flash_str!("echo:Diameter control off, puller ").write_to(out)?;
                 write_milli(out, line.puller.current_mrpm())?;
-                out.write_str(" rpm\n")?;
+                crate::flash_str!(" rpm\n").write_to(out)?;
                 Ok(())
             }
             Code::M(407) => {
@@ -198,7 +203,8 @@ impl Machine<'_> {
                 Ok(value) => match value.to_int() {
                     Some(seconds @ 1..=255) => {
                         line.diameter.set_stale_after(seconds as u8);
-                        ufmt::uwrite!(out, "echo:Diameter watchdog {} s\n", seconds)?;
+                        crate::flash_str!("echo:Diameter watchdog ").write_to(out)?;
+                        ufmt::uwrite!(out, "{} s\n", seconds)?;
                         Ok(())
                     }
                     _ => Err(CommandError::OutOfRange(b'S')),
@@ -206,7 +212,7 @@ impl Machine<'_> {
             },
             Code::M(115) => {
                 super::write_capabilities(out)?;
-                out.write_str("Cap:EXTRUSION_LINE:1\n")?;
+                crate::flash_str!("Cap:EXTRUSION_LINE:1\n").write_to(out)?;
                 Ok(())
             }
             _ => return Ok(None),
@@ -246,7 +252,7 @@ fn set_point<W: uWrite + ?Sized>(line: &mut ExtrusionLine<ClosedLoopPi>, command
     })();
     if result.is_ok() {
         let settings = *line.diameter.settings();
-        out.write_str("echo:Diameter setpoint ")?;
+        crate::flash_str!("echo:Diameter setpoint ").write_to(out)?;
         write_mm_px(out, &settings, u32::from(settings.setpoint_cpx))?;
         out.write_str("\n")?;
     }
@@ -268,7 +274,7 @@ fn gains<W: uWrite + ?Sized>(line: &mut ExtrusionLine<ClosedLoopPi>, command: &C
     })();
     if result.is_ok() {
         let (kp, ki) = line.diameter.gains();
-        out.write_str("echo:Diameter PI Kp:")?;
+        crate::flash_str!("echo:Diameter PI Kp:").write_to(out)?;
         write_signed_ten_thousandths(out, kp)?;
         out.write_str(" Ki:")?;
         write_signed_ten_thousandths(out, ki)?;

@@ -133,9 +133,11 @@ impl DiameterWarning {
     pub fn write<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         match *self {
             DiameterWarning::Stale { seconds, held_mrpm } => {
-                ufmt::uwrite!(out, "echo:Diameter measurement stale ({} s), puller held at ", seconds)?;
+                crate::flash_str!("echo:Diameter measurement stale (").write_to(out)?;
+                ufmt::uwrite!(out, "{}", seconds)?;
+                crate::flash_str!(" s), puller held at ").write_to(out)?;
                 write_milli(out, held_mrpm)?;
-                out.write_str(" rpm\n")
+                crate::flash_str!(" rpm\n").write_to(out)
             }
         }
     }

@@ -34,12 +34,20 @@ pub struct ColdExtrusion {
 impl ColdExtrusion {
     /// `Error:Cold extrusion prevented: barrel 24.00 C, minimum 175.00 C (M302 P1 overrides)`
     pub fn write_refused<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "Error:Cold extrusion prevented: barrel {} C, minimum {} C (M302 P1 overrides)\n", self.measured, self.minimum)
+        crate::flash_str!("Error:Cold extrusion prevented: barrel ").write_to(out)?;
+        ufmt::uwrite!(out, "{}", self.measured)?;
+        crate::flash_str!(" C, minimum ").write_to(out)?;
+        ufmt::uwrite!(out, "{}", self.minimum)?;
+        crate::flash_str!(" C (M302 P1 overrides)\n").write_to(out)
     }
 
     /// `Error:Barrel cooled to 170.00 C (minimum 175.00 C): screw stopped`
     pub fn write_stopped<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "Error:Barrel cooled to {} C (minimum {} C): screw stopped\n", self.measured, self.minimum)
+        crate::flash_str!("Error:Barrel cooled to ").write_to(out)?;
+        ufmt::uwrite!(out, "{}", self.measured)?;
+        crate::flash_str!(" C (minimum ").write_to(out)?;
+        ufmt::uwrite!(out, "{}", self.minimum)?;
+        crate::flash_str!(" C): screw stopped\n").write_to(out)
     }
 }
 
@@ -169,14 +177,14 @@ impl<P: PiLaw> ExtrusionLine<P> {
     /// (`no measurement` before the first, `stale 7 s` when stale).
     pub fn write_report<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         let settings = self.diameter.settings();
-        out.write_str("echo:Diameter ")?;
+        crate::flash_str!("echo:Diameter ").write_to(out)?;
         match self.diameter.last_measurement_cpx() {
             Some(cpx) => write_mm_px(out, settings, u32::from(cpx))?,
-            None => out.write_str("no measurement")?,
+            None => crate::flash_str!("no measurement").write_to(out)?,
         }
-        out.write_str(" setpoint ")?;
+        crate::flash_str!(" setpoint ").write_to(out)?;
         write_mm_px(out, settings, u32::from(settings.setpoint_cpx))?;
-        out.write_str(" puller ")?;
+        crate::flash_str!(" puller ").write_to(out)?;
         super::diameter::write_milli(out, self.puller.current_mrpm())?;
         out.write_str(" rpm ")?;
         out.write_str(match self.diameter.mode() {

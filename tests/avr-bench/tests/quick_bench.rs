@@ -6,7 +6,7 @@
 //! `cargo +nightly avr` once per test process when missing or stale.
 
 use avr_bench::bench::{self, exchange, stack_budget, STATIC_RAM_BUDGET_BYTES};
-use avr_bench::board::{Board, Endstop, RampsConfig, CPU_HZ, X, Y, Z};
+use avr_bench::board::{Board, Endstop, RampsConfig, CPU_HZ, E0, X, Y, Z};
 use avr_bench::build::mega2560_elf;
 use avr_bench::elf::ElfInfo;
 use avr_bench::host::{with_checksum, Flow, HostConfig};
@@ -815,4 +815,49 @@ fn fixed_point_is_the_faster_loop_arithmetic_on_the_avr() {
     // Two closed axes at 1 kHz take under 30 % of the CPU: a tick stays
     // under 150 µs (today ≈ 113 µs; soft float ≈ 270 µs would take 54 %).
     assert!(fixed.2 < 2400.0, "{cycles:?}");
+}
+
+/// The extrusion line build (SPEC §4, `machine-extrusion-line`) on the
+/// real ELF: the screw (E0's driver) and the puller (X's) run from Timer5
+/// at exactly their set speeds, a cold barrel refuses the screw, planner
+/// moves are refused, and M112 stops both at once.
+#[test]
+fn the_extrusion_line_build_turns_its_screw_and_puller_at_their_set_speeds() {
+    let mut board = boot_variant("extrusion-line", "mega2560-ramps/machine-extrusion-line");
+    let said = replies(&mut board, &["M115"]);
+    assert!(said.iter().any(|l| l == "Cap:EXTRUSION_LINE:1"), "{said:?}");
+    let refused = replies(&mut board, &["M3 S10"]);
+    assert!(refused[0].starts_with("Error:Cold extrusion prevented: barrel "), "{refused:?}");
+    assert_eq!(replies(&mut board, &["G1 X10"]), ["Error:Not available on this machine", "ok"]);
+    board.run_for_ms(200.0);
+    assert_eq!((board.step_count(E0), board.step_count(X)), (0, 0));
+    // The override, then 10 rpm (8000 steps/s) and 4 rpm (2560 steps/s),
+    // reached by 5 rpm/s ramps within 2 s.
+    assert_eq!(replies(&mut board, &["M302 P1", "M3 S10", "M860 S4"]), ["ok", "ok", "echo:Puller manual 4.000 rpm", "ok"]);
+    board.run_for_ms(2_500.0);
+    let before = (board.step_count(E0), board.step_count(X));
+    board.run_for_ms(1_000.0);
+    let after = (board.step_count(E0), board.step_count(X));
+    println!("screw {} steps/s, puller {} steps/s", after.0 - before.0, after.1 - before.1);
+    assert!((after.0 - before.0).abs_diff(8_000) <= 2, "{before:?} {after:?}");
+    assert!((after.1 - before.1).abs_diff(2_560) <= 2, "{before:?} {after:?}");
+    // Steady to the 10 ms: a compare held off past its time is taken late,
+    // never left for the timer's 32.8 ms wrap (which once dropped whole
+    // 10 ms windows here).
+    board.clear_step_edges();
+    let start = board.cycle();
+    board.run_for_ms(3_000.0);
+    let mut per_10_ms = vec![0u32; 300];
+    for edge in board.step_edges(E0).iter().filter(|e| e.rising) {
+        if let Some(count) = per_10_ms.get_mut(((edge.cycle - start) / 160_000) as usize) {
+            *count += 1;
+        }
+    }
+    let off: Vec<(usize, u32)> = per_10_ms.iter().copied().enumerate().filter(|&(_, n)| !(79..=81).contains(&n)).collect();
+    assert!(off.is_empty(), "10 ms windows without their 80 steps: {off:?}");
+    board.send(["M112"].into_iter());
+    board.run_for_ms(20.0);
+    let stopped = (board.step_count(E0), board.step_count(X));
+    board.run_for_ms(500.0);
+    assert_eq!((board.step_count(E0), board.step_count(X)), stopped);
 }
