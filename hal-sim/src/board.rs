@@ -74,6 +74,9 @@ pub struct SimBoard {
     /// The extrusion line's two velocity step timers, when the machine is
     /// the line ([`SimBoard::extrusion_line`]).
     pub line: Option<LineTimersSim>,
+    /// The powder bed's platforms, carriage, roller and suction, when the
+    /// machine is the powder bed ([`SimBoard::powder_bed`]).
+    pub powder_bed: Option<crate::powder_bed_plant::PowderBed>,
 }
 
 /// The extrusion line's step timers as the Mega runs them (Timer5 compare
@@ -168,6 +171,7 @@ impl SimBoard {
             now_ms: 0,
             output: String::new(),
             line: None,
+            powder_bed: None,
         };
         let _ = board.link.machine.write_banner(&mut Output(&mut board.output));
         let _ = board.link.machine.load_settings(&mut board.eeprom, &mut Output(&mut board.output));
@@ -184,6 +188,48 @@ impl SimBoard {
         board.line = Some(LineTimersSim::default());
         board.take_output();
         board
+    }
+
+    /// A booted powder bed (SPEC §5): both platforms with 200 mm (40 000
+    /// steps) between their reed switches, the carriage at C−; its tick
+    /// runs every millisecond as the board's does. The banner has been read.
+    pub fn powder_bed() -> Self {
+        let mut board = Self::new();
+        board.link.machine.become_powder_bed();
+        board.powder_bed = Some(crate::powder_bed_plant::PowderBed::new(firmware::machine::powder_bed::PLATFORM, 40_000));
+        board.take_output();
+        board
+    }
+
+    /// The powder bed's millisecond: read the plant, run the firmware's
+    /// tick, drive the plant (platform step, carriage duty for 1 ms).
+    fn run_powder_bed(&mut self) {
+        use firmware::machine::powder_bed::BedInputs;
+        use firmware::machines::powder_bed::{CarriageEnd, Platform};
+        let Some(bed) = self.powder_bed.as_mut() else { return };
+        let at = bed.carriage.at();
+        let inputs = BedInputs {
+            feed_switches: bed.feed.switch_levels(),
+            build_switches: bed.build.switch_levels(),
+            at_minus: at == Some(CarriageEnd::Minus),
+            at_plus: at == Some(CarriageEnd::Plus),
+            carriage_count: bed.carriage.decoder.count(),
+            bridge_fault: false,
+        };
+        let Ok(outputs) = self.link.machine.powder_bed_tick(&inputs, &mut Output(&mut self.output));
+        for platform in [&mut bed.feed, &mut bed.build] {
+            let level = platform.driver.enable_level(outputs.platforms_enabled);
+            platform.set_enable(level);
+        }
+        if let Some((platform, direction)) = outputs.step {
+            match platform {
+                Platform::Feed => bed.feed.pulse(direction),
+                Platform::Build => bed.build.pulse(direction),
+            }
+        }
+        bed.roller_on = outputs.roller;
+        bed.suction_on = outputs.suction;
+        bed.carriage.drive(outputs.carriage_duty);
     }
 
     /// Bytes sent by the host: they arrive at the line rate (115200 baud,
@@ -225,6 +271,7 @@ impl SimBoard {
                 let Ok(timers) = self.link.machine.poll_line(self.now_ms, &mut out);
                 self.apply_line_timers(timers);
             }
+            self.run_powder_bed();
             if self.link.machine.is_halted() {
                 self.generator.halt(StepFault::Stopped);
             }

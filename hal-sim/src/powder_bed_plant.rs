@@ -215,6 +215,15 @@ impl Carriage {
         Err(StrokeFailed)
     }
 
+    /// One millisecond with the firmware's duty on the H-bridge (the
+    /// board's 1 kHz tick, when the firmware runs the loop itself).
+    pub fn drive(&mut self, duty: i32) {
+        self.plant.set_duty(duty);
+        let decoder = &mut self.decoder;
+        self.plant.advance(CARRIAGE_TICK_S, |a, b| decoder.on_edge(a, b));
+        self.time_s += CARRIAGE_TICK_S;
+    }
+
     fn tick(&mut self, position: i32) -> Result<(), StrokeFailed> {
         let duty = self.controller.tick(Reference { position, velocity: 0 }, Ok(self.decoder.count()), DriverStatus::default()).map_err(|_| StrokeFailed)?;
         self.plant.set_duty(duty);

@@ -22,6 +22,8 @@ mod motion_commands;
 mod thermal;
 #[cfg(feature = "extrusion-line")]
 pub mod line;
+#[cfg(feature = "powder-bed")]
+pub mod powder_bed;
 
 use crate::gcode::{self, Code, Command, ParseError};
 use crate::motion::{Motion, MotionConfig, StepFeeder};
@@ -68,6 +70,9 @@ enum Running {
     Autotune { slot: HeaterSlot, apply: bool, tune: Autotune },
     /// `M303` ended (its report is out): `ok` at the next poll.
     AutotuneDone,
+    /// `M880`–`M882`: the powder bed's job runs in its 1 kHz tick.
+    #[cfg(feature = "powder-bed")]
+    BedJob,
 }
 
 /// Raw endstop levels as the board reads them, one bit per switch:
@@ -114,6 +119,10 @@ pub struct Machine<'q> {
     /// ([`Machine::become_extrusion_line`]).
     #[cfg(feature = "extrusion-line")]
     line: Option<line::LineState>,
+    /// The powder bed's state, when this machine is one
+    /// ([`Machine::become_powder_bed`]).
+    #[cfg(feature = "powder-bed")]
+    powder: Option<powder_bed::BedState>,
 }
 
 /// How one M-code changes the settings (`M92`, `M201`, …).
@@ -188,6 +197,8 @@ impl<'q> Machine<'q> {
             addr_of_mut!((*p).defaults).write(settings);
             #[cfg(feature = "extrusion-line")]
             addr_of_mut!((*p).line).write(None);
+            #[cfg(feature = "powder-bed")]
+            addr_of_mut!((*p).powder).write(None);
         }
     }
 
@@ -219,6 +230,8 @@ impl<'q> Machine<'q> {
             defaults: _,
             #[cfg(feature = "extrusion-line")]
             line: _,
+            #[cfg(feature = "powder-bed")]
+            powder: _,
         } = self;
     }
 
@@ -532,6 +545,14 @@ impl<'q> Machine<'q> {
         // it refuses everything that would act.
         if self.halted && is_known(command.code) && !matches!(command.code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410)) {
             return Ok(Outcome::Failed(CommandError::Halted));
+        }
+        #[cfg(feature = "powder-bed")]
+        if let Some(result) = self.bed_command(command, out)? {
+            return Ok(match result {
+                Ok(Some(running)) => Outcome::Started(running),
+                Ok(None) => Outcome::Done,
+                Err(error) => Outcome::Failed(error),
+            });
         }
         #[cfg(feature = "extrusion-line")]
         if let Some(result) = self.line_command(command, out)? {

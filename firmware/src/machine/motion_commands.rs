@@ -142,6 +142,8 @@ impl<'q> Machine<'q> {
             Running::HeatWait { .. } => return self.heat_wait_done(now_ms, out),
             Running::Autotune { .. } => false,
             Running::AutotuneDone => true,
+            #[cfg(feature = "powder-bed")]
+            Running::BedJob => self.bed_job_done(),
         })
     }
 

@@ -1,0 +1,438 @@
+//! The powder-bed retrofit (SPEC §5) as a machine the executor runs: its
+//! G-code and its 1 kHz duties. Compiled with the `powder-bed` feature; a
+//! board makes its machine the powder bed with
+//! [`Machine::become_powder_bed`] at boot (host builds keep every machine,
+//! so hal-sim runs this one beside the printers).
+//!
+//! Once a millisecond the board reads the switches, the carriage's end
+//! sensors and its encoder count ([`BedInputs`]), calls
+//! [`Machine::powder_bed_tick`], and drives what comes back
+//! ([`BedOutputs`]): at most one platform step, the carriage H-bridge's
+//! duty, roller and suction. The routines are the core's state machines
+//! (`machines::powder_bed`); this module runs the job they belong to:
+//!
+//! | command | job | reply |
+//! |---|---|---|
+//! | `M880 [F] [B]` | travel measurement of the feed and/or build platform (none named: both) | `echo:Feed platform travel 40000 steps 200.000 mm` |
+//! | `M881 [L<mm>] [N<layers>]` | layer cycles (default 0.1 mm, 1 layer) | `echo:Layer 1 done` per layer |
+//! | `M882 S0` / `S1` | carriage to C− / C+ | `echo:Carriage at C+` |
+//! | `M3` / `M5` | roller on / off | |
+//! | `M10` / `M11` | suction on / off | |
+//! | `M104`, `M109`, `M140`, `M190` | none: this machine has no heaters | `echo:M109 ignored: this machine has no heaters` |
+//!
+//! `M880`–`M882` block like `G28` (busy keep-alives every 2 s) and end
+//! with their report and `ok`. A fault ends the job with an `Error:` line
+//! (roller and suction off, carriage braked): a switch not found, a
+//! carriage stroke whose sensor never trips within its length, a bridge
+//! fault or a following error of the carriage's servo loop. `M112` stops
+//! everything. Planner moves (`G0`–`G3`, `G28`, `G92`) are refused: the
+//! platforms and the carriage move only through these jobs.
+//!
+//! The carriage is a DC servo axis: the closed-loop module's controller
+//! (servo PID from the relay rule, in [`crate::num::Native`] arithmetic)
+//! follows a reference that runs toward the end at a constant speed; once
+//! the end sensor reads active the reference stops a little inside the
+//! sensor's zone and the axis settles there.
+
+use super::error::CommandError;
+use super::{Machine, Running};
+use crate::closed_loop::control::{AxisController, DriverStatus, FollowingErrorLimit, LoopGains, Reference};
+use crate::closed_loop::tuning::relay_ziegler_nichols;
+use crate::gcode::{Code, Command};
+use crate::machines::powder_bed::{
+    write_no_heaters, write_travel_report, CarriageEnd, LayerCommand, LayerCycle, LayerEvent, LayerSettings, Platform, PlatformAction,
+    PlatformDriver, PlatformSwitches, TravelLimits, TravelMeasurement, Vertical,
+};
+use crate::closed_loop::output::ActiveLevel;
+use ufmt::uWrite;
+
+/// The platforms' drivers (SPEC §5's M542 at 800 ppr, 200 steps/mm).
+pub const PLATFORM: PlatformDriver = PlatformDriver::M542;
+/// Reed switches: pull-up, switch to ground.
+pub const SWITCH_ACTIVE: ActiveLevel = ActiveLevel::Low;
+/// Carriage stroke speed, encoder counts per second (ours).
+pub const STROKE_COUNTS_PER_S: i32 = 2_000;
+/// A stroke gives up this far from its start without its sensor.
+pub const MAX_STROKE_COUNTS: i32 = 4_800;
+/// Where the carriage stops past the sensor's edge, counts.
+const HOLD_INSIDE_COUNTS: i32 = 20;
+/// Ticks the carriage settles at its stop before the stroke counts as done.
+const SETTLE_TICKS: u16 = 300;
+/// The carriage's loop period (the board's 1 kHz tick).
+const CARRIAGE_TICK_S: f32 = 0.001;
+
+/// What the board read this millisecond.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BedInputs {
+    /// Raw pin levels (true = high) of the reed switches, lower and upper.
+    pub feed_switches: (bool, bool),
+    pub build_switches: (bool, bool),
+    /// The carriage's end sensors, already read with their polarity.
+    pub at_minus: bool,
+    pub at_plus: bool,
+    /// The carriage's quadrature count.
+    pub carriage_count: i32,
+    /// The H-bridge reports a fault.
+    pub bridge_fault: bool,
+}
+
+/// What the board drives this millisecond.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BedOutputs {
+    /// One step of one platform (set DIR with `PLATFORM.dir_level`, then
+    /// pulse STEP on its active edge).
+    pub step: Option<(Platform, Vertical)>,
+    /// The carriage H-bridge: signed duty (±255), 0 = brake.
+    pub carriage_duty: i32,
+    pub roller: bool,
+    pub suction: bool,
+    /// Platform drivers enabled (ENA at its active level).
+    pub platforms_enabled: bool,
+}
+
+/// A carriage stroke in progress.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Stroke {
+    to: CarriageEnd,
+    /// The reference, counts × 1000 (a 1 kHz tick moves it by the speed in
+    /// counts/s exactly).
+    reference_milli: i32,
+    goal: i32,
+    /// Set once the sensor tripped: hold here, ticks left to settle.
+    hold: Option<(i32, u16)>,
+}
+
+enum StrokeResult {
+    Running(i32),
+    Arrived,
+    Failed,
+}
+
+/// The job a blocking command runs.
+#[derive(Clone, Copy, Debug)]
+enum Job {
+    Idle,
+    /// `M880`: one platform, then maybe the other.
+    Travel { platform: Platform, routine: TravelMeasurement, then_build: bool },
+    /// `M881`: the cycle's current command, its progress, layers to go.
+    Layers { command: LayerCommand, steps_left: u32, layers_left: u16 },
+    /// `M882`.
+    Carriage,
+}
+
+/// The powder bed's state inside the machine.
+#[derive(Clone, Copy, Debug)]
+pub struct BedState {
+    job: Job,
+    cycle: LayerCycle,
+    carriage: AxisController,
+    stroke: Option<Stroke>,
+    roller: bool,
+    suction: bool,
+    platforms_enabled: bool,
+    /// What the board read at the last tick (where the carriage is when a
+    /// command starts).
+    last: BedInputs,
+}
+
+impl BedState {
+    fn new() -> Self {
+        let gains = relay_ziegler_nichols(127.0, 10.0, 0.05)
+            .ok()
+            .and_then(|relay| LoopGains::servo_pid(&relay, CARRIAGE_TICK_S).ok())
+            .unwrap_or(LoopGains::OPEN_LOOP);
+        Self {
+            job: Job::Idle,
+            cycle: LayerCycle::new(LayerSettings { thickness_um: 100, suction_while_spreading: false }),
+            carriage: AxisController::new(gains, 255, FollowingErrorLimit { limit: 4_000, hold_ticks: 1_000 }),
+            stroke: None,
+            roller: false,
+            suction: false,
+            platforms_enabled: false,
+            last: BedInputs { feed_switches: (true, true), build_switches: (true, true), ..BedInputs::default() },
+        }
+    }
+
+    /// Whether a blocking job is under way.
+    pub fn is_busy(&self) -> bool {
+        !matches!(self.job, Job::Idle)
+    }
+
+    fn start_stroke(&mut self, to: CarriageEnd, count: i32) {
+        let goal = match to {
+            CarriageEnd::Plus => count + MAX_STROKE_COUNTS,
+            CarriageEnd::Minus => count - MAX_STROKE_COUNTS,
+        };
+        self.carriage.reset();
+        self.stroke = Some(Stroke { to, reference_milli: count * 1000, goal, hold: None });
+    }
+
+    /// One millisecond of the stroke.
+    fn stroke_tick(&mut self, inputs: &BedInputs) -> StrokeResult {
+        let Some(mut stroke) = self.stroke else { return StrokeResult::Failed };
+        let arrived = match stroke.to {
+            CarriageEnd::Minus => inputs.at_minus,
+            CarriageEnd::Plus => inputs.at_plus,
+        };
+        let position = match stroke.hold {
+            Some((at, 0)) => {
+                let _ = at;
+                self.stroke = None;
+                return StrokeResult::Arrived;
+            }
+            Some((at, left)) => {
+                stroke.hold = Some((at, left - 1));
+                at
+            }
+            None if arrived => {
+                let at = inputs.carriage_count + if stroke.to == CarriageEnd::Plus { HOLD_INSIDE_COUNTS } else { -HOLD_INSIDE_COUNTS };
+                stroke.hold = Some((at, SETTLE_TICKS));
+                at
+            }
+            None => {
+                let reference = stroke.reference_milli / 1000;
+                if reference == stroke.goal {
+                    // The whole stroke length and no sensor.
+                    self.stroke = None;
+                    return StrokeResult::Failed;
+                }
+                stroke.reference_milli = match stroke.to {
+                    CarriageEnd::Plus => (stroke.reference_milli + STROKE_COUNTS_PER_S).min(stroke.goal * 1000),
+                    CarriageEnd::Minus => (stroke.reference_milli - STROKE_COUNTS_PER_S).max(stroke.goal * 1000),
+                };
+                stroke.reference_milli / 1000
+            }
+        };
+        self.stroke = Some(stroke);
+        let status = DriverStatus { alarm: false, bridge_fault: inputs.bridge_fault };
+        match self.carriage.tick(Reference { position, velocity: 0 }, Ok(inputs.carriage_count), status) {
+            Ok(duty) => StrokeResult::Running(duty),
+            Err(_) => {
+                self.stroke = None;
+                StrokeResult::Failed
+            }
+        }
+    }
+
+    /// Roller, suction and carriage off (a finished or failed job).
+    fn all_off(&mut self) {
+        self.roller = false;
+        self.suction = false;
+        self.stroke = None;
+    }
+}
+
+/// The end sensor that reads active now.
+fn carriage_at(inputs: &BedInputs) -> Option<CarriageEnd> {
+    match (inputs.at_minus, inputs.at_plus) {
+        (true, false) => Some(CarriageEnd::Minus),
+        (false, true) => Some(CarriageEnd::Plus),
+        _ => None,
+    }
+}
+
+fn switches(inputs: &BedInputs, platform: Platform) -> PlatformSwitches {
+    let (lower, upper) = match platform {
+        Platform::Feed => inputs.feed_switches,
+        Platform::Build => inputs.build_switches,
+    };
+    PlatformSwitches::from_levels(lower, upper, SWITCH_ACTIVE)
+}
+
+impl Machine<'_> {
+    /// Make this machine the powder bed (the board calls it once at boot).
+    pub fn become_powder_bed(&mut self) {
+        self.powder = Some(BedState::new());
+    }
+
+    /// The powder bed's state, if this machine is one.
+    pub fn powder_bed(&self) -> Option<&BedState> {
+        self.powder.as_ref()
+    }
+
+    /// The 1 kHz duties: one tick of the running job. Reports and faults
+    /// are printed here; the command's `ok` follows at the next poll.
+    pub fn powder_bed_tick<W: uWrite + ?Sized>(&mut self, inputs: &BedInputs, out: &mut W) -> Result<BedOutputs, W::Error> {
+        let halted = self.halted;
+        let Some(bed) = self.powder.as_mut() else { return Ok(BedOutputs::default()) };
+        if halted {
+            bed.job = Job::Idle;
+            bed.all_off();
+            bed.platforms_enabled = false;
+            return Ok(BedOutputs::default());
+        }
+        bed.last = *inputs;
+        let mut outputs = BedOutputs::default();
+        match bed.job {
+            Job::Idle => {}
+            Job::Travel { platform, mut routine, then_build } => match routine.tick(&TravelLimits::DEFAULT, switches(inputs, platform)) {
+                PlatformAction::Step(direction) => {
+                    outputs.step = Some((platform, direction));
+                    bed.job = Job::Travel { platform, routine, then_build };
+                }
+                PlatformAction::Wait => bed.job = Job::Travel { platform, routine, then_build },
+                PlatformAction::Finished(_) | PlatformAction::Failed(_) => {
+                    if let Some(result) = routine.report(&PLATFORM) {
+                        write_travel_report(platform, result, out)?;
+                    }
+                    bed.job = if then_build {
+                        Job::Travel { platform: Platform::Build, routine: TravelMeasurement::new(), then_build: false }
+                    } else {
+                        Job::Idle
+                    };
+                }
+            },
+            Job::Carriage => match bed.stroke_tick(inputs) {
+                StrokeResult::Running(duty) => outputs.carriage_duty = duty,
+                StrokeResult::Arrived => {
+                    let end = if inputs.at_plus { "+" } else { "-" };
+                    ufmt::uwrite!(out, "echo:Carriage at C{}\n", end)?;
+                    bed.job = Job::Idle;
+                }
+                StrokeResult::Failed => {
+                    crate::flash_str!("Error:Carriage stroke failed (sensor not reached or servo fault)\n").write_to(out)?;
+                    bed.all_off();
+                    bed.job = Job::Idle;
+                }
+            },
+            Job::Layers { command, steps_left, layers_left } => {
+                let (next, steps_left) = match command {
+                    LayerCommand::Roller(on) => {
+                        bed.roller = on;
+                        (bed.cycle.on_event(LayerEvent::Done), 0)
+                    }
+                    LayerCommand::Suction(on) => {
+                        bed.suction = on;
+                        (bed.cycle.on_event(LayerEvent::Done), 0)
+                    }
+                    LayerCommand::MoveCarriage { to, .. } => {
+                        if bed.stroke.is_none() {
+                            bed.start_stroke(to, inputs.carriage_count);
+                        }
+                        match bed.stroke_tick(inputs) {
+                            StrokeResult::Running(duty) => {
+                                outputs.carriage_duty = duty;
+                                (command, 0)
+                            }
+                            StrokeResult::Arrived => (bed.cycle.on_event(LayerEvent::CarriageArrived(to)), 0),
+                            StrokeResult::Failed => (bed.cycle.on_event(LayerEvent::Failed), 0),
+                        }
+                    }
+                    LayerCommand::StepPlatform { platform, direction, steps } => {
+                        // A fresh command starts with its full count.
+                        let left = if steps_left == 0 { steps } else { steps_left };
+                        if left == 0 {
+                            (bed.cycle.on_event(LayerEvent::Done), 0)
+                        } else {
+                            outputs.step = Some((platform, direction));
+                            if left == 1 {
+                                (bed.cycle.on_event(LayerEvent::Done), 0)
+                            } else {
+                                (command, left - 1)
+                            }
+                        }
+                    }
+                    LayerCommand::Finished { layer } => {
+                        ufmt::uwrite!(out, "echo:Layer {} done\n", layer)?;
+                        if layers_left > 1 {
+                            bed.job = Job::Layers {
+                                command: bed.cycle.start(&PLATFORM, &PLATFORM, carriage_at(inputs)),
+                                steps_left: 0,
+                                layers_left: layers_left - 1,
+                            };
+                        } else {
+                            bed.job = Job::Idle;
+                        }
+                        return Ok(bed.outputs(outputs));
+                    }
+                    LayerCommand::Aborted(_) => {
+                        crate::flash_str!("Error:Layer cycle aborted\n").write_to(out)?;
+                        bed.all_off();
+                        bed.job = Job::Idle;
+                        return Ok(bed.outputs(outputs));
+                    }
+                };
+                bed.job = Job::Layers { command: next, steps_left, layers_left };
+            }
+        }
+        Ok(bed.outputs(outputs))
+    }
+
+    /// The powder bed's commands; `None` for a command it leaves to the
+    /// executor (reports, settings, `M112`).
+    pub(super) fn bed_command<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<Option<Result<Option<Running>, CommandError>>, W::Error> {
+        let Some(bed) = self.powder.as_mut() else { return Ok(None) };
+        let result = match command.code {
+            Code::G(0..=3 | 28 | 92) | Code::Modal => Err(CommandError::NotThisMachine),
+            Code::M(code @ (104 | 109 | 140 | 190)) => {
+                write_no_heaters(code, out)?;
+                Ok(None)
+            }
+            Code::M(3 | 5) => {
+                bed.roller = command.code == Code::M(3);
+                Ok(None)
+            }
+            Code::M(10 | 11) => {
+                bed.suction = command.code == Code::M(10);
+                Ok(None)
+            }
+            Code::M(880) => {
+                let (feed, build) = match (command.has(b'F'), command.has(b'B')) {
+                    (false, false) => (true, true),
+                    named => named,
+                };
+                let platform = if feed { Platform::Feed } else { Platform::Build };
+                bed.platforms_enabled = true;
+                bed.job = Job::Travel { platform, routine: TravelMeasurement::new(), then_build: feed && build };
+                Ok(Some(Running::BedJob))
+            }
+            Code::M(881) => (|| {
+                let mut settings = bed.cycle.settings();
+                if let Some(mm) = command.value(b'L')? {
+                    settings.thickness_um = mm.to_scaled(3).and_then(|um| u32::try_from(um).ok()).filter(|um| (1..=2_000).contains(um)).ok_or(CommandError::OutOfRange(b'L'))?;
+                }
+                let layers = match command.value(b'N')? {
+                    Some(n) => n.to_int().and_then(|n| u16::try_from(n).ok()).filter(|n| *n >= 1).ok_or(CommandError::OutOfRange(b'N'))?,
+                    None => 1,
+                };
+                bed.cycle.set_settings(settings);
+                bed.platforms_enabled = true;
+                let command = bed.cycle.start(&PLATFORM, &PLATFORM, carriage_at(&bed.last));
+                bed.job = Job::Layers { command, steps_left: 0, layers_left: layers };
+                Ok(Some(Running::BedJob))
+            })(),
+            Code::M(882) => match command.value(b'S').map(|s| s.and_then(|s| s.to_int())) {
+                Err(error) => Err(error.into()),
+                Ok(Some(end @ (0 | 1))) => {
+                    let to = if end == 0 { CarriageEnd::Minus } else { CarriageEnd::Plus };
+                    let count = bed.last.carriage_count;
+                    bed.start_stroke(to, count);
+                    bed.job = Job::Carriage;
+                    Ok(Some(Running::BedJob))
+                }
+                Ok(_) => Err(CommandError::OutOfRange(b'S')),
+            },
+            Code::M(115) => {
+                super::write_capabilities(out)?;
+                out.write_str("Cap:POWDER_BED:1\n")?;
+                Ok(None)
+            }
+            _ => return Ok(None),
+        };
+        Ok(Some(result))
+    }
+
+    /// Whether the powder bed's job is over (for `Running::BedJob`).
+    pub(super) fn bed_job_done(&self) -> bool {
+        self.powder.as_ref().is_none_or(|bed| !bed.is_busy())
+    }
+}
+
+impl BedState {
+    fn outputs(&self, mut outputs: BedOutputs) -> BedOutputs {
+        outputs.roller = self.roller;
+        outputs.suction = self.suction;
+        outputs.platforms_enabled = self.platforms_enabled;
+        outputs
+    }
+}
