@@ -14,7 +14,7 @@ cargo +nightly avr
 say "checking the firmware against its budgets"
 bash tests/scripts/size-check.sh "$elf"
 
-for machine in delta arm extrusion-line; do
+for machine in delta arm extrusion-line powder-bed; do
   say "building the $machine machine: cargo +nightly avr --features mega2560-ramps/machine-$machine"
   CARGO_TARGET_DIR=$target/machines/$machine cargo +nightly avr --features "mega2560-ramps/machine-$machine"
   bash tests/scripts/size-check.sh "$target/machines/$machine/avr-none/release/mega2560-ramps.elf"

@@ -13,6 +13,8 @@
 #![deny(unsafe_op_in_unsafe_fn)]
 
 mod adc;
+#[cfg(feature = "machine-powder-bed")]
+mod bed;
 mod clock;
 #[cfg(feature = "display-hd44780")]
 mod display;
@@ -59,6 +61,8 @@ fn main() -> ! {
     #[cfg(feature = "display-hd44780")]
     let (mut lcd, mut next_screen_ms) = (display::init(), 0u32);
     let mut outputs = Outputs::default();
+    #[cfg(feature = "machine-powder-bed")]
+    let mut last_bed_ms = 0u32;
 
     // The loop never sleeps: QEMU's AVR machine does not wake from `sleep`
     // on its timer interrupt and avr-tester stops at the first `sleep`, and
@@ -73,6 +77,14 @@ fn main() -> ! {
             _ => {}
         }
         let _ = link.service(&mut rx, &mut eeprom, now, &mut tx);
+        // The powder bed's millisecond: read, decide, drive.
+        #[cfg(feature = "machine-powder-bed")]
+        if now != last_bed_ms {
+            last_bed_ms = now;
+            let inputs = bed::read(&dp);
+            let Ok(decided) = link.machine.powder_bed_tick(&inputs, &mut tx);
+            bed::drive(&dp, &decided);
+        }
         #[cfg(feature = "machine-extrusion-line")]
         {
             let Ok(timers) = link.machine.poll_line(now, &mut tx);
@@ -123,6 +135,11 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
         link.machine.become_extrusion_line();
         line::init(dp);
     }
+    #[cfg(feature = "machine-powder-bed")]
+    {
+        link.machine.become_powder_bed();
+        bed::init(dp);
+    }
     for endstop in pins::ENDSTOPS {
         pins::make_input_pulled_up(dp, endstop);
     }
@@ -154,9 +171,13 @@ compile_error!("choose one bed: bed-ssr or bed-bang-bang");
 #[cfg(any(
     all(feature = "machine-delta", feature = "machine-arm"),
     all(feature = "machine-delta", feature = "machine-extrusion-line"),
-    all(feature = "machine-arm", feature = "machine-extrusion-line")
+    all(feature = "machine-arm", feature = "machine-extrusion-line"),
+    all(feature = "machine-powder-bed", any(feature = "machine-delta", feature = "machine-arm", feature = "machine-extrusion-line"))
 ))]
-compile_error!("choose one machine: machine-delta, machine-arm or machine-extrusion-line");
+compile_error!("choose one machine: machine-delta, machine-arm, machine-extrusion-line or machine-powder-bed");
+
+#[cfg(all(feature = "machine-powder-bed", any(feature = "bed-ssr", feature = "bed-bang-bang")))]
+compile_error!("the powder bed has no heated bed");
 
 #[cfg(all(feature = "machine-extrusion-line", any(feature = "bed-ssr", feature = "bed-bang-bang")))]
 compile_error!("the extrusion line has no bed: its SSR is the barrel's");
@@ -165,7 +186,7 @@ compile_error!("the extrusion line has no bed: its SSR is the barrel's");
 /// loop writes a pin only when its value changes: each write holds the
 /// step interrupt off for a moment.
 #[derive(Default)]
-#[cfg_attr(feature = "machine-extrusion-line", allow(dead_code))]
+#[cfg_attr(any(feature = "machine-extrusion-line", feature = "machine-powder-bed"), allow(dead_code))]
 struct Outputs {
     drivers_enabled: Option<bool>,
     fan_duty: Option<u8>,
@@ -180,12 +201,14 @@ fn apply_outputs(dp: &Peripherals, machine: &Machine, last: &mut Outputs) {
         ssr::stop();
         #[cfg(feature = "machine-extrusion-line")]
         line::stop(dp);
+        #[cfg(feature = "machine-powder-bed")]
+        bed::stop(dp);
         pins::all_outputs_safe(dp);
         *last = Outputs { drivers_enabled: Some(false), fan_duty: Some(0), heater_duties: Some((0, 0)) };
         return;
     }
-    // The line's drivers are its own (line.rs).
-    #[cfg(not(feature = "machine-extrusion-line"))]
+    // The line's and the powder bed's drivers are their own (line.rs, bed.rs).
+    #[cfg(not(any(feature = "machine-extrusion-line", feature = "machine-powder-bed")))]
     {
         let enabled = machine.steppers_enabled();
         if last.drivers_enabled != Some(enabled) {
@@ -202,7 +225,10 @@ fn apply_outputs(dp: &Peripherals, machine: &Machine, last: &mut Outputs) {
         pwm::set(dp, pwm::Output::Bed, fan);
         last.fan_duty = Some(fan);
     }
+    // The powder bed has no heaters: D10 and D8 are its roller and suction.
+    #[cfg(not(feature = "machine-powder-bed"))]
     let heaters = machine.heater_duties();
+    #[cfg(not(feature = "machine-powder-bed"))]
     if last.heater_duties != Some(heaters) {
         #[cfg(not(feature = "machine-extrusion-line"))]
         pwm::set(dp, pwm::Output::Hotend, heaters.0);
@@ -225,6 +251,8 @@ fn panic(_info: &core::panic::PanicInfo) -> ! {
     stepping::stop_timer(&dp);
     #[cfg(feature = "machine-extrusion-line")]
     line::stop(&dp);
+    #[cfg(feature = "machine-powder-bed")]
+    bed::stop(&dp);
     pins::all_outputs_safe(&dp);
     watchdog::stop(&dp);
     let mut tx = serial::Tx;

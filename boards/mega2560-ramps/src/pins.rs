@@ -21,6 +21,7 @@ pub enum Port {
     D,
     E,
     F,
+    G,
     H,
     J,
     K,
@@ -79,7 +80,7 @@ pub fn make_output(dp: &Peripherals, pin: Pin, high: bool) {
 
 /// [`make_output`] from code that already holds interrupts off (an
 /// interrupt handler).
-#[cfg_attr(not(feature = "bed-ssr"), allow(dead_code))]
+#[cfg_attr(not(any(feature = "bed-ssr", feature = "machine-extrusion-line")), allow(dead_code))]
 pub fn make_output_in(dp: &Peripherals, _cs: avr_device::interrupt::CriticalSection, pin: Pin, high: bool) {
     make_output_unguarded(dp, pin, high);
 }
@@ -100,6 +101,7 @@ fn make_output_unguarded(dp: &Peripherals, pin: Pin, high: bool) {
         Port::D => drive!(PORTD, portd, ddrd),
         Port::E => drive!(PORTE, porte, ddre),
         Port::F => drive!(PORTF, portf, ddrf),
+        Port::G => drive!(PORTG, portg, ddrg),
         Port::H => drive!(PORTH, porth, ddrh),
         Port::J => drive!(PORTJ, portj, ddrj),
         Port::K => drive!(PORTK, portk, ddrk),
@@ -125,6 +127,7 @@ pub fn make_input_pulled_up(dp: &Peripherals, pin: Pin) {
         Port::D => input!(PORTD, portd, ddrd),
         Port::E => input!(PORTE, porte, ddre),
         Port::F => input!(PORTF, portf, ddrf),
+        Port::G => input!(PORTG, portg, ddrg),
         Port::H => input!(PORTH, porth, ddrh),
         Port::J => input!(PORTJ, portj, ddrj),
         Port::K => input!(PORTK, portk, ddrk),
@@ -141,6 +144,7 @@ pub fn read(dp: &Peripherals, pin: Pin) -> bool {
         Port::D => dp.PORTD.pind.read().bits(),
         Port::E => dp.PORTE.pine.read().bits(),
         Port::F => dp.PORTF.pinf.read().bits(),
+        Port::G => dp.PORTG.ping.read().bits(),
         Port::H => dp.PORTH.pinh.read().bits(),
         Port::J => dp.PORTJ.pinj.read().bits(),
         Port::K => dp.PORTK.pink.read().bits(),
@@ -150,7 +154,7 @@ pub fn read(dp: &Peripherals, pin: Pin) -> bool {
 }
 
 /// Drive every stepper driver's enable (active low).
-#[cfg_attr(feature = "machine-extrusion-line", allow(dead_code))]
+#[cfg_attr(any(feature = "machine-extrusion-line", feature = "machine-powder-bed"), allow(dead_code))]
 pub fn set_steppers_enabled(dp: &Peripherals, enabled: bool) {
     for enable in STEPPER_ENABLES {
         make_output(dp, enable, !enabled);

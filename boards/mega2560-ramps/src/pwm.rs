@@ -17,7 +17,7 @@
 use avr_device::atmega2560::Peripherals;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "machine-extrusion-line", allow(dead_code))]
+#[cfg_attr(any(feature = "machine-extrusion-line", feature = "machine-powder-bed"), allow(dead_code))]
 pub enum Output {
     Hotend,
     #[cfg_attr(feature = "bed-ssr", allow(dead_code))]

@@ -82,6 +82,8 @@ fn USART0_RX() {
             crate::stepping::stop_timer(&dp);
             #[cfg(feature = "machine-extrusion-line")]
             crate::line::stop(&dp);
+            #[cfg(feature = "machine-powder-bed")]
+            crate::bed::stop(&dp);
             crate::pins::all_outputs_safe(&dp);
         }
         let pending = EMERGENCIES.borrow(cs);

@@ -363,7 +363,8 @@ impl Machine<'_> {
     pub(super) fn bed_command<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<Option<Result<Option<Running>, CommandError>>, W::Error> {
         let Some(bed) = self.powder.as_mut() else { return Ok(None) };
         let result = match command.code {
-            Code::G(0..=3 | 28 | 92) | Code::Modal => Err(CommandError::NotThisMachine),
+            // No planner moves; the platform drivers are the jobs' own.
+            Code::G(0..=3 | 28 | 92) | Code::Modal | Code::M(17 | 18 | 84) => Err(CommandError::NotThisMachine),
             Code::M(code @ (104 | 109 | 140 | 190)) => {
                 write_no_heaters(code, out)?;
                 Ok(None)

@@ -861,3 +861,32 @@ fn the_extrusion_line_build_turns_its_screw_and_puller_at_their_set_speeds() {
     board.run_for_ms(500.0);
     assert_eq!((board.step_count(E0), board.step_count(X)), stopped);
 }
+
+/// The powder-bed build (SPEC §5, `machine-powder-bed`) on the real ELF:
+/// the feed platform (Z's driver, M542: steps on the falling edge, DIR high
+/// = down) measures its travel between its reed switches (Z_MIN = A, Z_MAX
+/// = B, closing to ground), heater codes are answered without heating, the
+/// roller follows M3/M5 on D10.
+#[test]
+fn the_powder_bed_build_measures_its_feed_platform_travel() {
+    let mut board = boot_variant("powder-bed", "mega2560-ramps/machine-powder-bed");
+    // The bench counts DIR high as +, the platform's down: bench −(platform).
+    // A closes at platform −200 steps, B at +800: 1 000 steps = 5 mm apart.
+    board.set_endstop(4, Some(Endstop { axis: Z, at_steps: 200, is_min: false, pressed_level: false }));
+    board.set_endstop(5, Some(Endstop { axis: Z, at_steps: -800, is_min: true, pressed_level: false }));
+    let said = replies(&mut board, &["M115"]);
+    assert!(said.iter().any(|l| l == "Cap:POWDER_BED:1"), "{said:?}");
+    assert_eq!(replies(&mut board, &["M109 S200"]), ["echo:M109 ignored: this machine has no heaters", "ok"]);
+    let travel = exchange(&mut board, &["M880 F"], 10.0).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(travel, ["echo:Feed platform travel 1000 steps 5.000 mm", "ok"]);
+    // Down 200 to A, up 1 000 to B (plus the steps the switches' debounce
+    // and edges take): the platform ends on B.
+    assert_eq!(board.position(Z), -800);
+    let portb = |board: &Board| board.read_ram(0x25);
+    assert_eq!(replies(&mut board, &["M3"]), ["ok"]);
+    board.run_for_ms(5.0);
+    assert_ne!(portb(&board) & (1 << 4), 0, "roller on (D10)");
+    assert_eq!(replies(&mut board, &["M5"]), ["ok"]);
+    board.run_for_ms(5.0);
+    assert_eq!(portb(&board) & (1 << 4), 0, "roller off");
+}

@@ -1,0 +1,168 @@
+//! The powder-bed retrofit's hardware (cargo feature `machine-powder-bed`,
+//! SPEC §5; pins from `firmware::machines::config::powder_bed`).
+//!
+//! | part | pins |
+//! |---|---|
+//! | feed platform (M542) | STEP D46 = PL3, DIR D48 = PL1, ENA A8 = PK0 |
+//! | build platform (M542) | STEP D26 = PA4, DIR D28 = PA6, ENA D24 = PA2 |
+//! | reed switches (to ground) | feed A D18 = PD3, B D19 = PD2; build A D14 = PJ1, B D15 = PJ0 |
+//! | carriage encoder | A D2 = PE4 (INT4), B D3 = PE5 (INT5), both edges |
+//! | carriage H-bridge (VNH5019) | PWM D44 = PL5 (OC5C, 7.8 kHz), INA D40 = PG1, INB D42 = PL7, DIAG A5 = PF5 (low = fault) |
+//! | carriage end sensors (to ground) | C− D11 = PB5, C+ D6 = PH3 |
+//! | roller, suction | D10 = PB4, D8 = PH5 (MOSFETs) |
+//!
+//! The quadrature decoder runs in the two external interrupts (the core's
+//! `QuadratureDecoder::on_edge`: a table lookup and an add). Everything
+//! else happens once a millisecond in the main loop ([`read`], the core's
+//! `Machine::powder_bed_tick`, [`drive`]): an M542 step is DIR, 5 µs, the
+//! falling STEP edge, 5 µs, STEP back high (the driver wants ≥ 5 µs each).
+//!
+//! Known limit: the carriage's servo loop runs at the main loop's
+//! millisecond, so a main-loop pass longer than a few milliseconds (a
+//! report, a settings save) stretches its period; the loop's following
+//! error limit then stops the stroke (a fault, never a runaway).
+
+use crate::pins::{self, Pin, Port};
+use avr_device::atmega2560::Peripherals;
+use avr_device::interrupt::Mutex;
+use core::cell::RefCell;
+use firmware::closed_loop::quadrature::QuadratureDecoder;
+use firmware::machine::powder_bed::{BedInputs, BedOutputs, PLATFORM};
+use firmware::machines::powder_bed::{Platform, Vertical};
+
+struct PlatformPins {
+    step: Pin,
+    dir: Pin,
+    enable: Pin,
+}
+
+const FEED: PlatformPins = PlatformPins { step: pins::pin(Port::L, 3), dir: pins::pin(Port::L, 1), enable: pins::pin(Port::K, 0) };
+const BUILD: PlatformPins = PlatformPins { step: pins::pin(Port::A, 4), dir: pins::pin(Port::A, 6), enable: pins::pin(Port::A, 2) };
+const FEED_LOWER: Pin = pins::pin(Port::D, 3);
+const FEED_UPPER: Pin = pins::pin(Port::D, 2);
+const BUILD_LOWER: Pin = pins::pin(Port::J, 1);
+const BUILD_UPPER: Pin = pins::pin(Port::J, 0);
+const ENCODER_A: Pin = pins::pin(Port::E, 4);
+const ENCODER_B: Pin = pins::pin(Port::E, 5);
+const BRIDGE_PWM: Pin = pins::pin(Port::L, 5);
+const BRIDGE_INA: Pin = pins::pin(Port::G, 1);
+const BRIDGE_INB: Pin = pins::pin(Port::L, 7);
+const BRIDGE_DIAG: Pin = pins::pin(Port::F, 5);
+const CARRIAGE_MINUS: Pin = pins::pin(Port::B, 5);
+const CARRIAGE_PLUS: Pin = pins::pin(Port::H, 3);
+const ROLLER: Pin = pins::pin(Port::B, 4);
+const SUCTION: Pin = pins::pin(Port::H, 5);
+
+/// COM5C1: OC5C driven by the timer (non-inverting).
+const COM5C1: u8 = 1 << 3;
+
+static DECODER: Mutex<RefCell<QuadratureDecoder>> = Mutex::new(RefCell::new(QuadratureDecoder::new(true, true, 0)));
+
+/// Outputs safe, inputs pulled up, the encoder's interrupts on, Timer5 in
+/// 8-bit fast PWM for the bridge (its output still disconnected).
+pub fn init(dp: &Peripherals) {
+    for platform in [&FEED, &BUILD] {
+        // M542: STEP idles high, ENA high = disabled.
+        pins::make_output(dp, platform.step, PLATFORM.step_idle_level());
+        pins::make_output(dp, platform.dir, false);
+        pins::make_output(dp, platform.enable, PLATFORM.enable_level(false));
+    }
+    for input in [FEED_LOWER, FEED_UPPER, BUILD_LOWER, BUILD_UPPER, CARRIAGE_MINUS, CARRIAGE_PLUS, BRIDGE_DIAG, ENCODER_A, ENCODER_B] {
+        pins::make_input_pulled_up(dp, input);
+    }
+    stop(dp);
+    // Timer5: WGM52|WGM50 fast PWM 8-bit, CS51 clk/8 (7.8 kHz).
+    // SAFETY (all `bits`): documented mode and prescaler values.
+    dp.TC5.tccr5a.write(|w| unsafe { w.bits(0b0000_0001) });
+    dp.TC5.tccr5b.write(|w| unsafe { w.bits(0b0000_1010) });
+    let (a, b) = (pins::read(dp, ENCODER_A), pins::read(dp, ENCODER_B));
+    avr_device::interrupt::free(|cs| *DECODER.borrow(cs).borrow_mut() = QuadratureDecoder::new(a, b, 0));
+    // INT4, INT5 on any logical change (ISCn1:0 = 01), then enabled.
+    // SAFETY: documented sense-control bits.
+    dp.EXINT.eicrb.modify(|r, w| unsafe { w.bits((r.bits() & !0b0000_1111) | 0b0000_0101) });
+    dp.EXINT.eifr.write(|w| w.bits(0b0011_0000));
+    dp.EXINT.eimsk.modify(|r, w| w.bits(r.bits() | 0b0011_0000));
+}
+
+/// Carriage braked, roller and suction off, platform drivers disabled:
+/// from any context (halt, `M112` in the receive interrupt, panic).
+pub fn stop(dp: &Peripherals) {
+    // SAFETY: clearing the bridge's compare-output bits only.
+    dp.TC5.tccr5a.modify(|r, w| unsafe { w.bits(r.bits() & !COM5C1) });
+    for pin in [BRIDGE_PWM, BRIDGE_INA, BRIDGE_INB, ROLLER, SUCTION] {
+        pins::make_output(dp, pin, false);
+    }
+    for platform in [&FEED, &BUILD] {
+        pins::make_output(dp, platform.enable, PLATFORM.enable_level(false));
+    }
+}
+
+/// What the machine needs to know this millisecond.
+pub fn read(dp: &Peripherals) -> BedInputs {
+    BedInputs {
+        feed_switches: (pins::read(dp, FEED_LOWER), pins::read(dp, FEED_UPPER)),
+        build_switches: (pins::read(dp, BUILD_LOWER), pins::read(dp, BUILD_UPPER)),
+        // Sensors and DIAG pull low when active.
+        at_minus: !pins::read(dp, CARRIAGE_MINUS),
+        at_plus: !pins::read(dp, CARRIAGE_PLUS),
+        carriage_count: avr_device::interrupt::free(|cs| DECODER.borrow(cs).borrow().count()),
+        bridge_fault: !pins::read(dp, BRIDGE_DIAG),
+    }
+}
+
+/// Drive what the machine decided for this millisecond.
+pub fn drive(dp: &Peripherals, outputs: &BedOutputs) {
+    for platform in [&FEED, &BUILD] {
+        pins::make_output(dp, platform.enable, PLATFORM.enable_level(outputs.platforms_enabled));
+    }
+    if let Some((platform, direction)) = outputs.step {
+        let pins = match platform {
+            Platform::Feed => &FEED,
+            Platform::Build => &BUILD,
+        };
+        step(dp, pins, direction);
+    }
+    pins::make_output(dp, ROLLER, outputs.roller);
+    pins::make_output(dp, SUCTION, outputs.suction);
+    set_bridge(dp, outputs.carriage_duty);
+}
+
+/// One M542 step: DIR, ≥ 5 µs, the active (falling) edge, ≥ 5 µs, idle.
+fn step(dp: &Peripherals, platform: &PlatformPins, direction: Vertical) {
+    pins::make_output(dp, platform.dir, PLATFORM.dir_level(direction));
+    avr_device::asm::delay_cycles(80);
+    let idle = PLATFORM.step_idle_level();
+    pins::make_output(dp, platform.step, !idle);
+    avr_device::asm::delay_cycles(80);
+    pins::make_output(dp, platform.step, idle);
+}
+
+/// The VNH5019: INA/INB set the direction, PWM the magnitude; 0 brakes
+/// to ground (INA = INB = 0).
+fn set_bridge(dp: &Peripherals, duty: i32) {
+    let magnitude = duty.unsigned_abs().min(255) as u8;
+    pins::make_output(dp, BRIDGE_INA, duty > 0);
+    pins::make_output(dp, BRIDGE_INB, duty < 0);
+    dp.TC5.ocr5c.write(|w| w.bits(u16::from(magnitude)));
+    // SAFETY: COM5C1 only.
+    dp.TC5.tccr5a.modify(|r, w| unsafe { w.bits(if magnitude == 0 { r.bits() & !COM5C1 } else { r.bits() | COM5C1 }) });
+    // An output, low whenever the timer does not drive it.
+    pins::make_output(dp, BRIDGE_PWM, false);
+}
+
+fn on_encoder_edge() {
+    // SAFETY: reading port E's input register has no side effect.
+    let dp = unsafe { Peripherals::steal() };
+    let (a, b) = (pins::read(&dp, ENCODER_A), pins::read(&dp, ENCODER_B));
+    avr_device::interrupt::free(|cs| DECODER.borrow(cs).borrow_mut().on_edge(a, b));
+}
+
+#[avr_device::interrupt(atmega2560)]
+fn INT4() {
+    on_encoder_edge();
+}
+
+#[avr_device::interrupt(atmega2560)]
+fn INT5() {
+    on_encoder_edge();
+}
