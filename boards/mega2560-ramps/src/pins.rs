@@ -21,6 +21,7 @@ pub enum Port {
     D,
     E,
     F,
+    #[cfg_attr(not(feature = "machine-powder-bed"), allow(dead_code))]
     G,
     H,
     J,
