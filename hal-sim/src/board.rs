@@ -232,6 +232,22 @@ impl SimBoard {
         bed.carriage.drive(outputs.carriage_duty);
     }
 
+    /// Send one line and run until its `ok` (Marlin's bare `ok`, or `ok `
+    /// with a report) for at most `max_ms`: the replies, the busy
+    /// keep-alives of a blocking command left out. Panics without an `ok`.
+    pub fn reply_to(&mut self, line: &str, max_ms: u32) -> String {
+        self.receive(format!("{line}\n").as_bytes());
+        let mut output = String::new();
+        for _ in 0..max_ms {
+            self.advance(1);
+            output.push_str(&self.take_output());
+            if output.ends_with('\n') && output.lines().last().is_some_and(|l| l == "ok" || l.starts_with("ok ")) {
+                return output.replace("echo:busy: processing\n", "");
+            }
+        }
+        panic!("no ok for {line:?} within {max_ms} ms: {output:?}");
+    }
+
     /// Bytes sent by the host: they arrive at the line rate (115200 baud,
     /// 8N1) while [`SimBoard::advance`] runs, as on a real serial line.
     pub fn receive(&mut self, bytes: &[u8]) {

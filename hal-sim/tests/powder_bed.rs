@@ -179,39 +179,25 @@ fn a_carriage_that_cannot_reach_its_sensor_aborts_the_layer_with_everything_off(
 
 use hal_sim::board::SimBoard;
 
-/// Send one line and run until its `ok` (at most `max_ms`); the replies,
-/// busy keep-alives left out.
-fn command(board: &mut SimBoard, line: &str, max_ms: u32) -> String {
-    board.receive(format!("{line}\n").as_bytes());
-    let mut output = String::new();
-    for _ in 0..max_ms {
-        board.advance(1);
-        output.push_str(&board.take_output());
-        if output.ends_with("ok\n") {
-            return output.replace("echo:busy: processing\n", "");
-        }
-    }
-    panic!("no ok for {line:?} within {max_ms} ms: {output:?}");
-}
 
 /// G-code in, platforms and carriage moved: the powder bed as the firmware
 /// runs it (M880 travel, M881 layers, M882 carriage, roller, no heaters).
 #[test]
 fn the_powder_bed_measures_its_travel_and_runs_layers_under_gcode() {
     let mut board = SimBoard::powder_bed();
-    assert!(command(&mut board, "M115", 100).contains("Cap:POWDER_BED:1\n"));
-    assert_eq!(command(&mut board, "M109 S200", 100), "echo:M109 ignored: this machine has no heaters\nok\n");
-    assert_eq!(command(&mut board, "G1 X10", 100), "Error:Not available on this machine\nok\n");
+    assert!(board.reply_to("M115", 100).contains("Cap:POWDER_BED:1\n"));
+    assert_eq!(board.reply_to("M109 S200", 100), "echo:M109 ignored: this machine has no heaters\nok\n");
+    assert_eq!(board.reply_to("G1 X10", 100), "Error:Not available on this machine\nok\n");
     // Both platforms: 40 000 steps between the switches = 200 mm.
     assert_eq!(
-        command(&mut board, "M880", 400_000),
+        board.reply_to("M880", 400_000),
         "echo:Feed platform travel 40000 steps 200.000 mm\necho:Build platform travel 40000 steps 200.000 mm\nok\n"
     );
     let bed = board.powder_bed.as_ref().unwrap();
     let (feed0, build0) = (bed.feed.position, bed.build.position);
     assert_eq!(bed.feed.edges_while_disabled + bed.build.edges_while_disabled, 0);
     // Two layers of 0.1 mm: 20 steps each way per layer.
-    assert_eq!(command(&mut board, "M881 L0.1 N2", 60_000), "echo:Layer 1 done\necho:Layer 2 done\nok\n");
+    assert_eq!(board.reply_to("M881 L0.1 N2", 60_000), "echo:Layer 1 done\necho:Layer 2 done\nok\n");
     let bed = board.powder_bed.as_ref().unwrap();
     assert_eq!(bed.feed.position - feed0, 40, "feed up two layers");
     assert_eq!(build0 - bed.build.position, 40, "build down two layers");
@@ -219,12 +205,12 @@ fn the_powder_bed_measures_its_travel_and_runs_layers_under_gcode() {
     assert_eq!(bed.carriage.at(), Some(firmware::machines::powder_bed::CarriageEnd::Minus));
     assert_eq!(bed.carriage.decoder.illegal_transitions(), 0);
     // The carriage on its own, and the roller.
-    assert_eq!(command(&mut board, "M882 S1", 10_000), "echo:Carriage at C+\nok\n");
-    assert_eq!(command(&mut board, "M3", 100), "ok\n");
+    assert_eq!(board.reply_to("M882 S1", 10_000), "echo:Carriage at C+\nok\n");
+    assert_eq!(board.reply_to("M3", 100), "ok\n");
     assert!(board.powder_bed.as_ref().unwrap().roller_on);
-    assert_eq!(command(&mut board, "M5", 100), "ok\n");
+    assert_eq!(board.reply_to("M5", 100), "ok\n");
     assert!(!board.powder_bed.as_ref().unwrap().roller_on);
-    assert_eq!(command(&mut board, "M881 L0", 100), "Error:Value out of range for L\nok\n");
+    assert_eq!(board.reply_to("M881 L0", 100), "Error:Value out of range for L\nok\n");
 }
 
 /// A carriage whose end sensor never trips (unplugged) ends the layer
@@ -237,7 +223,7 @@ fn a_carriage_sensor_that_never_trips_aborts_the_layer() {
         let bed = board.powder_bed.as_ref().unwrap();
         (bed.feed.position, bed.build.position)
     };
-    let reply = command(&mut board, "M881", 60_000);
+    let reply = board.reply_to("M881", 60_000);
     assert_eq!(reply, "Error:Layer cycle aborted\nok\n");
     let bed = board.powder_bed.as_ref().unwrap();
     assert!(!bed.roller_on && !bed.suction_on);
