@@ -77,6 +77,9 @@ pub struct SimBoard {
     /// The powder bed's platforms, carriage, roller and suction, when the
     /// machine is the powder bed ([`SimBoard::powder_bed`]).
     pub powder_bed: Option<crate::powder_bed_plant::PowderBed>,
+    /// Driver ALARM inputs (bit i: motor i), read by the firmware every
+    /// millisecond ([`SimBoard::set_driver_alarms`]).
+    driver_alarms: u8,
 }
 
 /// The extrusion line's step timers as the Mega runs them (Timer5 compare
@@ -172,6 +175,7 @@ impl SimBoard {
             output: String::new(),
             line: None,
             powder_bed: None,
+            driver_alarms: 0,
         };
         let _ = board.link.machine.write_banner(&mut Output(&mut board.output));
         let _ = board.link.machine.load_settings(&mut board.eeprom, &mut Output(&mut board.output));
@@ -248,6 +252,11 @@ impl SimBoard {
         panic!("no ok for {line:?} within {max_ms} ms: {output:?}");
     }
 
+    /// Set the drivers' ALARM inputs (bit i: motor i active).
+    pub fn set_driver_alarms(&mut self, alarms: u8) {
+        self.driver_alarms = alarms;
+    }
+
     /// Bytes sent by the host: they arrive at the line rate (115200 baud,
     /// 8N1) while [`SimBoard::advance`] runs, as on a real serial line.
     pub fn receive(&mut self, bytes: &[u8]) {
@@ -282,6 +291,7 @@ impl SimBoard {
                 Ok(StepperRequest::Configure(config)) => self.generator.set_config(config),
                 _ => {}
             }
+            let _ = self.link.machine.on_driver_alarms(self.driver_alarms, &mut out);
             let _ = self.link.service(&mut self.rx, &mut self.eeprom, self.now_ms, &mut out);
             if self.line.is_some() {
                 let Ok(timers) = self.link.machine.poll_line(self.now_ms, &mut out);

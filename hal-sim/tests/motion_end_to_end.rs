@@ -299,3 +299,35 @@ fn g18_and_g19_arcs_land_on_their_exact_end_points() {
     );
     assert_eq!(board.steps.positions()[..3], [2000, 1000, 4000]);
 }
+
+/// SPEC §3: a driver's ALARM (a closed-loop driver lost sync) stops the
+/// job at once, names the motor, and the position is invalid: moves wait
+/// for `G28`, which waits until the alarm clears. Releasing the motors
+/// (`M18`) invalidates the arm's position the same way.
+#[test]
+fn a_driver_alarm_stops_the_arm_and_moves_wait_for_a_new_homing() {
+    use firmware::motion::MotionConfig;
+    use hal_sim::board::SimEeprom;
+    let mut board = SimBoard::with_machine(MotionConfig::spec_arm(400), SimEeprom::new());
+    board.take_output();
+    board.set_endstops(Box::new(|p: &[i64; 4]| u8::from(p[0] >= 400) << 4 | u8::from(p[1] >= 300) << 5 | u8::from(p[2] <= -300) << 2));
+    let homed = board.run_gcode("G28\n", 120_000);
+    assert_eq!(homed.replace("echo:busy: processing\n", ""), "ok\n");
+    // A long move, and 200 ms into it the Y driver alarms.
+    board.receive(b"G1 X100 F600\n");
+    board.advance(200);
+    board.set_driver_alarms(0b0010);
+    board.advance(20);
+    let stopped_at = board.steps.positions();
+    board.advance(500);
+    assert_eq!(board.steps.positions(), stopped_at, "every motor stopped");
+    let output = board.take_output();
+    assert!(output.contains("Error:Driver alarm on Y: motion stopped, home with G28\n"), "{output}");
+    assert_eq!(board.run_gcode("G1 X0\n", 1_000), "Error:Position unknown after a motion stop: home with G28 first\nok\n");
+    assert_eq!(board.run_gcode("G28\n", 1_000), "Error:A driver ALARM is active: clear it before homing\nok\n");
+    board.set_driver_alarms(0);
+    let rehomed = board.run_gcode("G28\nM114\n", 120_000);
+    assert!(rehomed.contains("X:-100.00 Y:-107.00 Z:68.00"), "{rehomed}");
+    // M18 releases the motors: home again.
+    assert_eq!(board.run_gcode("M18\nG1 X-90\n", 1_000), "ok\nError:Home XYZ first (G28)\nok\n");
+}

@@ -76,6 +76,9 @@ fn main() -> ! {
             Ok(StepperRequest::Configure(config)) => stepping::configure(config),
             _ => {}
         }
+        // SPEC §3: a driver that lost sync stops the job.
+        #[cfg(feature = "machine-arm")]
+        let _ = link.machine.on_driver_alarms(pins::driver_alarms(&dp), &mut tx);
         let _ = link.service(&mut rx, &mut eeprom, now, &mut tx);
         // The powder bed's millisecond: read, decide, drive.
         #[cfg(feature = "machine-powder-bed")]
@@ -142,6 +145,10 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
     }
     for endstop in pins::ENDSTOPS {
         pins::make_input_pulled_up(dp, endstop);
+    }
+    #[cfg(feature = "machine-arm")]
+    for alarm in pins::DRIVER_ALARMS {
+        pins::make_input_pulled_up(dp, alarm);
     }
     let _ = link.machine.write_banner(tx);
     (link, serial::Rx { consumer })

@@ -59,6 +59,24 @@ pub const HOTEND_THERMISTOR_CHANNEL: u8 = 13;
 /// The ADC channel of the bed thermistor.
 pub const BED_THERMISTOR_CHANNEL: u8 = 14;
 
+/// SPEC §3's driver ALARM inputs (the arm build), motors X Y Z E0 in
+/// order: A9–A12 = PK1–PK4 on RAMPS AUX-2, pulled up.
+#[cfg(feature = "machine-arm")]
+pub const DRIVER_ALARMS: [Pin; 4] = [pin(Port::K, 1), pin(Port::K, 2), pin(Port::K, 3), pin(Port::K, 4)];
+/// The level of an active ALARM (polarity is configuration): the drivers'
+/// open-collector outputs pull the line low on an alarm.
+#[cfg(feature = "machine-arm")]
+pub const DRIVER_ALARM_ACTIVE_HIGH: bool = false;
+
+/// The active driver ALARMs, bit i = motor i.
+#[cfg(feature = "machine-arm")]
+pub fn driver_alarms(dp: &Peripherals) -> u8 {
+    DRIVER_ALARMS
+        .iter()
+        .enumerate()
+        .fold(0, |alarms, (motor, &alarm)| if read(dp, alarm) == DRIVER_ALARM_ACTIVE_HIGH { alarms | 1 << motor } else { alarms })
+}
+
 /// STEP and DIR pins of X, Y, Z and E0 (driven by [`crate::stepping`]).
 pub const STEP_DIR: [Pin; 8] = [
     pin(Port::F, 0),

@@ -33,6 +33,8 @@ pub enum CommandError {
     MachineFrameArc,
     /// A diameter PI gain above zero (the loop is reverse acting).
     DiameterGainSign,
+    /// `G28` while a driver's ALARM input is active.
+    DriverAlarm,
 }
 
 impl From<ParseError> for CommandError {
@@ -57,6 +59,7 @@ impl CommandError {
             Self::UnsupportedMode(code) => write_unsupported_mode(code, out),
             Self::MachineFrameArc => crate::flash_str!("G53 moves with G0 or G1 only").write_to(out),
             Self::DiameterGainSign => crate::flash_str!("Diameter gains must be <= 0 (reverse acting)").write_to(out),
+            Self::DriverAlarm => crate::flash_str!("A driver ALARM is active: clear it before homing").write_to(out),
         }?;
         out.write_str("\n")
     }

@@ -115,6 +115,8 @@ pub struct Machine<'q> {
     position_lost: bool,
     /// The machine's own defaults (`M502`, and when no stored image loads).
     defaults: Settings,
+    /// Driver ALARM inputs active at the last reading (bit i: motor i).
+    driver_alarms: u8,
     /// The extrusion line's state, when this machine is one
     /// ([`Machine::become_extrusion_line`]).
     #[cfg(feature = "extrusion-line")]
@@ -195,6 +197,7 @@ impl<'q> Machine<'q> {
             addr_of_mut!((*p).cold_extrusion).write(ColdExtrusionGuard::HOTEND);
             addr_of_mut!((*p).position_lost).write(false);
             addr_of_mut!((*p).defaults).write(settings);
+            addr_of_mut!((*p).driver_alarms).write(0);
             #[cfg(feature = "extrusion-line")]
             addr_of_mut!((*p).line).write(None);
             #[cfg(feature = "powder-bed")]
@@ -228,6 +231,7 @@ impl<'q> Machine<'q> {
             motion: _,
             position_lost: _,
             defaults: _,
+            driver_alarms: _,
             #[cfg(feature = "extrusion-line")]
             line: _,
             #[cfg(feature = "powder-bed")]
@@ -275,6 +279,23 @@ impl<'q> Machine<'q> {
     /// Latest raw endstop levels.
     pub fn set_endstop_levels(&mut self, levels: EndstopLevels) {
         self.endstop_levels = levels;
+    }
+
+    /// The drivers' ALARM inputs (SPEC §3: a closed-loop driver lost
+    /// sync), as the board read them with their polarity: bit i = motor i.
+    /// A new alarm stops every motor at once, says which, and refuses
+    /// moves until `G28`, which waits until no alarm is active.
+    pub fn on_driver_alarms<W: uWrite + ?Sized>(&mut self, alarms: u8, out: &mut W) -> Result<(), W::Error> {
+        let new = alarms & !self.driver_alarms;
+        self.driver_alarms = alarms;
+        if new == 0 || self.halted {
+            return Ok(());
+        }
+        self.motion.request_stop();
+        self.lose_alarmed_position();
+        let motor = new.trailing_zeros() as usize;
+        let letter = AXIS_LETTERS.get(motor).copied().unwrap_or(b'?');
+        ufmt::uwrite!(out, "Error:Driver alarm on {}: motion stopped, home with G28\n", char::from(letter))
     }
 
     /// Whether another line fits in the command queue.
@@ -565,6 +586,7 @@ impl<'q> Machine<'q> {
             Code::G(0 | 1) | Code::Modal => self.linear_move(command, out),
             Code::G(2 | 3) => self.arc_move(command, out),
             Code::G(4) => return Ok(self.dwell(command)),
+            Code::G(28) if self.driver_alarms != 0 => Err(CommandError::DriverAlarm),
             Code::G(28) => return Ok(self.home(command)),
             code if gcode::is_mode_setting(code) => self.apply_setting(code, out)?,
             Code::M(2 | 30) => {

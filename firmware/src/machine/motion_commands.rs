@@ -88,6 +88,11 @@ impl<'q> Machine<'q> {
         }
     }
 
+    /// An ALARM stopped the motors: as a lost position.
+    pub(super) fn lose_alarmed_position(&mut self) {
+        self.lose_position();
+    }
+
     fn lose_position(&mut self) {
         self.position_lost = true;
         if matches!(
@@ -128,6 +133,11 @@ impl<'q> Machine<'q> {
                 let idle = self.motion.is_idle();
                 if idle && then_disable {
                     self.steppers_enabled = false;
+                    // A machine that must home (SPEC §3's arm) does not know
+                    // where free motors went: home again.
+                    if self.motion.config.must_home {
+                        self.motion.forget_home();
+                    }
                 }
                 idle
             }

@@ -644,6 +644,11 @@ impl<'q> Motion<'q> {
         }
     }
 
+    /// The motors were released (`M18`): every axis must home again.
+    pub fn forget_home(&mut self) {
+        self.homed = 0;
+    }
+
     /// `M410`: stop now; the position is lost.
     pub fn request_stop(&mut self) {
         self.stop_requested = true;
