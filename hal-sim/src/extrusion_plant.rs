@@ -340,6 +340,92 @@ pub fn run_line(options: &LineOptions) -> LineRun {
     run
 }
 
+/// Microsteps per output turn of the firmware's line: the screw 200 × 15
+/// × 16, the puller 200 × 6 × 32 (`firmware::machine::line::LINE_CONFIG`).
+const SCREW_STEPS_PER_REV: f64 = 48_000.0;
+const PULLER_STEPS_PER_REV: f64 = 38_400.0;
+
+/// [`run_line`] with the whole firmware in the loop, over its serial line:
+/// the executor's G-code (`M104 S210`, `M3 S10` every 10 s until the
+/// interlock allows it, `M860`, `M861 P<px>` once a second, `M405`), the
+/// barrel on SPEC §4's plant through the 4.8 kΩ thermistor and the
+/// thesis PI on the SSR's slow PWM, and the screw and puller on their
+/// step timers as the Mega runs them. The diameter plant turns at the
+/// speeds the motors really stepped (counted over each 100 ms). The
+/// puller drive is the firmware's (6:1); `options.puller` and `gains`
+/// are the firmware's own, not the options'.
+pub fn run_line_gcode(options: &LineOptions) -> LineRun {
+    use crate::board::SimBoard;
+    let mut board = SimBoard::extrusion_line();
+    let mut plant = DiameterPlant::new(options.plant.clone(), 0.01);
+    let mut run = LineRun::default();
+    let mut last_steps = [0u64; 2];
+    let mut last_puller_rpm = 0.0;
+    let steps = |board: &SimBoard| board.line.as_ref().expect("the line's timers").steps;
+    // One second: the plant at the motors' speeds, then the camera.
+    let mut second = |board: &mut SimBoard, plant: &mut DiameterPlant, run: &mut LineRun, camera: bool| -> (Option<u32>, f64) {
+        for _ in 0..10 {
+            board.advance(100);
+            let now = steps(board);
+            let screw_rpm = (now[0] - last_steps[0]) as f64 / SCREW_STEPS_PER_REV * 600.0;
+            let puller_rpm = (now[1] - last_steps[1]) as f64 / PULLER_STEPS_PER_REV * 600.0;
+            last_steps = now;
+            run.largest_ramp_step_rpm = run.largest_ramp_step_rpm.max((puller_rpm - last_puller_rpm).abs());
+            last_puller_rpm = puller_rpm;
+            plant.advance(0.1, puller_rpm, screw_rpm);
+        }
+        let measured = plant.camera_px();
+        if camera {
+            if let Some(px) = measured {
+                // The strand's first seconds are thinner than any filament:
+                // the firmware refuses those (an Error: line, no change).
+                board.reply_to(&format!("M861 P{px}"), 100);
+            }
+        }
+        (measured, last_puller_rpm)
+    };
+    board.reply_to("M104 S210", 100);
+    let mut t = 0.0;
+    loop {
+        if (t as u32).is_multiple_of(10) {
+            let reply = board.reply_to("M3 S10", 100);
+            if reply == "ok
+" {
+                break;
+            }
+            let celsius = reply.split("barrel ").nth(1).and_then(|r| r.split(' ').next()).and_then(|c| c.parse().ok()).unwrap_or(f64::NAN);
+            run.refusals.push((t, celsius));
+        }
+        second(&mut board, &mut plant, &mut run, false);
+        t += 1.0;
+        assert!(t < 7200.0, "the barrel never got hot enough");
+    }
+    let report = board.reply_to("M105", 100);
+    run.screw_started_at_c = report.split("T:").nth(1).and_then(|r| r.split(' ').next()).and_then(|c| c.parse().ok()).unwrap_or(f64::NAN);
+    run.screw_started_s = t;
+    board.reply_to(&format!("M860 S{:.3}", options.manual_puller_rpm), 100);
+    for _ in 0..options.manual_s {
+        second(&mut board, &mut plant, &mut run, true);
+    }
+    board.reply_to("M405", 100);
+    for s in 0..options.automatic_s {
+        let silent = options.camera_gap.is_some_and(|(from, to)| s >= from && s < to);
+        let (measured, puller_rpm) = second(&mut board, &mut plant, &mut run, !silent);
+        let output = board.take_output();
+        for line in output.lines().filter(|l| l.starts_with("echo:Diameter measurement stale")) {
+            let held = line.split("held at ").nth(1).and_then(|r| r.split(' ').next()).and_then(|r| r.parse().ok()).unwrap_or(f64::NAN);
+            run.stale_warnings.push((f64::from(s + 1), held));
+        }
+        run.samples.push(Sample {
+            t_s: f64::from(s + 1),
+            measured_px: if silent { None } else { measured },
+            true_mm: plant.diameter_mm(),
+            puller_rpm,
+        });
+    }
+    run
+}
+
 /// Figures of a run: from the first sample after which every measured
 /// sample stays within ±0.05 mm of the setpoint.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -373,10 +459,11 @@ pub fn setpoint_mm() -> f64 {
 }
 
 /// For `cargo benchmark` (keys `diameter_mean_mm`, `diameter_std_mm`,
-/// `diameter_settle_s`): the standard run's figures (thesis, real line at
-/// its own 120 px setpoint: mean 2.585 mm, σ 0.097 mm).
+/// `diameter_settle_s`): the standard run's figures with the whole
+/// firmware in the loop ([`run_line_gcode`]; the thesis, real line at its
+/// own 120 px setpoint: mean 2.585 mm, σ 0.097 mm).
 pub fn diameter_benchmark() -> (f64, f64, f64) {
-    let run = run_line(&LineOptions::standard());
+    let run = run_line_gcode(&LineOptions::standard());
     let f = figures(&run, setpoint_mm()).expect("the standard run settles");
     (f.mean_mm, f.std_mm, f.settle_s)
 }

@@ -2,8 +2,10 @@
 //! firmware's line (screw and puller steppers, diameter loop, interlock)
 //! against the diameter plant and the camera of `hal_sim::extrusion_plant`.
 //!
-//! The barrel temperature is a stub (first order to 210 °C): the thermal
-//! module's barrel plant, PI and SSR slow PWM do not exist yet.
+//! `run_line` drives the core's line directly with a first-order barrel
+//! stub; `run_line_gcode` (the benchmark's) puts the whole firmware in the
+//! loop over G-code: the barrel plant of SPEC §4 under the thesis PI on the
+//! SSR's slow PWM, the interlock, the step timers.
 
 use firmware::machines::velocity::{DriveTrain, TimerChange, VelocityConfig, VelocityStepper, MEGA_STEP_TIMER_HZ};
 use hal_sim::extrusion_plant::*;
@@ -39,10 +41,24 @@ fn starts_cold_refuses_the_screw_below_175_c_then_holds_2_85_mm_on_every_sample(
     );
 }
 
+/// The benchmark's run: the whole firmware over G-code (real barrel
+/// thermal, interlock, step timers) holds the tolerance too.
+#[test]
+fn through_the_firmware_s_gcode_the_line_settles_and_holds_2_85_mm() {
+    let run = run_line_gcode(&LineOptions::standard());
+    assert!(run.refusals.len() > 10 && run.refusals.iter().all(|&(_, c)| c < 175.0), "{:?}", run.refusals);
+    assert!(run.screw_started_at_c >= 175.0 && run.screw_started_at_c < 190.0, "{}", run.screw_started_at_c);
+    let f = figures(&run, setpoint_mm()).expect("settles");
+    println!("through G-code: {f:?}, screw started at {} °C after {} s", run.screw_started_at_c, run.screw_started_s);
+    assert!(f.settle_s <= 120.0, "{f:?}");
+    assert!(within_tolerance_after(&run, f.settle_s).is_empty());
+    assert!((f.mean_mm - 2.85).abs() < 0.01, "{f:?}");
+}
+
 #[test]
 fn the_benchmark_function_gives_the_standard_runs_figures() {
     let (mean, std, settle) = diameter_benchmark();
-    let f = figures(&run_line(&LineOptions::standard()), setpoint_mm()).unwrap();
+    let f = figures(&run_line_gcode(&LineOptions::standard()), setpoint_mm()).unwrap();
     assert_eq!((mean, std, settle), (f.mean_mm, f.std_mm, f.settle_s));
 }
 
