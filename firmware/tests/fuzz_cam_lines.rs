@@ -53,22 +53,30 @@ proptest! {
         prop_assert_eq!(position_x(&mut board), format!("{expected}.00"), "{}", line);
     }
 
-    /// An unsupported mode anywhere on a line refuses the whole line: the
-    /// move on it does not run, and the next move waits for G54.
+    /// An unsupported mode anywhere on a line (inverse-time feed) refuses
+    /// the whole line: the move on it does not run, nor the next one.
     #[test]
-    fn an_unsupported_work_offset_on_a_line_moves_nothing(
-        system in 55u32..=59,
-        before in proptest::collection::vec(0..NEUTRAL.len(), 0..3),
+    fn an_unsupported_feed_mode_on_a_line_moves_nothing(
+        before in proptest::collection::vec(0..NEUTRAL.len() - 3, 0..3),
         x in 1u32..50,
     ) {
         let mut board = SimBoard::booted();
         let mut words: Vec<String> = before.iter().map(|&i| NEUTRAL[i].to_string()).collect();
-        words.push(format!("G{system}"));
+        words.push("G93".into());
         words.push(format!("G1 X{x} F6000"));
         let line = words.join(" ");
         let output = board.run_gcode(&format!("{line}\nG1 X5\n"), 20_000);
-        let refusal = format!("Error:G{system} is not supported: moves are refused until G54\nok\n");
+        let refusal = "Error:G93 is not supported: moves are refused until G94\nok\n";
         prop_assert_eq!(output, refusal.repeat(2), "{}", line);
         prop_assert_eq!(board.steps.positions(), [0, 0, 0, 0]);
+    }
+
+    /// A work system's zero moves every target on by exactly its offset.
+    #[test]
+    fn a_work_offset_shifts_the_target_by_itself(system in 1u32..=6, zero in 0u32..40, x in 0u32..40) {
+        let mut board = SimBoard::booted();
+        let line = format!("G10 L2 P{system} X{zero}\nG{} G0 X{x}\n", 53 + system);
+        prop_assert_eq!(board.run_gcode(&line, 20_000), "ok\nok\n");
+        prop_assert_eq!(board.steps.positions()[0], i64::from(zero + x) * 100);
     }
 }

@@ -26,8 +26,8 @@ pub enum CommandError {
     /// The command belongs to another kind of machine (`M665` on a
     /// Cartesian printer).
     NotThisMachine,
-    /// A mode this firmware does not run (`G55`, `G93`); moves wait until
-    /// the supported one is back.
+    /// A mode this firmware does not run (`G93`); moves wait until the
+    /// supported one is back.
     UnsupportedMode(Code),
     /// `G53` with an arc (Grbl: machine coordinates for `G0`/`G1` only).
     MachineFrameArc,
@@ -83,10 +83,10 @@ fn write_motion_error<W: uWrite + ?Sized>(error: MotionError, out: &mut W) -> Re
 }
 
 fn write_unsupported_mode<W: uWrite + ?Sized>(code: Code, out: &mut W) -> Result<(), W::Error> {
+    // G93 (inverse-time feed) is the only one today.
     let (number, back) = match code {
-        Code::G(93) => (93, 94),
-        Code::G(n) => (n, 54),
-        _ => (0, 54),
+        Code::G(n) => (n, 94),
+        _ => (0, 94),
     };
     ufmt::uwrite!(out, "G{} is not supported: moves are refused until G{}", number, back)
 }

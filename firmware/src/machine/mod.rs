@@ -522,10 +522,11 @@ impl<'q> Machine<'q> {
             Code::G(21) => modal.units = Units::Millimetres,
             Code::G(90) => self.set_distance(Distance::Absolute),
             Code::G(91) => self.set_distance(Distance::Relative),
-            // The only work coordinate system, and the only feed mode.
-            Code::G(54) if matches!(modal.unsupported, Some(Code::G(55..=59))) => modal.unsupported = None,
+            // Work coordinate systems (offsets from G10 L2/L20).
+            Code::G(n @ 54..=59) => modal.work = (n - 54) as u8,
+            // The only feed mode.
             Code::G(94) if modal.unsupported == Some(Code::G(93)) => modal.unsupported = None,
-            Code::G(55..=59 | 93) => {
+            Code::G(93) => {
                 modal.unsupported = Some(code);
                 return Ok(Err(CommandError::UnsupportedMode(code)));
             }
@@ -545,6 +546,7 @@ impl<'q> Machine<'q> {
     fn end_program(&mut self) {
         self.set_distance(Distance::Absolute);
         self.modal.plane = Plane::Xy;
+        self.modal.work = 0;
         self.modal.unsupported = None;
         self.modal.motion_mode = MotionMode::Linear;
     }
@@ -660,6 +662,14 @@ impl<'q> Machine<'q> {
             Code::M(304) => self.set_pid(command, HeaterSlot::Bed, out),
             Code::M(302) => self.cold_extrusion_command(command, out),
             Code::M(303) => return self.autotune(command, out),
+            // Grbl's G10 L2 / L20: work offsets. Without L it would be
+            // Marlin's firmware retraction, which this build does not have.
+            Code::G(10) if command.has(b'L') => match command.value(b'L').map(|l| l.and_then(|l| l.to_int())) {
+                Ok(Some(2)) => self.modal.set_work_offsets(command, false),
+                Ok(Some(20)) => self.modal.set_work_offsets(command, true),
+                Ok(_) => Err(CommandError::OutOfRange(b'L')),
+                Err(error) => Err(error.into()),
+            },
             Code::G(10 | 11) => {
                 self.not_yet_available(text, out)?;
                 Ok(())

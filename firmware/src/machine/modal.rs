@@ -69,15 +69,23 @@ pub struct ModalState {
     pub offset: Position,
     /// `G17`/`G18`/`G19`: the plane of arcs.
     pub plane: Plane,
-    /// A mode this firmware does not run (`G55`–`G59` work coordinates,
-    /// `G93` inverse-time feed) was asked for: moves are refused until it
-    /// is switched back (`G54`, `G94`) or the program ends (`M2`/`M30`),
-    /// so no move runs in a mode other than the one the program meant.
+    /// A mode this firmware does not run (`G93` inverse-time feed) was
+    /// asked for: moves are refused until it is switched back (`G94`) or
+    /// the program ends (`M2`/`M30`), so no move runs in a mode other than
+    /// the one the program meant.
     pub unsupported: Option<Code>,
     /// `G53` on the line being executed: its target is in machine
     /// coordinates (no `G92` shift) and absolute. Cleared after the line.
     pub machine_frame: bool,
+    /// `G54`–`G59`: the work coordinate system in use (0 = `G54`).
+    pub work: u8,
+    /// Where each work system's zero lies in machine coordinates, µm, X Y Z
+    /// (`G10 L2`/`L20`; Grbl's). All zero at power-up (they are not saved).
+    pub work_offsets: [[i32; 3]; WORK_SYSTEMS],
 }
+
+/// `G54`–`G59`.
+pub const WORK_SYSTEMS: usize = 6;
 
 pub use crate::motion::Plane;
 
@@ -100,14 +108,27 @@ impl ModalState {
             plane: Plane::Xy,
             unsupported: None,
             machine_frame: false,
+            work: 0,
+            work_offsets: [[0; 3]; WORK_SYSTEMS],
         }
+    }
+
+    /// logical = machine + this, per axis: the `G92` shift less the work
+    /// system's zero (X, Y, Z; E has no work offset).
+    pub fn shift(&self, axis: usize) -> i32 {
+        self.offset[axis].saturating_sub(self.work_zero(axis))
+    }
+
+    /// The work system's zero on `axis` (0 for E).
+    fn work_zero(&self, axis: usize) -> i32 {
+        self.work_offsets[usize::from(self.work) % WORK_SYSTEMS].get(axis).copied().unwrap_or(0)
     }
 
     /// The logical position (what `M114` reports and `G90` targets mean).
     pub fn logical_position(&self) -> Position {
         let mut logical = [0; AXES];
         for (axis, value) in logical.iter_mut().enumerate() {
-            *value = self.position[axis].saturating_add(self.offset[axis]);
+            *value = self.position[axis].saturating_add(self.shift(axis));
         }
         logical
     }
@@ -154,7 +175,7 @@ impl ModalState {
             let distance = if letter == b'E' { self.extruder_distance } else { self.distance };
             let machine = match distance {
                 _ if self.machine_frame && letter != b'E' => i64::from(um),
-                Distance::Absolute => i64::from(um) - i64::from(self.offset[axis]),
+                Distance::Absolute => i64::from(um) - i64::from(self.shift(axis)),
                 Distance::Relative => i64::from(self.position[axis]) + i64::from(um),
             };
             if machine.unsigned_abs() > MAX_COORDINATE_UM as u64 {
@@ -176,9 +197,38 @@ impl ModalState {
                 None if !named => 0,
                 None => continue,
             };
-            offset[axis] = value.saturating_sub(self.position[axis]);
+            // logical = machine + G92 − work zero = value
+            offset[axis] = value.saturating_sub(self.position[axis]).saturating_add(self.work_zero(axis));
         }
         self.offset = offset;
+        Ok(())
+    }
+
+    /// `G10 L2 P<n>` (`l20`: false) sets work system `n`'s zero to the
+    /// given machine coordinates; `G10 L20 P<n>` (true) sets it so that
+    /// the machine stands at the given coordinates in it. `P0` is the
+    /// system in use, `P1`–`P6` are `G54`–`G59`. Axes not named keep theirs.
+    pub fn set_work_offsets(&mut self, command: &Command, l20: bool) -> Result<(), CommandError> {
+        let system = match command.value(b'P')? {
+            None => usize::from(self.work),
+            Some(p) => match p.to_int() {
+                Some(0) => usize::from(self.work),
+                Some(n @ 1..=6) => n as usize - 1,
+                _ => return Err(CommandError::OutOfRange(b'P')),
+            },
+        };
+        let mut zero = self.work_offsets[system];
+        for (axis, &letter) in AXIS_LETTERS[..3].iter().enumerate() {
+            let Some(value) = command.value(letter)? else { continue };
+            let um = self.length_um(letter, value)?;
+            zero[axis] = if l20 {
+                // logical = machine + G92 − zero = um
+                self.position[axis].saturating_add(self.offset[axis]).saturating_sub(um)
+            } else {
+                um
+            };
+        }
+        self.work_offsets[system] = zero;
         Ok(())
     }
 }

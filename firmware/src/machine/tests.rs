@@ -356,22 +356,44 @@ fn a_mode_set_on_a_move_line_applies_to_that_move() {
     assert_eq!(machine.modal().logical_position()[0], 5_000);
 }
 
-/// Work coordinates other than G54 and inverse-time feed are not run; a
-/// program that asks for them gets an error, and its moves are refused
-/// (not run in the wrong frame) until it switches back.
+/// Inverse-time feed (`G93`) is not run: a program that asks for it gets
+/// an error, and its moves are refused (not run at a feed it did not mean)
+/// until it switches back to `G94`.
 #[test]
-fn unsupported_modes_are_refused_and_hold_moves_until_switched_back() {
+fn inverse_time_feed_is_refused_and_holds_moves_until_g94() {
     let mut machine = new_machine();
-    assert_eq!(converse(&mut machine, 0, "G55\n"), "Error:G55 is not supported: moves are refused until G54\nok\n");
-    assert_eq!(converse(&mut machine, 0, "G1 X5\n"), "Error:G55 is not supported: moves are refused until G54\nok\n");
+    assert_eq!(converse(&mut machine, 0, "G93 G1 X6 F2\n"), "Error:G93 is not supported: moves are refused until G94\nok\n");
+    assert_eq!(converse(&mut machine, 0, "G1 X5\n"), "Error:G93 is not supported: moves are refused until G94\nok\n");
     assert_eq!(machine.modal().logical_position()[0], 0);
-    assert_eq!(converse(&mut machine, 0, "G54\nG1 X5\n"), "ok\nok\n");
-    assert_eq!(machine.modal().logical_position()[0], 5_000);
-    assert_eq!(converse(&mut machine, 0, "G93 G1 X6\n"), "Error:G93 is not supported: moves are refused until G94\nok\n");
-    assert_eq!(machine.modal().logical_position()[0], 5_000);
     assert_eq!(converse(&mut machine, 0, "G94\nG1 X6\n"), "ok\nok\n");
     assert_eq!(machine.modal().logical_position()[0], 6_000);
 }
+
+/// Grbl's work coordinates: `G10 L2 P<n>` puts system n's zero at machine
+/// coordinates, `G10 L20` so that the machine stands at the given place in
+/// it; `G54`–`G59` choose; `G92` shifts on top; `G53` ignores both.
+#[test]
+fn work_coordinate_systems_follow_grbl() {
+    let mut machine = new_machine();
+    // G55's zero at machine (10, 20, 0).
+    assert_eq!(converse(&mut machine, 0, "G10 L2 P2 X10 Y20\nG55\nG0 X0 Y0\n"), "ok\nok\nok\n");
+    assert_eq!(machine.modal().position[..2], [10_000, 20_000]);
+    assert_eq!(machine.modal().logical_position()[..2], [0, 0]);
+    // G54 is still the machine frame.
+    assert_eq!(converse(&mut machine, 0, "G54\nG0 X5\n"), "ok\nok\n");
+    assert_eq!(machine.modal().position[0], 5_000);
+    // L20: here (machine X 5) is X 1 in G56: its zero is at machine 4.
+    assert_eq!(converse(&mut machine, 0, "G10 L20 P3 X1\nG56\nG0 X2\n"), "ok\nok\nok\n");
+    assert_eq!(machine.modal().position[0], 6_000);
+    // G92 on top, G53 ignores both, M2 returns to G54.
+    assert_eq!(converse(&mut machine, 0, "G92 X0\nG0 X1\n"), "ok\nok\n");
+    assert_eq!(machine.modal().position[0], 7_000);
+    assert_eq!(converse(&mut machine, 0, "G53 G0 X3\n"), "ok\n");
+    assert_eq!(machine.modal().position[0], 3_000);
+    assert_eq!(converse(&mut machine, 0, "G10 L3 P1 X0\nG10 L2 P7 X0\n"), "Error:Value out of range for L\nok\nError:Value out of range for P\nok\n");
+    assert_eq!(machine.modal().work, 2);
+}
+
 
 /// In G18 the centre comes from K and I (Grbl): a J offset is not one.
 #[test]
@@ -387,7 +409,8 @@ fn a_g18_arc_reads_its_centre_from_k_and_i() {
 #[test]
 fn m2_and_m30_end_the_program_and_restore_the_default_modes() {
     let mut machine = new_machine();
-    assert_eq!(converse(&mut machine, 0, "G91\nG18\nG55\nM30\n"), "ok\nok\nError:G55 is not supported: moves are refused until G54\nok\nok\n");
+    assert_eq!(converse(&mut machine, 0, "G91\nG18\nG93\nG57\nM30\n"), "ok\nok\nError:G93 is not supported: moves are refused until G94\nok\nok\nok\n");
+    assert_eq!(machine.modal().work, 0);
     assert_eq!(machine.modal().distance, Distance::Absolute);
     assert_eq!(machine.modal().plane, modal::Plane::Xy);
     assert_eq!(machine.modal().unsupported, None);
