@@ -229,3 +229,28 @@ fn a_carriage_sensor_that_never_trips_aborts_the_layer() {
     assert!(!bed.roller_on && !bed.suction_on);
     assert_eq!((bed.feed.position, bed.build.position), (feed0, build0));
 }
+
+/// SPEC §5's relay auto-tune of the carriage's DC servo loop over G-code:
+/// the relay oscillates the axis, the report gives Ku, Pu and the
+/// Ziegler–Nichols gains, `A1` puts them in the loop, and the carriage
+/// still makes its strokes with them.
+#[test]
+fn m825_tunes_the_carriage_servo_and_the_tuned_loop_strokes() {
+    let mut board = SimBoard::powder_bed();
+    let reply = board.reply_to("M825 S127 A1", 30_000);
+    assert!(reply.starts_with("echo:Carriage relay d:127 a:"), "{reply}");
+    let field = |name: &str| -> f64 {
+        reply.split(&format!("{name}:")).nth(1).and_then(|r| r.split([' ', '\n']).next()).and_then(|v| v.parse().ok()).unwrap_or(f64::NAN)
+    };
+    let (amplitude, period, ku) = (field("a"), field("Pu"), field("Ku"));
+    // Ku = 4d/(πa); the plant (40 counts/s per duty unit, 30 ms lag, 4 ms
+    // dead time) oscillates within tens of ms and a few tens of counts.
+    assert!(amplitude > 1.0 && amplitude < 200.0, "{reply}");
+    assert!(period > 0.005 && period < 0.5, "{reply}");
+    assert!((ku - 4.0 * 127.0 / (std::f64::consts::PI * amplitude)).abs() < 0.01 * ku, "{reply}");
+    println!("{reply}");
+    assert!(reply.ends_with("ok\n"), "{reply}");
+    assert_eq!(board.reply_to("M882 S1", 10_000), "echo:Carriage at C+\nok\n");
+    assert_eq!(board.reply_to("M882 S0", 10_000), "echo:Carriage at C-\nok\n");
+    assert_eq!(board.reply_to("M825 S300", 100), "Error:Value out of range for S\nok\n");
+}

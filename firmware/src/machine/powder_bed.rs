@@ -16,6 +16,7 @@
 //! | `M880 [F] [B]` | travel measurement of the feed and/or build platform (none named: both) | `echo:Feed platform travel 40000 steps 200.000 mm` |
 //! | `M881 [L<mm>] [N<layers>]` | layer cycles (default 0.1 mm, 1 layer) | `echo:Layer 1 done` per layer |
 //! | `M882 S0` / `S1` | carriage to C− / C+ | `echo:Carriage at C+` |
+//! | `M825 [S<d>] [B<band>] [N<cycles>] [A1]` | relay auto-tune of the carriage's servo loop (SPEC §5, Åström–Hägglund, Ziegler–Nichols gains); `A1` applies them | `echo:Carriage relay d:127 a:10.00 Pu:0.200 Ku:16.1701 Kp:9.7021 Ki:97.0209 Kd:0.2426` |
 //! | `M3` / `M5` | roller on / off | |
 //! | `M10` / `M11` | suction on / off | |
 //! | `M104`, `M109`, `M140`, `M190` | none: this machine has no heaters | `echo:M109 ignored: this machine has no heaters` |
@@ -37,7 +38,9 @@
 use super::error::CommandError;
 use super::{Machine, Running};
 use crate::closed_loop::control::{AxisController, DriverStatus, FollowingErrorLimit, LoopGains, Reference};
+use crate::closed_loop::relay::{RelayAutotune, RelayStep};
 use crate::closed_loop::tuning::relay_ziegler_nichols;
+use crate::reply::Fixed;
 use crate::gcode::{Code, Command};
 use crate::machines::powder_bed::{
     write_no_heaters, write_travel_report, CarriageEnd, LayerCommand, LayerCycle, LayerEvent, LayerSettings, Platform, PlatformAction,
@@ -118,6 +121,8 @@ enum Job {
     Layers { command: LayerCommand, steps_left: u32, layers_left: u16 },
     /// `M882`.
     Carriage,
+    /// `M825`: the relay experiment on the carriage; `apply`: `A1`.
+    RelayTune { tune: RelayAutotune, relay_amplitude: i32, apply: bool },
 }
 
 /// The powder bed's state inside the machine.
@@ -282,11 +287,30 @@ impl Machine<'_> {
                     };
                 }
             },
+            Job::RelayTune { mut tune, relay_amplitude, apply } => match tune.tick(inputs.carriage_count) {
+                RelayStep::Output(duty) => {
+                    outputs.carriage_duty = if inputs.bridge_fault { 0 } else { duty };
+                    bed.job = if inputs.bridge_fault { Job::Idle } else { Job::RelayTune { tune, relay_amplitude, apply } };
+                    if inputs.bridge_fault {
+                        crate::flash_str!("Error:Carriage relay tune stopped: bridge fault\n").write_to(out)?;
+                    }
+                }
+                RelayStep::Done(result) => {
+                    bed.job = Job::Idle;
+                    bed.finish_relay(result, apply, out)?;
+                }
+                RelayStep::Failed => {
+                    bed.job = Job::Idle;
+                    crate::flash_str!("Error:Carriage relay tune failed (no steady oscillation)\n").write_to(out)?;
+                }
+            },
             Job::Carriage => match bed.stroke_tick(inputs) {
                 StrokeResult::Running(duty) => outputs.carriage_duty = duty,
                 StrokeResult::Arrived => {
                     let end = if inputs.at_plus { "+" } else { "-" };
-                    ufmt::uwrite!(out, "echo:Carriage at C{}\n", end)?;
+                    crate::flash_str!("echo:Carriage at C").write_to(out)?;
+                    out.write_str(end)?;
+                    out.write_str("\n")?;
                     bed.job = Job::Idle;
                 }
                 StrokeResult::Failed => {
@@ -333,7 +357,9 @@ impl Machine<'_> {
                         }
                     }
                     LayerCommand::Finished { layer } => {
-                        ufmt::uwrite!(out, "echo:Layer {} done\n", layer)?;
+                        crate::flash_str!("echo:Layer ").write_to(out)?;
+                        ufmt::uwrite!(out, "{}", layer)?;
+                        crate::flash_str!(" done\n").write_to(out)?;
                         if layers_left > 1 {
                             bed.job = Job::Layers {
                                 command: bed.cycle.start(&PLATFORM, &PLATFORM, carriage_at(inputs)),
@@ -413,9 +439,26 @@ impl Machine<'_> {
                 }
                 Ok(_) => Err(CommandError::OutOfRange(b'S')),
             },
+            Code::M(825) => (|| {
+                let word = |letter, default: i32, range: core::ops::RangeInclusive<i32>| -> Result<i32, CommandError> {
+                    match command.value(letter)? {
+                        None => Ok(default),
+                        Some(value) => value.to_int().filter(|v| range.contains(v)).ok_or(CommandError::OutOfRange(letter)),
+                    }
+                };
+                let relay_amplitude = word(b'S', 127, 10..=255)?;
+                let band = word(b'B', 5, 1..=500)?;
+                let cycles = word(b'N', 10, 3..=50)?;
+                let apply = word(b'A', 0, 0..=1)? == 1;
+                let setpoint = bed.last.carriage_count;
+                bed.stroke = None;
+                let tune = RelayAutotune::new(setpoint, relay_amplitude, 0, band, MAX_STROKE_COUNTS, cycles as u8);
+                bed.job = Job::RelayTune { tune, relay_amplitude, apply };
+                Ok(Some(Running::BedJob))
+            })(),
             Code::M(115) => {
                 super::write_capabilities(out)?;
-                out.write_str("Cap:POWDER_BED:1\n")?;
+                crate::flash_str!("Cap:POWDER_BED:1\n").write_to(out)?;
                 Ok(None)
             }
             _ => return Ok(None),
@@ -430,6 +473,38 @@ impl Machine<'_> {
 }
 
 impl BedState {
+    /// The relay experiment's result: the report, and with `A1` the
+    /// carriage loop's new gains (servo PID, derivative on the measurement).
+    fn finish_relay<W: uWrite + ?Sized>(&mut self, result: crate::closed_loop::relay::RelayResult, apply: bool, out: &mut W) -> Result<(), W::Error> {
+        let period_s = result.period_ticks as f32 * CARRIAGE_TICK_S;
+        let Ok(gains) = relay_ziegler_nichols(result.relay_amplitude as f32, result.oscillation_amplitude as f32, period_s) else {
+            return crate::flash_str!("Error:Carriage relay tune failed (no oscillation)\n").write_to(out);
+        };
+        let ten_thousandths = |value: f32| Fixed { mantissa: crate::motion::math::round_to_i32(value * 10_000.0), digits: 4 };
+        // Label by label from flash: this build's RAM is nearly full.
+        crate::flash_str!("echo:Carriage relay d:").write_to(out)?;
+        ufmt::uwrite!(out, "{}", result.relay_amplitude)?;
+        for (label, value) in [
+            (crate::flash_str!(" a:"), Fixed::hundredths(result.oscillation_amplitude * 100)),
+            (crate::flash_str!(" Pu:"), Fixed { mantissa: result.period_ticks as i32, digits: 3 }),
+            (crate::flash_str!(" Ku:"), ten_thousandths(gains.ku)),
+            (crate::flash_str!(" Kp:"), ten_thousandths(gains.kp)),
+            (crate::flash_str!(" Ki:"), ten_thousandths(gains.ki)),
+            (crate::flash_str!(" Kd:"), ten_thousandths(gains.kd)),
+        ] {
+            label.write_to(out)?;
+            ufmt::uwrite!(out, "{}", value)?;
+        }
+        out.write_str("\n")?;
+        if apply {
+            match LoopGains::servo_pid(&gains, CARRIAGE_TICK_S) {
+                Ok(loop_gains) => self.carriage.set_gains(loop_gains),
+                Err(_) => crate::flash_str!("Error:Carriage gains out of range, not applied\n").write_to(out)?,
+            }
+        }
+        Ok(())
+    }
+
     fn outputs(&self, mut outputs: BedOutputs) -> BedOutputs {
         outputs.roller = self.roller;
         outputs.suction = self.suction;

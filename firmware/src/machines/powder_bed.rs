@@ -347,11 +347,19 @@ pub fn write_travel_report<W: ufmt::uWrite + ?Sized>(
 ) -> Result<(), W::Error> {
     match result {
         Ok(report) => {
-            ufmt::uwrite!(out, "echo:{} platform travel {} steps ", platform.name(), report.steps)?;
+            ufmt::uwrite!(out, "echo:{}", platform.name())?;
+            crate::flash_str!(" platform travel ").write_to(out)?;
+            ufmt::uwrite!(out, "{}", report.steps)?;
+            crate::flash_str!(" steps ").write_to(out)?;
             write_um_as_mm(report.um as i32, out)?;
             out.write_str(" mm\n")
         }
-        Err(fault) => ufmt::uwrite!(out, "Error:{} platform travel: {}\n", platform.name(), fault.message()),
+        Err(fault) => {
+            ufmt::uwrite!(out, "Error:{}", platform.name())?;
+            crate::flash_str!(" platform travel: ").write_to(out)?;
+            out.write_str(fault.message())?;
+            out.write_str("\n")
+        }
     }
 }
 
@@ -600,7 +608,8 @@ impl LayerCycle {
 /// The reply to a heater command on a machine with none (SPEC §5):
 /// `echo:M109 ignored: this machine has no heaters` (then `ok`, at once).
 pub fn write_no_heaters<W: ufmt::uWrite + ?Sized>(code: u16, out: &mut W) -> Result<(), W::Error> {
-    ufmt::uwrite!(out, "echo:M{} ignored: this machine has no heaters\n", code)
+    ufmt::uwrite!(out, "echo:M{}", code)?;
+    crate::flash_str!(" ignored: this machine has no heaters\n").write_to(out)
 }
 
 #[cfg(test)]
