@@ -18,9 +18,12 @@
 //! falling STEP edge, 5 µs, STEP back high (the driver wants ≥ 5 µs each).
 //!
 //! Known limit: the carriage's servo loop runs at the main loop's
-//! millisecond, so a main-loop pass longer than a few milliseconds (a
-//! report, a settings save) stretches its period; the loop's following
-//! error limit then stops the stroke (a fault, never a runaway).
+//! millisecond, so a main-loop pass longer than a few milliseconds (a long
+//! report at 115 200 baud, a settings save) stretches its period. The
+//! bridge must not keep its last duty meanwhile: the 1 kHz tick brakes it
+//! when the main loop has not driven it for [`BRAKE_AFTER_MS`]
+//! ([`on_tick`]), and the next pass drives it again. A stroke then runs
+//! late, or ends in the loop's following-error stop, never runs away.
 
 use crate::pins::{self, Pin, Port};
 use avr_device::atmega2560::Peripherals;
@@ -55,6 +58,12 @@ const SUCTION: Pin = pins::pin(Port::H, 5);
 
 /// COM5C1: OC5C driven by the timer (non-inverting).
 const COM5C1: u8 = 1 << 3;
+
+/// The tick brakes the bridge after this long without [`drive`].
+pub const BRAKE_AFTER_MS: u32 = 3;
+
+/// When [`drive`] last ran (ms), and whether the bridge is driven.
+static LAST_DRIVE: Mutex<core::cell::Cell<(u32, bool)>> = Mutex::new(core::cell::Cell::new((0, false)));
 
 static DECODER: Mutex<RefCell<QuadratureDecoder>> = Mutex::new(RefCell::new(QuadratureDecoder::new(true, true, 0)));
 
@@ -110,8 +119,9 @@ pub fn read(dp: &Peripherals) -> BedInputs {
     }
 }
 
-/// Drive what the machine decided for this millisecond.
-pub fn drive(dp: &Peripherals, outputs: &BedOutputs) {
+/// Drive what the machine decided for millisecond `now_ms`.
+pub fn drive(dp: &Peripherals, outputs: &BedOutputs, now_ms: u32) {
+    avr_device::interrupt::free(|cs| LAST_DRIVE.borrow(cs).set((now_ms, outputs.carriage_duty != 0)));
     for platform in [&FEED, &BUILD] {
         pins::make_output(dp, platform.enable, PLATFORM.enable_level(outputs.platforms_enabled));
     }
@@ -148,6 +158,21 @@ fn set_bridge(dp: &Peripherals, duty: i32) {
     dp.TC5.tccr5a.modify(|r, w| unsafe { w.bits(if magnitude == 0 { r.bits() & !COM5C1 } else { r.bits() | COM5C1 }) });
     // An output, low whenever the timer does not drive it.
     pins::make_output(dp, BRIDGE_PWM, false);
+}
+
+/// From the 1 kHz tick: brake a bridge the main loop has left alone too
+/// long (see the module docs).
+pub fn on_tick(dp: &Peripherals, cs: avr_device::interrupt::CriticalSection, now_ms: u32) {
+    let cell = LAST_DRIVE.borrow(cs);
+    let (last, driven) = cell.get();
+    if driven && now_ms.wrapping_sub(last) > BRAKE_AFTER_MS {
+        // SAFETY: COM5C1 only.
+        dp.TC5.tccr5a.modify(|r, w| unsafe { w.bits(r.bits() & !COM5C1) });
+        for pin in [BRIDGE_PWM, BRIDGE_INA, BRIDGE_INB] {
+            pins::make_output_in(dp, cs, pin, false);
+        }
+        cell.set((last, false));
+    }
 }
 
 fn on_encoder_edge() {

@@ -38,6 +38,8 @@ fn TIMER3_COMPA() {
         let millis = MILLIS.borrow(cs);
         let now = millis.get().wrapping_add(1);
         millis.set(now);
+        #[cfg(feature = "machine-powder-bed")]
+        crate::bed::on_tick(&unsafe { Peripherals::steal() }, cs, now);
         #[cfg(any(feature = "bed-ssr", feature = "machine-extrusion-line"))]
         crate::ssr::on_tick(&unsafe { Peripherals::steal() }, cs, now);
     });

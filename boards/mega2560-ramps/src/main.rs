@@ -86,7 +86,7 @@ fn main() -> ! {
             last_bed_ms = now;
             let inputs = bed::read(&dp);
             let Ok(decided) = link.machine.powder_bed_tick(&inputs, &mut tx);
-            bed::drive(&dp, &decided);
+            bed::drive(&dp, &decided, now);
         }
         #[cfg(feature = "machine-extrusion-line")]
         {

@@ -99,7 +99,7 @@ pub fn make_output(dp: &Peripherals, pin: Pin, high: bool) {
 
 /// [`make_output`] from code that already holds interrupts off (an
 /// interrupt handler).
-#[cfg_attr(not(any(feature = "bed-ssr", feature = "machine-extrusion-line")), allow(dead_code))]
+#[cfg_attr(not(any(feature = "bed-ssr", feature = "machine-extrusion-line", feature = "machine-powder-bed")), allow(dead_code))]
 pub fn make_output_in(dp: &Peripherals, _cs: avr_device::interrupt::CriticalSection, pin: Pin, high: bool) {
     make_output_unguarded(dp, pin, high);
 }
