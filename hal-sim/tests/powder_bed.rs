@@ -254,3 +254,23 @@ fn m825_tunes_the_carriage_servo_and_the_tuned_loop_strokes() {
     assert_eq!(board.reply_to("M882 S0", 10_000), "echo:Carriage at C-\nok\n");
     assert_eq!(board.reply_to("M825 S300", 100), "Error:Value out of range for S\nok\n");
 }
+
+/// The carriage loop's own commands (listed in M115 as CLOSED_LOOP): gains
+/// set by hand, the encoder report, the following-error limit.
+#[test]
+fn the_carriage_loop_takes_its_gains_and_limits_at_run_time() {
+    let mut board = SimBoard::powder_bed();
+    assert!(board.reply_to("M115", 100).contains("Cap:CLOSED_LOOP:1\n"));
+    assert_eq!(board.reply_to("M821 P2 I40 D0.02", 100), "echo:Carriage PID Kp:2.0000 Ki:40.0000 Kd:0.0200\nok\n");
+    assert_eq!(board.reply_to("M821", 100), "echo:Carriage PID Kp:2.0000 Ki:40.0000 Kd:0.0200\nok\n");
+    assert_eq!(board.reply_to("M821 P-1", 100), "Error:Value out of range for P\nok\n");
+    assert_eq!(board.reply_to("M822", 100), "echo:Carriage enc:0 at:C- fault:none\nok\n");
+    assert_eq!(board.reply_to("M882 S1", 10_000), "echo:Carriage at C+\nok\n");
+    let report = board.reply_to("M822", 100);
+    assert!(report.starts_with("echo:Carriage enc:40") && report.ends_with(" at:C+ fault:none\nok\n"), "{report}");
+    assert_eq!(board.reply_to("M823 E200 T50", 100), "echo:Carriage following error 200 counts for 50 ms\nok\n");
+    // A limit the stroke cannot keep: the stroke stops with an error.
+    assert_eq!(board.reply_to("M821 P0.01 I0 D0", 100), "echo:Carriage PID Kp:0.0100 Ki:0.0000 Kd:0.0000\nok\n");
+    let reply = board.reply_to("M882 S0", 10_000);
+    assert_eq!(reply, "Error:Carriage stroke failed (sensor not reached or servo fault)\nok\n");
+}

@@ -16,6 +16,9 @@
 //! | `M880 [F] [B]` | travel measurement of the feed and/or build platform (none named: both) | `echo:Feed platform travel 40000 steps 200.000 mm` |
 //! | `M881 [L<mm>] [N<layers>]` | layer cycles (default 0.1 mm, 1 layer) | `echo:Layer 1 done` per layer |
 //! | `M882 S0` / `S1` | carriage to C− / C+ | `echo:Carriage at C+` |
+//! | `M821 [P<kp>] [I<ki>] [D<kd>]` | the carriage's servo PID gains (duty per count, per count·s, duty·s per count; derivative on the measurement, filter Td/10); bare: report | `echo:Carriage PID Kp:2.3664 Ki:51.4427 Kd:0.0272` |
+//! | `M822` | the carriage's encoder and sensors | `echo:Carriage enc:4020 at:C+ fault:none` |
+//! | `M823 E<counts> [T<ms>]` | following-error limit (and how long it may be exceeded); bare: report | `echo:Carriage following error 4000 counts for 1000 ms` |
 //! | `M825 [S<d>] [B<band>] [N<cycles>] [A1]` | relay auto-tune of the carriage's servo loop (SPEC §5, Åström–Hägglund, Ziegler–Nichols gains); `A1` applies them | `echo:Carriage relay d:127 a:10.00 Pu:0.200 Ku:16.1701 Kp:9.7021 Ki:97.0209 Kd:0.2426` |
 //! | `M3` / `M5` | roller on / off | |
 //! | `M10` / `M11` | suction on / off | |
@@ -39,7 +42,7 @@ use super::error::CommandError;
 use super::{Machine, Running};
 use crate::closed_loop::control::{AxisController, DriverStatus, FollowingErrorLimit, LoopGains, Reference};
 use crate::closed_loop::relay::{RelayAutotune, RelayStep};
-use crate::closed_loop::tuning::relay_ziegler_nichols;
+use crate::closed_loop::tuning::{relay_ziegler_nichols, RelayGains};
 use crate::reply::Fixed;
 use crate::gcode::{Code, Command};
 use crate::machines::powder_bed::{
@@ -138,14 +141,14 @@ pub struct BedState {
     /// What the board read at the last tick (where the carriage is when a
     /// command starts).
     last: BedInputs,
+    /// The carriage loop's PID gains as set (`M821`, `M825 A1`).
+    pid: RelayGains,
 }
 
 impl BedState {
     fn new() -> Self {
-        let gains = relay_ziegler_nichols(127.0, 10.0, 0.05)
-            .ok()
-            .and_then(|relay| LoopGains::servo_pid(&relay, CARRIAGE_TICK_S).ok())
-            .unwrap_or(LoopGains::OPEN_LOOP);
+        let pid = relay_ziegler_nichols(127.0, 10.0, 0.05).unwrap_or(RelayGains { ku: 0.0, kp: 0.0, ki: 0.0, kd: 0.0 });
+        let gains = LoopGains::servo_pid(&pid, CARRIAGE_TICK_S).unwrap_or(LoopGains::OPEN_LOOP);
         Self {
             job: Job::Idle,
             cycle: LayerCycle::new(LayerSettings { thickness_um: 100, suction_while_spreading: false }),
@@ -155,6 +158,7 @@ impl BedState {
             suction: false,
             platforms_enabled: false,
             last: BedInputs { feed_switches: (true, true), build_switches: (true, true), ..BedInputs::default() },
+            pid,
         }
     }
 
@@ -225,6 +229,11 @@ impl BedState {
         self.suction = false;
         self.stroke = None;
     }
+}
+
+/// A gain with four decimals.
+fn ten_thousandths(value: f32) -> Fixed {
+    Fixed { mantissa: crate::motion::math::round_to_i32(value * 10_000.0), digits: 4 }
 }
 
 /// The end sensor that reads active now.
@@ -439,6 +448,51 @@ impl Machine<'_> {
                 }
                 Ok(_) => Err(CommandError::OutOfRange(b'S')),
             },
+            Code::M(821) => (|| {
+                let read = |letter, now: f32| -> Result<f32, CommandError> {
+                    match command.value(letter)? {
+                        None => Ok(now),
+                        Some(value) => value.to_scaled(4).filter(|v| *v >= 0).map(|v| v as f32 / 10_000.0).ok_or(CommandError::OutOfRange(letter)),
+                    }
+                };
+                if command.has(b'P') || command.has(b'I') || command.has(b'D') {
+                    let pid = RelayGains { ku: bed.pid.ku, kp: read(b'P', bed.pid.kp)?, ki: read(b'I', bed.pid.ki)?, kd: read(b'D', bed.pid.kd)? };
+                    bed.set_pid(pid)?;
+                }
+                Ok(None)
+            })()
+            .map(|done| {
+                let _ = bed.write_pid(out);
+                done
+            }),
+            Code::M(822) => {
+                let last = bed.last;
+                crate::flash_str!("echo:Carriage enc:").write_to(out)?;
+                ufmt::uwrite!(out, "{}", last.carriage_count)?;
+                out.write_str(match carriage_at(&last) {
+                    Some(CarriageEnd::Minus) => " at:C-",
+                    Some(CarriageEnd::Plus) => " at:C+",
+                    None => " at:-",
+                })?;
+                out.write_str(if last.bridge_fault { " fault:bridge\n" } else { " fault:none\n" })?;
+                Ok(None)
+            }
+            Code::M(823) => (|| {
+                let mut limit = bed.carriage.following_error();
+                if let Some(counts) = command.value(b'E')? {
+                    limit.limit = counts.to_int().filter(|c| (1..=1_000_000).contains(c)).ok_or(CommandError::OutOfRange(b'E'))?;
+                }
+                if let Some(ms) = command.value(b'T')? {
+                    limit.hold_ticks = ms.to_int().and_then(|t| u16::try_from(t).ok()).ok_or(CommandError::OutOfRange(b'T'))?;
+                }
+                bed.carriage.set_following_error(limit);
+                Ok(None)
+            })()
+            .map(|done| {
+                let limit = bed.carriage.following_error();
+                let _ = ufmt::uwrite!(out, "echo:Carriage following error {} counts for {} ms\n", limit.limit, limit.hold_ticks);
+                done
+            }),
             Code::M(825) => (|| {
                 let word = |letter, default: i32, range: core::ops::RangeInclusive<i32>| -> Result<i32, CommandError> {
                     match command.value(letter)? {
@@ -458,7 +512,7 @@ impl Machine<'_> {
             })(),
             Code::M(115) => {
                 super::write_capabilities(out)?;
-                crate::flash_str!("Cap:POWDER_BED:1\n").write_to(out)?;
+                crate::flash_str!("Cap:POWDER_BED:1\nCap:CLOSED_LOOP:1\n").write_to(out)?;
                 Ok(None)
             }
             _ => return Ok(None),
@@ -480,7 +534,6 @@ impl BedState {
         let Ok(gains) = relay_ziegler_nichols(result.relay_amplitude as f32, result.oscillation_amplitude as f32, period_s) else {
             return crate::flash_str!("Error:Carriage relay tune failed (no oscillation)\n").write_to(out);
         };
-        let ten_thousandths = |value: f32| Fixed { mantissa: crate::motion::math::round_to_i32(value * 10_000.0), digits: 4 };
         // Label by label from flash: this build's RAM is nearly full.
         crate::flash_str!("echo:Carriage relay d:").write_to(out)?;
         ufmt::uwrite!(out, "{}", result.relay_amplitude)?;
@@ -496,13 +549,28 @@ impl BedState {
             ufmt::uwrite!(out, "{}", value)?;
         }
         out.write_str("\n")?;
-        if apply {
-            match LoopGains::servo_pid(&gains, CARRIAGE_TICK_S) {
-                Ok(loop_gains) => self.carriage.set_gains(loop_gains),
-                Err(_) => crate::flash_str!("Error:Carriage gains out of range, not applied\n").write_to(out)?,
-            }
+        if apply && self.set_pid(gains).is_err() {
+            crate::flash_str!("Error:Carriage gains out of range, not applied\n").write_to(out)?;
         }
         Ok(())
+    }
+
+    /// New PID gains for the carriage loop (its memory restarts).
+    fn set_pid(&mut self, pid: RelayGains) -> Result<(), CommandError> {
+        let loop_gains = LoopGains::servo_pid(&pid, CARRIAGE_TICK_S).map_err(|_| CommandError::OutOfRange(b'P'))?;
+        self.carriage.set_gains(loop_gains);
+        self.pid = pid;
+        Ok(())
+    }
+
+    /// `echo:Carriage PID Kp:… Ki:… Kd:…`
+    fn write_pid<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        crate::flash_str!("echo:Carriage PID").write_to(out)?;
+        for (label, value) in [(" Kp:", self.pid.kp), (" Ki:", self.pid.ki), (" Kd:", self.pid.kd)] {
+            out.write_str(label)?;
+            ufmt::uwrite!(out, "{}", ten_thousandths(value))?;
+        }
+        out.write_str("\n")
     }
 
     fn outputs(&self, mut outputs: BedOutputs) -> BedOutputs {
