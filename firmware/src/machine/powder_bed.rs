@@ -469,12 +469,14 @@ impl Machine<'_> {
                 let last = bed.last;
                 crate::flash_str!("echo:Carriage enc:").write_to(out)?;
                 ufmt::uwrite!(out, "{}", last.carriage_count)?;
+                crate::flash_str!(" at:").write_to(out)?;
                 out.write_str(match carriage_at(&last) {
-                    Some(CarriageEnd::Minus) => " at:C-",
-                    Some(CarriageEnd::Plus) => " at:C+",
-                    None => " at:-",
+                    Some(CarriageEnd::Minus) => "C-",
+                    Some(CarriageEnd::Plus) => "C+",
+                    None => "-",
                 })?;
-                out.write_str(if last.bridge_fault { " fault:bridge\n" } else { " fault:none\n" })?;
+                crate::flash_str!(" fault:").write_to(out)?;
+                out.write_str(if last.bridge_fault { "bridge\n" } else { "none\n" })?;
                 Ok(None)
             }
             Code::M(823) => (|| {
@@ -490,7 +492,10 @@ impl Machine<'_> {
             })()
             .map(|done| {
                 let limit = bed.carriage.following_error();
-                let _ = ufmt::uwrite!(out, "echo:Carriage following error {} counts for {} ms\n", limit.limit, limit.hold_ticks);
+                let _ = crate::flash_str!("echo:Carriage following error ").write_to(out);
+                let _ = ufmt::uwrite!(out, "{}", limit.limit);
+                let _ = crate::flash_str!(" counts for ").write_to(out);
+                let _ = ufmt::uwrite!(out, "{} ms\n", limit.hold_ticks);
                 done
             }),
             Code::M(825) => (|| {
@@ -566,8 +571,8 @@ impl BedState {
     /// `echo:Carriage PID Kp:… Ki:… Kd:…`
     fn write_pid<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         crate::flash_str!("echo:Carriage PID").write_to(out)?;
-        for (label, value) in [(" Kp:", self.pid.kp), (" Ki:", self.pid.ki), (" Kd:", self.pid.kd)] {
-            out.write_str(label)?;
+        for (label, value) in [(crate::flash_str!(" Kp:"), self.pid.kp), (crate::flash_str!(" Ki:"), self.pid.ki), (crate::flash_str!(" Kd:"), self.pid.kd)] {
+            label.write_to(out)?;
             ufmt::uwrite!(out, "{}", ten_thousandths(value))?;
         }
         out.write_str("\n")
