@@ -19,8 +19,8 @@
 //!
 //! | | Q16.16 fixed point | f32 |
 //! |---|---|---|
-//! | ATmega2560, 16 MHz, cycles (simavr) | **1 806** (113 µs) | 4 314 (soft float, 270 µs) |
-//! | Cortex-M4F, instructions (QEMU `-icount`) | 211 | **125** |
+//! | ATmega2560, 16 MHz, cycles (simavr) | **1 741** (109 µs) | 4 584 (soft float, 287 µs) |
+//! | Cortex-M4F, instructions (QEMU `-icount`) | 189 | **148** |
 //!
 //! Bold: the board's choice. `cargo benchmark` prints them
 //! (`avr_loop_tick_cycles_fixed`/`_f32`, `arm_loop_tick_instructions_fixed`/`_f32`);

@@ -219,6 +219,8 @@ impl SimBoard {
             at_plus: at == Some(CarriageEnd::Plus),
             carriage_count: bed.carriage.decoder.count(),
             bridge_fault: false,
+            carriage_y_count: bed.carriage_y.decoder.count(),
+            bridge_y_fault: false,
         };
         let Ok(outputs) = self.link.machine.powder_bed_tick(&inputs, &mut Output(&mut self.output));
         for platform in [&mut bed.feed, &mut bed.build] {
@@ -234,6 +236,7 @@ impl SimBoard {
         bed.roller_on = outputs.roller;
         bed.suction_on = outputs.suction;
         bed.carriage.drive(outputs.carriage_duty);
+        bed.carriage_y.drive(outputs.carriage_y_duty);
     }
 
     /// Send one line and run until its `ok` (Marlin's bare `ok`, or `ok `

@@ -239,6 +239,8 @@ pub struct PowderBed {
     pub feed: PlatformPlant,
     pub build: PlatformPlant,
     pub carriage: Carriage,
+    /// The carriage's Y axis (no end sensors).
+    pub carriage_y: Carriage,
     pub roller_on: bool,
     pub suction_on: bool,
     /// Every command executed, in order, with what was true at that moment.
@@ -264,6 +266,7 @@ impl PowderBed {
             feed: PlatformPlant::new(driver, travel, travel / 2),
             build: PlatformPlant::new(driver, travel, travel - 100),
             carriage: Carriage::standard(),
+            carriage_y: Carriage::standard(),
             roller_on: false,
             suction_on: false,
             log: Vec::new(),

@@ -187,7 +187,7 @@ fn the_powder_bed_measures_its_travel_and_runs_layers_under_gcode() {
     let mut board = SimBoard::powder_bed();
     assert!(board.reply_to("M115", 100).contains("Cap:POWDER_BED:1\n"));
     assert_eq!(board.reply_to("M109 S200", 100), "echo:M109 ignored: this machine has no heaters\nok\n");
-    assert_eq!(board.reply_to("G1 X10", 100), "Error:Not available on this machine\nok\n");
+    assert_eq!(board.reply_to("G1 Z10", 100), "Error:Not available on this machine\nok\n");
     // Both platforms: 40 000 steps between the switches = 200 mm.
     assert_eq!(
         board.reply_to("M880", 400_000),
@@ -273,4 +273,27 @@ fn the_carriage_loop_takes_its_gains_and_limits_at_run_time() {
     assert_eq!(board.reply_to("M821 P0.01 I0 D0", 100), "echo:Carriage PID Kp:0.0100 Ki:0.0000 Kd:0.0000\nok\n");
     let reply = board.reply_to("M882 S0", 10_000);
     assert_eq!(reply, "Error:Carriage stroke failed (sensor not reached or servo fault)\nok\n");
+}
+
+/// SPEC §5: the carriage's X and Y follow G-code (the print pass's moves,
+/// which the thesis sent to a second board running Grbl): each move ends
+/// on its point within 2 counts (0.1 mm), M114 reports it, and Z or E
+/// words are refused (the platforms move only through their jobs).
+#[test]
+fn the_carriage_follows_g1_moves_in_x_and_y() {
+    let mut board = SimBoard::powder_bed();
+    assert_eq!(board.reply_to("G1 X20 Y10 F1200", 10_000), "ok\n");
+    let at = |board: &SimBoard| {
+        let bed = board.powder_bed.as_ref().unwrap();
+        (bed.carriage.decoder.count(), bed.carriage_y.decoder.count())
+    };
+    let (x, y) = at(&board);
+    assert!((x - 400).abs() <= 2 && (y - 200).abs() <= 2, "{x} {y}");
+    assert!(board.reply_to("M114", 100).starts_with("X:20.00 Y:10.00"));
+    assert_eq!(board.reply_to("G91", 100), "ok\n");
+    assert_eq!(board.reply_to("G0 X-5 Y5", 10_000), "ok\n");
+    let (x, y) = at(&board);
+    assert!((x - 300).abs() <= 2 && (y - 300).abs() <= 2, "{x} {y}");
+    assert_eq!(board.reply_to("G1 Z1", 100), "Error:Not available on this machine\nok\n");
+    assert_eq!(board.reply_to("G1 X1 E1", 100), "Error:Not available on this machine\nok\n");
 }

@@ -7,7 +7,9 @@
 //! | build platform (M542) | STEP D26 = PA4, DIR D28 = PA6, ENA D24 = PA2 |
 //! | reed switches (to ground) | feed A D18 = PD3, B D19 = PD2; build A D14 = PJ1, B D15 = PJ0 |
 //! | carriage encoder | A D2 = PE4 (INT4), B D3 = PE5 (INT5), both edges |
-//! | carriage H-bridge (VNH5019) | PWM D44 = PL5 (OC5C, 7.8 kHz), INA D40 = PG1, INB D42 = PL7, DIAG A5 = PF5 (low = fault) |
+//! | carriage X H-bridge (VNH5019) | PWM D44 = PL5 (OC5C, 7.8 kHz), INA D40 = PG1, INB D42 = PL7, DIAG A5 = PF5 (low = fault) |
+//! | carriage Y encoder | A D21 = PD0 (INT0), B D20 = PD1 (INT1), both edges |
+//! | carriage Y H-bridge (VNH5019) | PWM D45 = PL4 (OC5B), INA A9 = PK1, INB A10 = PK2, DIAG A11 = PK3 |
 //! | carriage end sensors (to ground) | C− D11 = PB5, C+ D6 = PH3 |
 //! | roller, suction | D10 = PB4, D8 = PH5 (MOSFETs) |
 //!
@@ -51,13 +53,20 @@ const BRIDGE_PWM: Pin = pins::pin(Port::L, 5);
 const BRIDGE_INA: Pin = pins::pin(Port::G, 1);
 const BRIDGE_INB: Pin = pins::pin(Port::L, 7);
 const BRIDGE_DIAG: Pin = pins::pin(Port::F, 5);
+const ENCODER_Y_A: Pin = pins::pin(Port::D, 0);
+const ENCODER_Y_B: Pin = pins::pin(Port::D, 1);
+const BRIDGE_Y_PWM: Pin = pins::pin(Port::L, 4);
+const BRIDGE_Y_INA: Pin = pins::pin(Port::K, 1);
+const BRIDGE_Y_INB: Pin = pins::pin(Port::K, 2);
+const BRIDGE_Y_DIAG: Pin = pins::pin(Port::K, 3);
 const CARRIAGE_MINUS: Pin = pins::pin(Port::B, 5);
 const CARRIAGE_PLUS: Pin = pins::pin(Port::H, 3);
 const ROLLER: Pin = pins::pin(Port::B, 4);
 const SUCTION: Pin = pins::pin(Port::H, 5);
 
-/// COM5C1: OC5C driven by the timer (non-inverting).
+/// COM5C1 / COM5B1: OC5C / OC5B driven by the timer (non-inverting).
 const COM5C1: u8 = 1 << 3;
+const COM5B1: u8 = 1 << 5;
 
 /// The tick brakes the bridge after this long without [`drive`].
 pub const BRAKE_AFTER_MS: u32 = 3;
@@ -66,6 +75,7 @@ pub const BRAKE_AFTER_MS: u32 = 3;
 static LAST_DRIVE: Mutex<core::cell::Cell<(u32, bool)>> = Mutex::new(core::cell::Cell::new((0, false)));
 
 static DECODER: Mutex<RefCell<QuadratureDecoder>> = Mutex::new(RefCell::new(QuadratureDecoder::new(true, true, 0)));
+static DECODER_Y: Mutex<RefCell<QuadratureDecoder>> = Mutex::new(RefCell::new(QuadratureDecoder::new(true, true, 0)));
 
 /// Outputs safe, inputs pulled up, the encoder's interrupts on, Timer5 in
 /// 8-bit fast PWM for the bridge (its output still disconnected).
@@ -76,7 +86,7 @@ pub fn init(dp: &Peripherals) {
         pins::make_output(dp, platform.dir, false);
         pins::make_output(dp, platform.enable, PLATFORM.enable_level(false));
     }
-    for input in [FEED_LOWER, FEED_UPPER, BUILD_LOWER, BUILD_UPPER, CARRIAGE_MINUS, CARRIAGE_PLUS, BRIDGE_DIAG, ENCODER_A, ENCODER_B] {
+    for input in [FEED_LOWER, FEED_UPPER, BUILD_LOWER, BUILD_UPPER, CARRIAGE_MINUS, CARRIAGE_PLUS, BRIDGE_DIAG, ENCODER_A, ENCODER_B, BRIDGE_Y_DIAG, ENCODER_Y_A, ENCODER_Y_B] {
         pins::make_input_pulled_up(dp, input);
     }
     stop(dp);
@@ -85,20 +95,27 @@ pub fn init(dp: &Peripherals) {
     dp.TC5.tccr5a.write(|w| unsafe { w.bits(0b0000_0001) });
     dp.TC5.tccr5b.write(|w| unsafe { w.bits(0b0000_1010) });
     let (a, b) = (pins::read(dp, ENCODER_A), pins::read(dp, ENCODER_B));
-    avr_device::interrupt::free(|cs| *DECODER.borrow(cs).borrow_mut() = QuadratureDecoder::new(a, b, 0));
-    // INT4, INT5 on any logical change (ISCn1:0 = 01), then enabled.
+    let (ya, yb) = (pins::read(dp, ENCODER_Y_A), pins::read(dp, ENCODER_Y_B));
+    avr_device::interrupt::free(|cs| {
+        *DECODER.borrow(cs).borrow_mut() = QuadratureDecoder::new(a, b, 0);
+        *DECODER_Y.borrow(cs).borrow_mut() = QuadratureDecoder::new(ya, yb, 0);
+    });
+    // INT4, INT5 (X) and INT0, INT1 (Y) on any logical change (ISCn1:0 =
+    // 01), then enabled.
     // SAFETY: documented sense-control bits.
     dp.EXINT.eicrb.modify(|r, w| unsafe { w.bits((r.bits() & !0b0000_1111) | 0b0000_0101) });
-    dp.EXINT.eifr.write(|w| w.bits(0b0011_0000));
-    dp.EXINT.eimsk.modify(|r, w| w.bits(r.bits() | 0b0011_0000));
+    // SAFETY: as above.
+    dp.EXINT.eicra.modify(|r, w| unsafe { w.bits((r.bits() & !0b0000_1111) | 0b0000_0101) });
+    dp.EXINT.eifr.write(|w| w.bits(0b0011_0011));
+    dp.EXINT.eimsk.modify(|r, w| w.bits(r.bits() | 0b0011_0011));
 }
 
 /// Carriage braked, roller and suction off, platform drivers disabled:
 /// from any context (halt, `M112` in the receive interrupt, panic).
 pub fn stop(dp: &Peripherals) {
-    // SAFETY: clearing the bridge's compare-output bits only.
-    dp.TC5.tccr5a.modify(|r, w| unsafe { w.bits(r.bits() & !COM5C1) });
-    for pin in [BRIDGE_PWM, BRIDGE_INA, BRIDGE_INB, ROLLER, SUCTION] {
+    // SAFETY: clearing the bridges' compare-output bits only.
+    dp.TC5.tccr5a.modify(|r, w| unsafe { w.bits(r.bits() & !(COM5C1 | COM5B1)) });
+    for pin in [BRIDGE_PWM, BRIDGE_INA, BRIDGE_INB, BRIDGE_Y_PWM, BRIDGE_Y_INA, BRIDGE_Y_INB, ROLLER, SUCTION] {
         pins::make_output(dp, pin, false);
     }
     for platform in [&FEED, &BUILD] {
@@ -116,12 +133,14 @@ pub fn read(dp: &Peripherals) -> BedInputs {
         at_plus: !pins::read(dp, CARRIAGE_PLUS),
         carriage_count: avr_device::interrupt::free(|cs| DECODER.borrow(cs).borrow().count()),
         bridge_fault: !pins::read(dp, BRIDGE_DIAG),
+        carriage_y_count: avr_device::interrupt::free(|cs| DECODER_Y.borrow(cs).borrow().count()),
+        bridge_y_fault: !pins::read(dp, BRIDGE_Y_DIAG),
     }
 }
 
 /// Drive what the machine decided for millisecond `now_ms`.
 pub fn drive(dp: &Peripherals, outputs: &BedOutputs, now_ms: u32) {
-    avr_device::interrupt::free(|cs| LAST_DRIVE.borrow(cs).set((now_ms, outputs.carriage_duty != 0)));
+    avr_device::interrupt::free(|cs| LAST_DRIVE.borrow(cs).set((now_ms, outputs.carriage_duty != 0 || outputs.carriage_y_duty != 0)));
     for platform in [&FEED, &BUILD] {
         pins::make_output(dp, platform.enable, PLATFORM.enable_level(outputs.platforms_enabled));
     }
@@ -134,8 +153,21 @@ pub fn drive(dp: &Peripherals, outputs: &BedOutputs, now_ms: u32) {
     }
     pins::make_output(dp, ROLLER, outputs.roller);
     pins::make_output(dp, SUCTION, outputs.suction);
-    set_bridge(dp, outputs.carriage_duty);
+    set_bridge(dp, &BRIDGE_X, outputs.carriage_duty);
+    set_bridge(dp, &BRIDGE_Y, outputs.carriage_y_duty);
 }
+
+struct Bridge {
+    pwm: Pin,
+    ina: Pin,
+    inb: Pin,
+    /// The channel's COM5x1 bit; `true`: OCR5C, `false`: OCR5B.
+    com: u8,
+    channel_c: bool,
+}
+
+const BRIDGE_X: Bridge = Bridge { pwm: BRIDGE_PWM, ina: BRIDGE_INA, inb: BRIDGE_INB, com: COM5C1, channel_c: true };
+const BRIDGE_Y: Bridge = Bridge { pwm: BRIDGE_Y_PWM, ina: BRIDGE_Y_INA, inb: BRIDGE_Y_INB, com: COM5B1, channel_c: false };
 
 /// One M542 step: DIR, ≥ 5 µs, the active (falling) edge, ≥ 5 µs, idle.
 fn step(dp: &Peripherals, platform: &PlatformPins, direction: Vertical) {
@@ -147,17 +179,21 @@ fn step(dp: &Peripherals, platform: &PlatformPins, direction: Vertical) {
     pins::make_output(dp, platform.step, idle);
 }
 
-/// The VNH5019: INA/INB set the direction, PWM the magnitude; 0 brakes
+/// A VNH5019: INA/INB set the direction, PWM the magnitude; 0 brakes
 /// to ground (INA = INB = 0).
-fn set_bridge(dp: &Peripherals, duty: i32) {
+fn set_bridge(dp: &Peripherals, bridge: &Bridge, duty: i32) {
     let magnitude = duty.unsigned_abs().min(255) as u8;
-    pins::make_output(dp, BRIDGE_INA, duty > 0);
-    pins::make_output(dp, BRIDGE_INB, duty < 0);
-    dp.TC5.ocr5c.write(|w| w.bits(u16::from(magnitude)));
-    // SAFETY: COM5C1 only.
-    dp.TC5.tccr5a.modify(|r, w| unsafe { w.bits(if magnitude == 0 { r.bits() & !COM5C1 } else { r.bits() | COM5C1 }) });
+    pins::make_output(dp, bridge.ina, duty > 0);
+    pins::make_output(dp, bridge.inb, duty < 0);
+    if bridge.channel_c {
+        dp.TC5.ocr5c.write(|w| w.bits(u16::from(magnitude)));
+    } else {
+        dp.TC5.ocr5b.write(|w| w.bits(u16::from(magnitude)));
+    }
+    // SAFETY: this channel's COM bit only.
+    dp.TC5.tccr5a.modify(|r, w| unsafe { w.bits(if magnitude == 0 { r.bits() & !bridge.com } else { r.bits() | bridge.com }) });
     // An output, low whenever the timer does not drive it.
-    pins::make_output(dp, BRIDGE_PWM, false);
+    pins::make_output(dp, bridge.pwm, false);
 }
 
 /// From the 1 kHz tick: brake a bridge the main loop has left alone too
@@ -166,9 +202,9 @@ pub fn on_tick(dp: &Peripherals, cs: avr_device::interrupt::CriticalSection, now
     let cell = LAST_DRIVE.borrow(cs);
     let (last, driven) = cell.get();
     if driven && now_ms.wrapping_sub(last) > BRAKE_AFTER_MS {
-        // SAFETY: COM5C1 only.
-        dp.TC5.tccr5a.modify(|r, w| unsafe { w.bits(r.bits() & !COM5C1) });
-        for pin in [BRIDGE_PWM, BRIDGE_INA, BRIDGE_INB] {
+        // SAFETY: the bridges' COM bits only.
+        dp.TC5.tccr5a.modify(|r, w| unsafe { w.bits(r.bits() & !(COM5C1 | COM5B1)) });
+        for pin in [BRIDGE_PWM, BRIDGE_INA, BRIDGE_INB, BRIDGE_Y_PWM, BRIDGE_Y_INA, BRIDGE_Y_INB] {
             pins::make_output_in(dp, cs, pin, false);
         }
         cell.set((last, false));
@@ -180,6 +216,23 @@ fn on_encoder_edge() {
     let dp = unsafe { Peripherals::steal() };
     let (a, b) = (pins::read(&dp, ENCODER_A), pins::read(&dp, ENCODER_B));
     avr_device::interrupt::free(|cs| DECODER.borrow(cs).borrow_mut().on_edge(a, b));
+}
+
+fn on_encoder_y_edge() {
+    // SAFETY: reading port D's input register has no side effect.
+    let dp = unsafe { Peripherals::steal() };
+    let (a, b) = (pins::read(&dp, ENCODER_Y_A), pins::read(&dp, ENCODER_Y_B));
+    avr_device::interrupt::free(|cs| DECODER_Y.borrow(cs).borrow_mut().on_edge(a, b));
+}
+
+#[avr_device::interrupt(atmega2560)]
+fn INT0() {
+    on_encoder_y_edge();
+}
+
+#[avr_device::interrupt(atmega2560)]
+fn INT1() {
+    on_encoder_y_edge();
 }
 
 #[avr_device::interrupt(atmega2560)]

@@ -174,6 +174,7 @@ impl<A: LoopArithmetic> AxisController<A> {
     /// One loop sample: returns the command (units/s or duty, within
     /// ±output_limit), or the latched fault (the axis must then stop: zero
     /// step rate, or brake).
+    #[inline(never)]
     pub fn tick(&mut self, reference: Reference, measured: Result<Units, EncoderFault>, driver: DriverStatus) -> Result<i32, AxisFault> {
         if let Some(fault) = self.fault {
             return Err(fault);

@@ -13,6 +13,7 @@
 //!
 //! | command | job | reply |
 //! |---|---|---|
+//! | `G0`/`G1 X Y [F]` | the carriage's X and Y servo axes to a point, on a straight line at the feed (the print pass's moves, Slic3r's G-code: "our one firmware does both", SPEC §5) | |
 //! | `M880 [F] [B]` | travel measurement of the feed and/or build platform (none named: both) | `echo:Feed platform travel 40000 steps 200.000 mm` |
 //! | `M881 [L<mm>] [N<layers>]` | layer cycles (default 0.1 mm, 1 layer) | `echo:Layer 1 done` per layer |
 //! | `M882 S0` / `S1` | carriage to C− / C+ | `echo:Carriage at C+` |
@@ -29,8 +30,8 @@
 //! (roller and suction off, carriage braked): a switch not found, a
 //! carriage stroke whose sensor never trips within its length, a bridge
 //! fault or a following error of the carriage's servo loop. `M112` stops
-//! everything. Planner moves (`G0`–`G3`, `G28`, `G92`) are refused: the
-//! platforms and the carriage move only through these jobs.
+//! everything. `G2`/`G3`, `G28` and `G92` are refused; `Z`/`E` words too
+//! (the platforms move only through their jobs).
 //!
 //! The carriage is a DC servo axis: the closed-loop module's controller
 //! (servo PID from the relay rule, in [`crate::num::Native`] arithmetic)
@@ -66,6 +67,11 @@ const HOLD_INSIDE_COUNTS: i32 = 20;
 const SETTLE_TICKS: u16 = 300;
 /// The carriage's loop period (the board's 1 kHz tick).
 const CARRIAGE_TICK_S: f32 = 0.001;
+/// Carriage encoder counts per mm (ours: 200 counts per motor turn, a
+/// 10 mm lead): X and Y positions in G-code are mm.
+pub const CARRIAGE_COUNTS_PER_MM: i32 = 20;
+/// A move counts as arrived within this many counts of its end.
+const ARRIVED_COUNTS: i32 = 2;
 
 /// What the board read this millisecond.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -76,10 +82,13 @@ pub struct BedInputs {
     /// The carriage's end sensors, already read with their polarity.
     pub at_minus: bool,
     pub at_plus: bool,
-    /// The carriage's quadrature count.
+    /// The carriage's quadrature count (X).
     pub carriage_count: i32,
-    /// The H-bridge reports a fault.
+    /// The H-bridge reports a fault (X).
     pub bridge_fault: bool,
+    /// The carriage's Y axis: its count and its bridge's fault line.
+    pub carriage_y_count: i32,
+    pub bridge_y_fault: bool,
 }
 
 /// What the board drives this millisecond.
@@ -90,6 +99,8 @@ pub struct BedOutputs {
     pub step: Option<(Platform, Vertical)>,
     /// The carriage H-bridge: signed duty (±255), 0 = brake.
     pub carriage_duty: i32,
+    /// The Y axis' H-bridge, the same way.
+    pub carriage_y_duty: i32,
     pub roller: bool,
     pub suction: bool,
     /// Platform drivers enabled (ENA at its active level).
@@ -124,6 +135,11 @@ enum Job {
     Layers { command: LayerCommand, steps_left: u32, layers_left: u16 },
     /// `M882`.
     Carriage,
+    /// `G0`/`G1`: X and Y from `from` to `to` (counts) in `ticks`; then
+    /// up to `settle` ticks to arrive.
+    /// (`per_tick`: counts per tick on each axis, so the reference needs no
+    /// 64-bit division: the AVR's is kilobytes of compiler-builtins.)
+    Move { from: [i32; 2], to: [i32; 2], per_tick: [f32; 2], ticks: u32, done: u32, settle: u16 },
     /// `M825`: the relay experiment on the carriage; `apply`: `A1`.
     RelayTune { tune: RelayAutotune, relay_amplitude: i32, apply: bool },
 }
@@ -134,6 +150,8 @@ pub struct BedState {
     job: Job,
     cycle: LayerCycle,
     carriage: AxisController,
+    /// The carriage's Y axis (same gains as X).
+    carriage_y: AxisController,
     stroke: Option<Stroke>,
     roller: bool,
     suction: bool,
@@ -153,6 +171,7 @@ impl BedState {
             job: Job::Idle,
             cycle: LayerCycle::new(LayerSettings { thickness_um: 100, suction_while_spreading: false }),
             carriage: AxisController::new(gains, 255, FollowingErrorLimit { limit: 4_000, hold_ticks: 1_000 }),
+            carriage_y: AxisController::new(gains, 255, FollowingErrorLimit { limit: 4_000, hold_ticks: 1_000 }),
             stroke: None,
             roller: false,
             suction: false,
@@ -177,6 +196,7 @@ impl BedState {
     }
 
     /// One millisecond of the stroke.
+    #[inline(never)]
     fn stroke_tick(&mut self, inputs: &BedInputs) -> StrokeResult {
         let Some(mut stroke) = self.stroke else { return StrokeResult::Failed };
         let arrived = match stroke.to {
@@ -266,6 +286,7 @@ impl Machine<'_> {
 
     /// The 1 kHz duties: one tick of the running job. Reports and faults
     /// are printed here; the command's `ok` follows at the next poll.
+    #[inline(never)]
     pub fn powder_bed_tick<W: uWrite + ?Sized>(&mut self, inputs: &BedInputs, out: &mut W) -> Result<BedOutputs, W::Error> {
         let halted = self.halted;
         let Some(bed) = self.powder.as_mut() else { return Ok(BedOutputs::default()) };
@@ -279,6 +300,37 @@ impl Machine<'_> {
         let mut outputs = BedOutputs::default();
         match bed.job {
             Job::Idle => {}
+            Job::Move { from, to, per_tick, ticks, done, settle } => {
+                let done = (done + 1).min(ticks);
+                let at = |axis: usize| {
+                    if done == ticks {
+                        to[axis]
+                    } else {
+                        from[axis] + crate::motion::math::round_to_i32(per_tick[axis] * done as f32)
+                    }
+                };
+                let x = bed.carriage.tick(Reference { position: at(0), velocity: 0 }, Ok(inputs.carriage_count), DriverStatus { alarm: false, bridge_fault: inputs.bridge_fault });
+                let y = bed.carriage_y.tick(Reference { position: at(1), velocity: 0 }, Ok(inputs.carriage_y_count), DriverStatus { alarm: false, bridge_fault: inputs.bridge_y_fault });
+                match (x, y) {
+                    (Ok(x), Ok(y)) => {
+                        outputs.carriage_duty = x;
+                        outputs.carriage_y_duty = y;
+                        let arrived = (inputs.carriage_count - to[0]).abs() <= ARRIVED_COUNTS && (inputs.carriage_y_count - to[1]).abs() <= ARRIVED_COUNTS;
+                        bed.job = if done < ticks {
+                            Job::Move { from, to, per_tick, ticks, done, settle }
+                        } else if arrived || settle == 0 {
+                            Job::Idle
+                        } else {
+                            Job::Move { from, to, per_tick, ticks, done, settle: settle - 1 }
+                        };
+                    }
+                    _ => {
+                        crate::flash_str!("Error:Carriage servo fault (following error or bridge): move stopped\n").write_to(out)?;
+                        bed.all_off();
+                        bed.job = Job::Idle;
+                    }
+                }
+            }
             Job::Travel { platform, mut routine, then_build } => match routine.tick(&TravelLimits::DEFAULT, switches(inputs, platform)) {
                 PlatformAction::Step(direction) => {
                     outputs.step = Some((platform, direction));
@@ -395,11 +447,18 @@ impl Machine<'_> {
 
     /// The powder bed's commands; `None` for a command it leaves to the
     /// executor (reports, settings, `M112`).
+    #[inline(never)]
     pub(super) fn bed_command<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<Option<Result<Option<Running>, CommandError>>, W::Error> {
+        if self.powder.is_none() {
+            return Ok(None);
+        }
+        if matches!(command.code, Code::G(0 | 1) | Code::Modal) {
+            return Ok(Some(self.carriage_move(command)));
+        }
         let Some(bed) = self.powder.as_mut() else { return Ok(None) };
         let result = match command.code {
             // No planner moves; the platform drivers are the jobs' own.
-            Code::G(0..=3 | 28 | 92) | Code::Modal | Code::M(17 | 18 | 84) => Err(CommandError::NotThisMachine),
+            Code::G(2 | 3 | 28 | 92) | Code::M(17 | 18 | 84) => Err(CommandError::NotThisMachine),
             Code::M(code @ (104 | 109 | 140 | 190)) => {
                 write_no_heaters(code, out)?;
                 Ok(None)
@@ -523,6 +582,38 @@ impl Machine<'_> {
             _ => return Ok(None),
         };
         Ok(Some(result))
+    }
+
+    /// `G0`/`G1 X Y [F]`: the carriage's servo axes on a straight line at
+    /// the feed (µm targets from the modal state: units, G90/G91, G92 and
+    /// work offsets as for any machine).
+    #[inline(never)]
+    fn carriage_move(&mut self, command: &Command) -> Result<Option<Running>, CommandError> {
+        if command.has(b'Z') || command.has(b'E') {
+            return Err(CommandError::NotThisMachine);
+        }
+        let feed = self.modal.read_feed(command)?;
+        let target = self.modal.target(command)?;
+        if let Some(feed) = feed {
+            self.modal.feed_um_per_s = feed;
+        }
+        let um_to_counts = |um: i32| (i64::from(um) * i64::from(CARRIAGE_COUNTS_PER_MM) / 1000) as i32;
+        let Some(bed) = self.powder.as_mut() else { return Err(CommandError::NotThisMachine) };
+        let from = [bed.last.carriage_count, bed.last.carriage_y_count];
+        let to = [um_to_counts(target[0]), um_to_counts(target[1])];
+        let (dx, dy) = ((to[0] - from[0]) as f32, (to[1] - from[1]) as f32);
+        let length_counts = crate::motion::math::sqrt(dx * dx + dy * dy);
+        let counts_per_s = self.modal.feed_um_per_s as f32 * CARRIAGE_COUNTS_PER_MM as f32 / 1000.0;
+        let ticks = if counts_per_s > 0.0 { (length_counts / counts_per_s * 1000.0) as u32 } else { 0 };
+        bed.stroke = None;
+        bed.carriage.reset();
+        bed.carriage_y.reset();
+        let ticks = ticks.max(1);
+        let per_tick = [dx / ticks as f32, dy / ticks as f32];
+        bed.job = Job::Move { from, to, per_tick, ticks, done: 0, settle: SETTLE_TICKS };
+        self.modal.position[0] = target[0];
+        self.modal.position[1] = target[1];
+        Ok(Some(Running::BedJob))
     }
 
     /// Whether the powder bed's job is over (for `Running::BedJob`).

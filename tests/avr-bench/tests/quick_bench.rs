@@ -813,7 +813,7 @@ fn fixed_point_is_the_faster_loop_arithmetic_on_the_avr() {
     assert!(float.1 > 50.0 && float.1 <= float.0 && float.0 <= float.2, "{cycles:?}");
     assert!(fixed.0 < float.0, "{cycles:?}");
     // Two closed axes at 1 kHz take under 30 % of the CPU: a tick stays
-    // under 150 µs (today ≈ 113 µs; soft float ≈ 270 µs would take 54 %).
+    // under 150 µs (today ≈ 109 µs; soft float ≈ 287 µs would take 57 %).
     assert!(fixed.2 < 2400.0, "{cycles:?}");
 }
 
