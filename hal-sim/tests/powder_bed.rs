@@ -297,3 +297,15 @@ fn the_carriage_follows_g1_moves_in_x_and_y() {
     assert_eq!(board.reply_to("G1 Z1", 100), "Error:Not available on this machine\nok\n");
     assert_eq!(board.reply_to("G1 X1 E1", 100), "Error:Not available on this machine\nok\n");
 }
+
+/// A carriage that does not move (motor unplugged) never oscillates: the
+/// relay experiment gives up after 20 s with an error and the bridge off,
+/// instead of driving it for ever.
+#[test]
+fn a_relay_tune_on_a_carriage_that_does_not_move_gives_up() {
+    let mut board = SimBoard::powder_bed();
+    // The motor's gain to zero: duty no longer turns it.
+    board.powder_bed.as_mut().unwrap().carriage.plant = hal_sim::axis_plant::DcServoPlant::new(0.0, 0.03, 0.004, 0.0001);
+    let reply = board.reply_to("M825", 25_000);
+    assert_eq!(reply, "Error:Carriage relay tune failed (no steady oscillation)\nok\n");
+}

@@ -67,6 +67,8 @@ const HOLD_INSIDE_COUNTS: i32 = 20;
 const SETTLE_TICKS: u16 = 300;
 /// The carriage's loop period (the board's 1 kHz tick).
 const CARRIAGE_TICK_S: f32 = 0.001;
+/// The relay experiment's time limit, ticks (20 s).
+pub const RELAY_TIMEOUT_TICKS: u32 = 20_000;
 /// Carriage encoder counts per mm (ours: 200 counts per motor turn, a
 /// 10 mm lead): X and Y positions in G-code are mm.
 pub const CARRIAGE_COUNTS_PER_MM: i32 = 20;
@@ -141,7 +143,9 @@ enum Job {
     /// 64-bit division: the AVR's is kilobytes of compiler-builtins.)
     Move { from: [i32; 2], to: [i32; 2], per_tick: [f32; 2], ticks: u32, done: u32, settle: u16 },
     /// `M825`: the relay experiment on the carriage; `apply`: `A1`.
-    RelayTune { tune: RelayAutotune, relay_amplitude: i32, apply: bool },
+    /// `ticks_left`: the experiment gives up after [`RELAY_TIMEOUT_TICKS`]
+    /// (a motor that does not move never oscillates).
+    RelayTune { tune: RelayAutotune, relay_amplitude: i32, apply: bool, ticks_left: u32 },
 }
 
 /// The powder bed's state inside the machine.
@@ -348,12 +352,17 @@ impl Machine<'_> {
                     };
                 }
             },
-            Job::RelayTune { mut tune, relay_amplitude, apply } => match tune.tick(inputs.carriage_count) {
-                RelayStep::Output(duty) => {
-                    outputs.carriage_duty = if inputs.bridge_fault { 0 } else { duty };
-                    bed.job = if inputs.bridge_fault { Job::Idle } else { Job::RelayTune { tune, relay_amplitude, apply } };
+            Job::RelayTune { mut tune, relay_amplitude, apply, ticks_left } => match tune.tick(inputs.carriage_count) {
+                RelayStep::Output(duty) if ticks_left > 0 && !inputs.bridge_fault => {
+                    outputs.carriage_duty = duty;
+                    bed.job = Job::RelayTune { tune, relay_amplitude, apply, ticks_left: ticks_left - 1 };
+                }
+                RelayStep::Output(_) => {
+                    bed.job = Job::Idle;
                     if inputs.bridge_fault {
                         crate::flash_str!("Error:Carriage relay tune stopped: bridge fault\n").write_to(out)?;
+                    } else {
+                        crate::flash_str!("Error:Carriage relay tune failed (no steady oscillation)\n").write_to(out)?;
                     }
                 }
                 RelayStep::Done(result) => {
@@ -571,7 +580,7 @@ impl Machine<'_> {
                 let setpoint = bed.last.carriage_count;
                 bed.stroke = None;
                 let tune = RelayAutotune::new(setpoint, relay_amplitude, 0, band, MAX_STROKE_COUNTS, cycles as u8);
-                bed.job = Job::RelayTune { tune, relay_amplitude, apply };
+                bed.job = Job::RelayTune { tune, relay_amplitude, apply, ticks_left: RELAY_TIMEOUT_TICKS };
                 Ok(Some(Running::BedJob))
             })(),
             Code::M(115) => {

@@ -878,6 +878,9 @@ fn the_powder_bed_build_measures_its_feed_platform_travel() {
     assert!(said.iter().any(|l| l == "Cap:POWDER_BED:1"), "{said:?}");
     assert_eq!(replies(&mut board, &["M109 S200"]), ["echo:M109 ignored: this machine has no heaters", "ok"]);
     let travel = exchange(&mut board, &["M880 F"], 10.0).unwrap_or_else(|e| panic!("{e}"));
+    // The layer cycle's and the relay tune's paths run too (no carriage
+    // plant on this bench: the strokes end in their errors).
+    let _ = exchange(&mut board, &["M881", "M825", "M503"], 30.0);
     assert_eq!(travel, ["echo:Feed platform travel 1000 steps 5.000 mm", "ok"]);
     // Down 200 to A, up 1 000 to B (plus the steps the switches' debounce
     // and edges take): the platform ends on B.
@@ -889,4 +892,10 @@ fn the_powder_bed_build_measures_its_feed_platform_travel() {
     assert_eq!(replies(&mut board, &["M5"]), ["ok"]);
     board.run_for_ms(5.0);
     assert_eq!(portb(&board) & (1 << 4), 0, "roller off");
+    // This build's static RAM is the fullest: its stack still fits.
+    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join("powder-bed"), &["mega2560-ramps/machine-powder-bed"], false).unwrap();
+    let ram_static = ElfInfo::read(&elf).unwrap().ram_static_bytes();
+    let stack = board.stack_peak_sp();
+    println!("powder bed: static RAM {ram_static} B, stack peak {stack} B of {} B", stack_budget(ram_static));
+    assert!(ram_static <= STATIC_RAM_BUDGET_BYTES && stack > 0 && stack <= stack_budget(ram_static), "{ram_static} {stack}");
 }
