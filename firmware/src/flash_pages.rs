@@ -62,7 +62,7 @@ impl<F: FlashSector, const N: usize> PagedStore<F, N> {
 
     /// Read the newest committed image into RAM (blank if none).
     pub fn open(flash: F) -> Self {
-        assert!(N % 4 == 0, "the image is programmed in words");
+        assert!(N.is_multiple_of(4), "the image is programmed in words");
         let mut store = Self { flash, mirror: [0xFF; N], next_page: 0, dirty: false };
         let pages = store.pages();
         let mut newest = None;

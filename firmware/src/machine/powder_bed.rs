@@ -529,9 +529,8 @@ impl Machine<'_> {
                 }
                 Ok(None)
             })()
-            .map(|done| {
+            .inspect(|_| {
                 let _ = bed.write_pid(out);
-                done
             }),
             Code::M(822) => {
                 let last = bed.last;
@@ -558,13 +557,12 @@ impl Machine<'_> {
                 bed.carriage.set_following_error(limit);
                 Ok(None)
             })()
-            .map(|done| {
+            .inspect(|_| {
                 let limit = bed.carriage.following_error();
                 let _ = crate::flash_str!("echo:Carriage following error ").write_to(out);
                 let _ = ufmt::uwrite!(out, "{}", limit.limit);
                 let _ = crate::flash_str!(" counts for ").write_to(out);
                 let _ = ufmt::uwrite!(out, "{} ms\n", limit.hold_ticks);
-                done
             }),
             Code::M(825) => (|| {
                 let word = |letter, default: i32, range: core::ops::RangeInclusive<i32>| -> Result<i32, CommandError> {
