@@ -13,7 +13,15 @@
 //!   cycle, the no-heater reply;
 //! - [`config`]: one configuration per machine, with its pin map.
 //!
-//! # Integration (for the lead)
+//! The executor runs them in `machine::line` and `machine::powder_bed`
+//! (G-code, main-loop and 1 kHz duties), and the Mega 2560 wires them in
+//! `boards/mega2560-ramps/src/line.rs` and `bed.rs` (features
+//! `machine-extrusion-line`, `machine-powder-bed`). The notes below are the
+//! design those follow; where they differ (the line's fans on D8 and its
+//! step timers on Timer5, the carriage's X/Y moves from `G0`/`G1`, the
+//! `M821`–`M825` carriage codes), the code and the README are current.
+//!
+//! # Integration (the design)
 //!
 //! ## Extrusion line (`machine-extrusion-line`)
 //!
