@@ -71,25 +71,28 @@ fn select(dp: &Peripherals, channel: u8) {
     dp.ADC.admux.write(|w| unsafe { w.bits((1 << 6) | (channel & 0x07)) });
 }
 
-#[avr_device::interrupt(atmega2560)]
-fn ADC() {
+/// ADC conversion complete (vector 29), with `sei` as its first
+/// instruction (`avr-non-blocking-interrupt`, see the tick in clock.rs):
+/// the step interrupt is never held up by this handler. It cannot re-enter:
+/// the flag clears as the vector runs and the next conversion starts at
+/// the next tick, a millisecond away; nothing else writes `SAMPLING` while
+/// it runs (the main loop only with interrupts off, and the step
+/// interrupt never).
+#[no_mangle]
+pub unsafe extern "avr-non-blocking-interrupt" fn __vector_29() {
     // SAFETY: the ADC registers are only written here, in `init` (before
     // interrupts) and by `start_conversion` (the tick, 1 ms apart from the
     // conversion that raised this interrupt).
     let dp = unsafe { Peripherals::steal() };
     let value = dp.ADC.adc.read().bits();
-    // SAFETY: interrupts are still off: nothing else touches `SAMPLING`.
+    // SAFETY: see above: this handler cannot re-enter and the main loop
+    // takes the sums with interrupts off.
     let sampling = unsafe { &mut *core::ptr::addr_of_mut!(SAMPLING) };
-    // The multiplexer moves to the other thermistor before anything can
-    // start the next conversion (the tick, 1 ms after the last one).
+    // The multiplexer moves to the other thermistor long before the tick
+    // starts the next conversion.
     let index = usize::from(sampling.current & 1);
     sampling.current = (sampling.current + 1) & 1;
     select(&dp, CHANNELS[usize::from(sampling.current)]);
-    // The step interrupt must not wait for the averaging: interrupts back
-    // on. Nothing else touches the averager meanwhile (the main loop only
-    // with interrupts off), and the next conversion ends a millisecond later.
-    // SAFETY: see above; this handler cannot re-enter.
-    unsafe { avr_device::interrupt::enable() };
     sampling.averagers[index].push(value);
 }
 

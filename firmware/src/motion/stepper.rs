@@ -62,7 +62,7 @@
 //!
 //! Directions are already inverted for the wiring ([`StepperConfig`]).
 
-use heapless::spsc::{Consumer, Producer, Queue};
+use super::step_ring::{Consumer, Producer, StepRing};
 
 /// Motors the core drives: X/A/X-screw, Y/B/elbow, Z/C/shoulder, E.
 pub const MOTORS: usize = 4;
@@ -173,8 +173,8 @@ pub struct StepperStatus {
 
 /// The storage of both queues; the board keeps it in a `static`.
 pub struct StepQueues {
-    segments: Queue<Segment, SEGMENT_SLOTS>,
-    blocks: Queue<StepBlock, BLOCK_SLOTS>,
+    segments: StepRing<Segment, SEGMENT_SLOTS>,
+    blocks: StepRing<StepBlock, BLOCK_SLOTS>,
 }
 
 impl Default for StepQueues {
@@ -185,7 +185,7 @@ impl Default for StepQueues {
 
 impl StepQueues {
     pub const fn new() -> Self {
-        Self { segments: Queue::new(), blocks: Queue::new() }
+        Self { segments: StepRing::new(), blocks: StepRing::new() }
     }
 
     /// The main loop's end and the interrupt's end.
@@ -334,7 +334,13 @@ impl<'a> StepGenerator<'a> {
         }
         let step_mask = self.pending_mask & !self.stopped;
         let dir_mask = self.pending_dir ^ self.config.dir_invert;
-        let next_interval_ticks = if self.events_left != 0 { self.next_event() } else { self.next_segment() };
+        let next_interval_ticks = if self.events_left != 0 {
+            self.next_event()
+        } else if self.take_next_segment_of_block() {
+            self.next_event()
+        } else {
+            self.next_segment()
+        };
         TimerAction { step_mask, dir_mask, next_interval_ticks }
     }
 
@@ -393,6 +399,30 @@ impl<'a> StepGenerator<'a> {
         let piece = if self.long_wait > 0xFFFF { LONG_WAIT_PIECE } else { self.long_wait };
         self.long_wait -= piece;
         TimerAction { step_mask: 0, dir_mask: self.pending_dir ^ self.config.dir_invert, next_interval_ticks: piece as u16 }
+    }
+
+    /// The common segment change, kept cheap: the next segment continues
+    /// the running block (no new block, no direction change, no fault, not
+    /// discarding). Copies its three fields straight from the queue slot
+    /// and frees it; `false` leaves everything else to
+    /// [`Self::next_segment`]. Out of line with few registers: the step
+    /// interrupt at 30 000 steps/s has 533 cycles per event, and the
+    /// general path (dequeue into a stack copy, block start, direction
+    /// lead) took up to ~800.
+    #[inline(never)]
+    fn take_next_segment_of_block(&mut self) -> bool {
+        if !self.in_block || self.discarding || self.fault.is_some() {
+            return false;
+        }
+        let Some(segment) = self.segments.front() else { return false };
+        if segment.starts_block || segment.events == 0 {
+            return false;
+        }
+        self.interval = segment.interval;
+        self.add = segment.add;
+        self.events_left = segment.events;
+        self.segments.release();
+        true
     }
 
     /// The running segment is used up: take the next one (and its block).
@@ -576,11 +606,11 @@ impl<'a> StepGenerator<'a> {
         self.long_wait = 0;
         self.discarding = true;
         self.events_done = self.events;
-        while let Some(segment) = self.segments.peek() {
+        while let Some(segment) = self.segments.front() {
             if segment.starts_block {
                 break;
             }
-            self.segments.dequeue();
+            self.segments.release();
         }
         self.finish_block();
     }

@@ -356,6 +356,13 @@ struct Shared {
     isr_entered_at: u64,
     /// Outermost interrupt handler runs: [entry, after RETI).
     isr_intervals: Vec<(u64, u64)>,
+    /// The vector (flash byte address) of each recorded top-level run.
+    isr_vectors: Vec<u32>,
+    isr_entered_vector: u32,
+    /// Main-loop stretches with interrupts off: (first pc, cycles), the
+    /// longest first, while recording ISR intervals.
+    main_cli: Vec<(u32, u64)>,
+    main_cli_open: Option<(u32, u64)>,
     /// Cycles per flash word address, when profiling.
     profile: Option<Vec<u64>>,
 }
@@ -482,6 +489,10 @@ impl Board {
                 watchdog_feeds_at: Vec::new(),
                 isr_entered_at: 0,
                 isr_intervals: Vec::new(),
+                isr_vectors: Vec::new(),
+                isr_entered_vector: 0,
+                main_cli: Vec::new(),
+                main_cli_open: None,
                 profile: None,
             });
             shared.next_sample = shared.sample_period_cycles;
@@ -717,6 +728,17 @@ impl Board {
                 if i_clear {
                     stats.i_clear_cycles += spent;
                 }
+                if (*shared).record_isr_intervals && nesting == 0 {
+                    let off_after = (*avr).sreg[ffi::S_I as usize] == 0 && (*avr).interrupts.running_ptr == 0;
+                    match ((*shared).main_cli_open, off_after) {
+                        (None, true) => (*shared).main_cli_open = Some((pc_before, cycle)),
+                        (Some((pc, from)), false) => {
+                            (*shared).main_cli_open = None;
+                            (*shared).main_cli.push((pc, after - from));
+                        }
+                        _ => {}
+                    }
+                }
                 if nesting > 0 {
                     stats.isr_cycles += spent;
                 }
@@ -725,6 +747,7 @@ impl Board {
                     stats.interrupt_entries += 1;
                     if nesting == 0 {
                         (*shared).isr_entered_at = after;
+                        (*shared).isr_entered_vector = (*avr).pc;
                     }
                     if self.correct_interrupt_entry {
                         (*avr).cycle += 5;
@@ -734,6 +757,8 @@ impl Board {
                 } else if nesting_after == 0 && nesting > 0 && (*shared).record_isr_intervals {
                     let entered = (*shared).isr_entered_at;
                     (*shared).isr_intervals.push((entered, after));
+                    let vector = (*shared).isr_entered_vector;
+                    (*shared).isr_vectors.push(vector);
                 }
                 let sp = u16::from(*(*avr).data.add(SPL)) | u16::from(*(*avr).data.add(SPH)) << 8;
                 if sp < stats.min_sp && sp >= crate::elf::RAM_START {
@@ -996,7 +1021,29 @@ impl Board {
         self.shared.record_isr_intervals = on;
         if !on {
             self.shared.isr_intervals.clear();
+            self.shared.isr_vectors.clear();
+            self.shared.main_cli.clear();
+            self.shared.main_cli_open = None;
         }
+    }
+
+    /// Every top-level handler run recorded since
+    /// [`Board::record_isr_intervals`] was turned on: (entered, returned)
+    /// cycles, nested handlers inside their outer one.
+    pub fn isr_intervals(&self) -> &[(u64, u64)] {
+        &self.shared.isr_intervals
+    }
+
+    /// Main-loop stretches with interrupts off while ISR intervals were
+    /// recorded: (flash byte address where they began, cycles).
+    pub fn main_loop_interrupt_locks(&self) -> &[(u32, u64)] {
+        &self.shared.main_cli
+    }
+
+    /// The interrupt vector number of each run in [`Board::isr_intervals`].
+    pub fn isr_vector_numbers(&self) -> Vec<u32> {
+        // The ATmega2560's vectors are 4 bytes apart from address 0.
+        self.shared.isr_vectors.iter().map(|pc| pc / 4).collect()
     }
 
     /// Cycles spent in interrupt handlers within `[from, to)` (needs
