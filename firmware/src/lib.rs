@@ -24,7 +24,8 @@
 //! - [`drivers`]: small device drivers (HD44780 character LCD, status screen);
 //! - [`num`]: the numeric abstraction of the control laws (fixed point on
 //!   the AVR, f32 on an FPU), chosen by the board;
-//! - [`progmem`]: constant tables kept in flash on the AVR.
+//! - [`progmem`]: constant tables kept in flash on the AVR;
+//! - [`ring`]: the lock-free queues between the main loop and interrupts.
 #![no_std]
 #![deny(unsafe_op_in_unsafe_fn)]
 #![cfg_attr(target_arch = "avr", feature(asm_experimental_arch))]
@@ -46,6 +47,7 @@ pub mod num;
 pub mod progmem;
 pub mod protocol;
 pub mod reply;
+pub mod ring;
 pub mod rx;
 pub mod settings;
 pub mod storage;

@@ -5,17 +5,17 @@
 //! non-zero count into an `Error:` reply and discards the damaged line, so the
 //! host learns about the loss (and, with line numbers, gets a resend).
 //!
-//! Built on `heapless::spsc`, which is lock-free (single producer, single
-//! consumer). On the AVR it needs heapless' `portable-atomic` feature.
+//! Built on [`crate::ring`]: lock-free, one byte per index, no interrupt
+//! lock on either end.
 
 use crate::emergency::{Emergency, EmergencyScanner};
-use heapless::spsc::{Consumer, Producer, Queue};
+use crate::ring::{Consumer, Producer, Ring};
 
 /// Bytes the ring holds (one slot of the queue stays empty by design).
 pub const RX_RING_SLOTS: usize = 128;
 
 /// The storage behind the ring; boards keep it in a `static`.
-pub type RxQueue = Queue<u8, RX_RING_SLOTS>;
+pub type RxQueue = Ring<u8, RX_RING_SLOTS>;
 
 /// Interrupt side of the ring.
 /// Put into the byte stream where bytes were lost (the ring was full, or

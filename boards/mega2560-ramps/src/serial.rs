@@ -6,9 +6,9 @@
 //! send never loses input.
 
 use avr_device::atmega2560::{Peripherals, USART0};
-use avr_device::interrupt::Mutex;
-use core::cell::RefCell;
+use avr_device::interrupt::{CriticalSection, Mutex};
 use core::cell::Cell;
+use core::ptr::addr_of_mut;
 use firmware::emergency::{Emergency, Pending};
 use firmware::host_link::SerialLink;
 use firmware::rx::{RxConsumer, RxProducer};
@@ -24,8 +24,20 @@ const CPU_HZ: u32 = 16_000_000;
 /// 115200 → 16 (117647 baud, +2.1 %, as on every Arduino); 250000 → 7 (exact).
 const UBRR: u16 = ((CPU_HZ + 4 * BAUD) / (8 * BAUD) - 1) as u16;
 
-/// The interrupt's end of the receive ring, installed once by [`init`].
-pub static RX_PRODUCER: Mutex<RefCell<Option<RxProducer<'static>>>> = Mutex::new(RefCell::new(None));
+/// The interrupt's end of the receive ring, installed once by [`init`]
+/// (before interrupts are on). Used by the receive interrupt, and by the
+/// main loop only inside critical sections ([`with_producer`]). A plain
+/// static, not a `RefCell`: the borrow flag cost a call inside every lock.
+static mut RX_PRODUCER: Option<RxProducer<'static>> = None;
+
+/// The producer, for the main loop (inside a critical section) or for the
+/// receive interrupt (its RX source is off while it runs, see below).
+fn with_producer<R>(_cs: CriticalSection<'_>, f: impl FnOnce(&mut RxProducer<'static>) -> R) -> Option<R> {
+    // SAFETY: the token (a critical section, or the receive interrupt with
+    // its own source disabled and nothing else touching the producer)
+    // gives exclusive access.
+    unsafe { (*addr_of_mut!(RX_PRODUCER)).as_mut().map(f) }
+}
 
 /// Emergencies seen by the receive interrupt, for the main loop to act on.
 static EMERGENCIES: Mutex<Cell<Pending>> = Mutex::new(Cell::new(Pending::NONE));
@@ -41,7 +53,7 @@ impl SerialLink for Rx {
     }
 
     fn take_dropped(&mut self) -> u8 {
-        avr_device::interrupt::free(|cs| RX_PRODUCER.borrow(cs).borrow_mut().as_mut().map_or(0, |p| p.take_dropped()))
+        avr_device::interrupt::free(|cs| with_producer(cs, |p| p.take_dropped())).unwrap_or(0)
     }
 
     fn take_emergencies(&mut self) -> Pending {
@@ -51,7 +63,8 @@ impl SerialLink for Rx {
 
 /// Set up 8N1 at [`BAUD`] with the receive interrupt on.
 pub fn init(dp: &Peripherals, producer: RxProducer<'static>) {
-    avr_device::interrupt::free(|cs| RX_PRODUCER.borrow(cs).replace(Some(producer)));
+    // SAFETY: interrupts are not enabled yet: nothing else uses it.
+    unsafe { *addr_of_mut!(RX_PRODUCER) = Some(producer) };
     let usart = &dp.USART0;
     usart.ubrr0.write(|w| w.bits(UBRR));
     // SAFETY: U2X0 (bit 1) only; the other bits are flags or zero.
@@ -62,22 +75,41 @@ pub fn init(dp: &Peripherals, producer: RxProducer<'static>) {
     usart.ucsr0b.write(|w| w.rxen0().set_bit().txen0().set_bit().rxcie0().set_bit());
 }
 
+/// USART0 receive complete. The byte and the overrun flag are taken at once
+/// (that clears the interrupt), then the handler switches its own source
+/// off and lets every other interrupt in while it runs the ring and the
+/// emergency scanner (~250 cycles): a step is held up only by the entry
+/// and these few register reads, not by the whole handler. The UART holds
+/// two more bytes meanwhile, and the source comes back on (with interrupts
+/// off) just before returning, so a byte that arrived is handled next.
 #[avr_device::interrupt(atmega2560)]
 fn USART0_RX() {
-    // SAFETY: read-only access to USART0's status and data registers; the
-    // main loop only ever writes to the transmit side.
+    // SAFETY: USART0's status and data registers are read only here; the
+    // main loop only writes the transmit side; UCSR0B's receive-interrupt
+    // bit is written only here, with interrupts off.
     let usart = unsafe { &*USART0::ptr() };
     let overrun = usart.ucsr0a.read().dor0().bit_is_set();
     let byte = usart.udr0.read().bits();
+    usart.ucsr0b.modify(|_, w| w.rxcie0().clear_bit());
+    // SAFETY: from here on only this handler's own source is off; the
+    // producer is touched by nothing that can interrupt it.
+    unsafe { avr_device::interrupt::enable() };
+    receive(byte, overrun);
+    avr_device::interrupt::disable();
+    usart.ucsr0b.modify(|_, w| w.rxcie0().set_bit());
+}
+
+#[inline(never)]
+fn receive(byte: u8, overrun: bool) {
+    // SAFETY: see the handler: its source is off, the main loop is
+    // interrupted, and no other interrupt uses the producer.
+    let cs = unsafe { CriticalSection::new() };
+    let Some(Some(emergency)) = with_producer(cs, |p| p.push(byte, overrun)) else { return };
     avr_device::interrupt::free(|cs| {
-        let Some(producer) = RX_PRODUCER.borrow(cs).borrow_mut().as_mut().map(|p| p.push(byte, overrun)) else {
-            return;
-        };
-        let Some(emergency) = producer else { return };
         if emergency == Emergency::Kill {
-            // M112 acts here and now, whatever the main loop is doing.
-            // SAFETY: the pin writes are single read-modify-writes of port
-            // registers, and interrupts are off inside this handler.
+            // M112 acts here and now, whatever the main loop is doing; with
+            // interrupts off, so the step interrupt cannot step in between.
+            // SAFETY: single read-modify-writes of port registers.
             let dp = unsafe { avr_device::atmega2560::Peripherals::steal() };
             crate::stepping::stop_timer(&dp);
             #[cfg(feature = "machine-extrusion-line")]

@@ -109,7 +109,6 @@ pub mod kinematics;
 pub mod math;
 pub mod planner;
 pub mod prep;
-pub mod step_ring;
 pub mod stepper;
 
 #[cfg(test)]

@@ -54,7 +54,8 @@ fn main() {
             }
             let mut locks: std::collections::BTreeMap<String, (usize, u64)> = Default::default();
             for &(pc, cycles) in board.main_loop_interrupt_locks() {
-                let e = locks.entry(board.symbol_at(pc).map_or(format!("{pc:#x}"), avr_bench::board::demangle)).or_default();
+                let name = board.symbol_at(pc).map_or(String::new(), avr_bench::board::demangle);
+                let e = locks.entry(format!("{name} at {pc:#x}")).or_default();
                 e.0 += 1;
                 e.1 = e.1.max(cycles);
             }
