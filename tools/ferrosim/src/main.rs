@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 use ferrosim::simulate::{self, MachineKind, Options};
+use ferrosim::tracking::{self, EncoderOptions, EncoderStrategy};
 use ferrosim::{plots, replay, serve};
 use std::path::PathBuf;
 
@@ -42,6 +43,17 @@ enum Command {
         /// Skip the plots.
         #[arg(long)]
         no_plots: bool,
+        /// Prusa only: run X and Y closed loop on their NSE-5310 encoders
+        /// (SPEC §1) against the simulated axes, print the tracking error
+        /// and alarms, plot `tracking_error`. `--encoders` alone: pid.
+        #[arg(long, value_enum, num_args = 0..=1, default_missing_value = "pid", value_name = "STRATEGY")]
+        encoders: Option<EncoderStrategy>,
+        /// Kp of `--encoders p-ff` (default 4.3).
+        #[arg(long, requires = "encoders")]
+        kp: Option<f64>,
+        /// γ of `--encoders pid`, in (0, 0.75] (default 0.5).
+        #[arg(long, requires = "encoders")]
+        gamma: Option<f64>,
     },
     /// Write a synthetic print (a 40 mm square, perimeters of 1 mm segments
     /// and infill, heated first) of about `minutes` to FILE, to try the
@@ -75,9 +87,22 @@ fn run(cli: Cli) -> Result<(), String> {
             eprintln!("ferrosim: virtual {machine:?} printer on {} at {speed}× real time; Ctrl-C stops it", printer.path);
             printer.run(|_| false)
         }
-        Command::Simulate { file, machine, layer, out, baud, no_plots } => {
+        Command::Simulate { file, machine, layer, out, baud, no_plots, encoders, kp, gamma } => {
+            let encoder_options = match encoders {
+                Some(_) if machine != MachineKind::Prusa => {
+                    return Err(format!(
+                        "--encoders: only the Prusa i3 (SPEC §1) has encoder-closed axes (NSE-5310 on X and Y); not the {machine:?}"
+                    ))
+                }
+                Some(strategy) => Some(EncoderOptions::standard(strategy.strategy(kp, gamma)?)),
+                None => None,
+            };
             let gcode = std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?;
-            let options = Options { machine, baud, ..Options::default() };
+            let mut options = Options { machine, baud, ..Options::default() };
+            if let Some(encoder) = &encoder_options {
+                // One X/Y sample per loop tick: the reference pieces.
+                options.xy_sample_ms = Some(tracking::sample_ms(encoder.loop_hz));
+            }
             let bar = indicatif::ProgressBar::new(simulate::host_lines(&gcode).len() as u64);
             bar.set_style(
                 indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} lines {msg}").map_err(|e| e.to_string())?,
@@ -85,8 +110,20 @@ fn run(cli: Cli) -> Result<(), String> {
             let report = simulate::run(&gcode, &options, |sent, _| bar.set_position(sent as u64));
             bar.finish_and_clear();
             print!("{}", report.summary());
+            let tracked = match &encoder_options {
+                Some(encoder) => {
+                    let tracked = tracking::track(&report, encoder)?;
+                    print!("{}", tracked.summary());
+                    Some(tracked)
+                }
+                None => None,
+            };
             if !no_plots {
-                for path in plots::simulation_plots(&report, &out, layer)? {
+                let mut files = plots::simulation_plots(&report, &out, layer)?;
+                if let Some(tracked) = &tracked {
+                    files.extend(plots::tracking_plots(tracked, &out)?);
+                }
+                for path in files {
                     println!("wrote {}", path.display());
                 }
             }

@@ -5,6 +5,7 @@ use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
 use crate::simulate::Report;
+use crate::tracking::Tracking;
 
 /// Plots need a font and a machine may have none installed: DejaVu Sans is
 /// compiled in.
@@ -32,6 +33,27 @@ fn thin(points: &[(f64, f64)], max: usize) -> Vec<(f64, f64)> {
     }
     let bucket = points.len().div_ceil(max);
     points.chunks(bucket).map(|c| *c.iter().max_by(|a, b| a.1.total_cmp(&b.1)).unwrap_or(&c[0])).collect()
+}
+
+/// At most `max` points keeping each bucket's lowest and highest, in time
+/// order: for signed data (a tracking error), where [`thin`]'s maxima would
+/// hide the negative peaks.
+pub fn envelope(points: &[(f64, f64)], max: usize) -> Vec<(f64, f64)> {
+    if points.len() <= max {
+        return points.to_vec();
+    }
+    let bucket = points.len().div_ceil(max / 2).max(2);
+    let mut out = Vec::with_capacity(max);
+    for chunk in points.chunks(bucket) {
+        let low = chunk.iter().min_by(|a, b| a.1.total_cmp(&b.1)).unwrap_or(&chunk[0]);
+        let high = chunk.iter().max_by(|a, b| a.1.total_cmp(&b.1)).unwrap_or(&chunk[0]);
+        if low.0 <= high.0 {
+            out.extend([*low, *high]);
+        } else {
+            out.extend([*high, *low]);
+        }
+    }
+    out
 }
 
 fn bounds(series: &[Series]) -> (std::ops::Range<f64>, std::ops::Range<f64>) {
@@ -195,4 +217,24 @@ pub fn simulation_plots(report: &Report, dir: &Path, layer: Option<usize>) -> Re
         )?);
     }
     Ok(files)
+}
+
+/// The closed-loop X and Y tracking error over time (`tracking_error.png`
+/// and `.svg` in `dir`).
+pub fn tracking_plots(tracking: &Tracking, dir: &Path) -> Result<Vec<PathBuf>, String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let [x, y] = tracking.error_series();
+    let title = format!(
+        "Tracking error, reference − encoder ({}, {} Hz)",
+        hal_sim::axis_plant::strategy_label(tracking.strategy),
+        tracking.loop_hz
+    );
+    Ok(line_chart(
+        &dir.join("tracking_error"),
+        &title,
+        "time (s)",
+        "mm",
+        &[Series { name: "X", points: envelope(&x, 4000) }, Series { name: "Y", points: envelope(&y, 4000) }],
+    )?
+    .to_vec())
 }

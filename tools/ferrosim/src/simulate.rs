@@ -82,11 +82,18 @@ pub struct Options {
     pub sample_ms: u32,
     /// Give up after this much virtual time.
     pub max_hours: f64,
+    /// Also record the X and Y motor steps every this many ms
+    /// ([`Report::xy_steps`]): the closed-loop reference of
+    /// [`crate::tracking`], one per loop tick ([`crate::tracking::sample_ms`]:
+    /// 4 ms at 250 Hz). Kept apart from `sample_ms` so that the figures
+    /// stay averages over 10 ms (over 4 ms one step of quantisation is
+    /// 625 mm/s² of acceleration).
+    pub xy_sample_ms: Option<u32>,
 }
 
 impl Default for Options {
     fn default() -> Self {
-        Self { machine: MachineKind::Prusa, baud: None, sample_ms: 10, max_hours: 48.0 }
+        Self { machine: MachineKind::Prusa, baud: None, sample_ms: 10, max_hours: 48.0, xy_sample_ms: None }
     }
 }
 
@@ -130,7 +137,13 @@ pub struct Report {
     /// Motor steps per motor unit (mm or °).
     pub steps_per_unit: [f64; 4],
     pub samples: Vec<Sample>,
+    /// X and Y motor steps from power-on every `Options::xy_sample_ms`
+    /// (empty without it): (time s, [X, Y]).
+    pub xy_steps: Vec<(f64, [i64; 2])>,
     pub thermal: Vec<ThermalSample>,
+    /// Each `G28`: from the moment the line was sent to the moment its `ok`
+    /// was in and the machine idle, virtual seconds.
+    pub homing: Vec<(f64, f64)>,
     /// Times the step interrupt ran out of prepared motion mid-block.
     pub underruns: u32,
     /// Wall-clock seconds the simulation took.
@@ -177,6 +190,11 @@ pub fn host_lines(gcode: &str) -> Vec<&str> {
         .collect()
 }
 
+/// Whether a host line is a `G28` (homing), with or without axis words.
+pub fn is_homing(line: &str) -> bool {
+    line.split_whitespace().any(|word| word.eq_ignore_ascii_case("G28"))
+}
+
 /// Run `gcode` on the simulated machine; `progress(sent, total)` is called
 /// every simulated second.
 pub fn run(gcode: &str, options: &Options, mut progress: impl FnMut(usize, usize)) -> Report {
@@ -200,7 +218,9 @@ pub fn run(gcode: &str, options: &Options, mut progress: impl FnMut(usize, usize
         timed_out: false,
         steps_per_unit: spu,
         samples: Vec::new(),
+        xy_steps: Vec::new(),
         thermal: Vec::new(),
+        homing: Vec::new(),
         underruns: 0,
         wall_s: 0.0,
     };
@@ -210,10 +230,19 @@ pub fn run(gcode: &str, options: &Options, mut progress: impl FnMut(usize, usize
     let mut last_underruns = board.underruns();
     let mut elapsed: u64 = 0;
     let mut offset = [0i64; 4];
+    let mut homing_since: Option<f64> = None;
     report.samples.push(Sample { time_s: 0.0, steps: board.steps.positions(), offset });
+    let xy_sample_ms = options.xy_sample_ms.map(|ms| u64::from(ms.max(1)));
+    let xy = |positions: [i64; 4]| [positions[0], positions[1]];
+    if xy_sample_ms.is_some() {
+        report.xy_steps.push((0.0, xy(board.steps.positions())));
+    }
     loop {
         if !in_flight {
             if let Some(line) = lines.get(next) {
+                if is_homing(line) {
+                    homing_since = Some(elapsed as f64 / 1000.0);
+                }
                 board.receive(line.as_bytes());
                 board.receive(b"\n");
                 next += 1;
@@ -236,6 +265,11 @@ pub fn run(gcode: &str, options: &Options, mut progress: impl FnMut(usize, usize
             let counted = board.link.machine.motor_steps();
             let positions = board.steps.positions();
             offset = [0, 1, 2, 3].map(|m| i64::from(counted[m]) - positions[m]);
+            if !in_flight {
+                if let Some(since) = homing_since.take() {
+                    report.homing.push((since, elapsed as f64 / 1000.0));
+                }
+            }
         }
         let underruns = board.underruns();
         report.underruns += u32::from(underruns.wrapping_sub(last_underruns));
@@ -243,6 +277,9 @@ pub fn run(gcode: &str, options: &Options, mut progress: impl FnMut(usize, usize
         let time_s = elapsed as f64 / 1000.0;
         if elapsed % u64::from(sample_ms) == 0 {
             report.samples.push(Sample { time_s, steps: board.steps.positions(), offset });
+        }
+        if xy_sample_ms.is_some_and(|ms| elapsed % ms == 0) {
+            report.xy_steps.push((time_s, xy(board.steps.positions())));
         }
         if elapsed % 100 == 0 {
             let (hotend, bed) = board.link.machine.heater_duties();
@@ -269,10 +306,16 @@ pub fn run(gcode: &str, options: &Options, mut progress: impl FnMut(usize, usize
     while !report.timed_out && elapsed - last_move_ms < 20 {
         board.advance(1);
         elapsed += 1;
+        if xy_sample_ms.is_some_and(|ms| elapsed % ms == 0) {
+            report.xy_steps.push((elapsed as f64 / 1000.0, xy(board.steps.positions())));
+        }
         if board.steps.positions() != positions {
             positions = board.steps.positions();
             last_move_ms = elapsed;
         }
+    }
+    if let Some(since) = homing_since {
+        report.homing.push((since, elapsed as f64 / 1000.0));
     }
     let _ = board.take_output();
     let counted = board.link.machine.motor_steps();
@@ -528,6 +571,12 @@ mod tests {
     #[test]
     fn hosts_strip_comments_and_blank_lines() {
         assert_eq!(host_lines("; start\nG28 ; home\n\n  G1 X1  \n"), ["G28", "G1 X1"]);
+    }
+
+    #[test]
+    fn homing_lines_are_g28_with_or_without_axes() {
+        assert!(is_homing("G28") && is_homing("g28 X Y") && is_homing("N3 G28 W"));
+        assert!(!is_homing("G280") && !is_homing("G1 X28") && !is_homing("M28"));
     }
 
     #[test]
