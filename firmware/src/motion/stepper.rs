@@ -334,18 +334,15 @@ impl<'a> StepGenerator<'a> {
         }
         let step_mask = self.pending_mask & !self.stopped;
         let dir_mask = self.pending_dir ^ self.config.dir_invert;
-        let next_interval_ticks = if self.events_left != 0 {
-            self.next_event()
-        } else if self.take_next_segment_of_block() {
-            self.next_event()
-        } else {
-            self.next_segment()
-        };
+        let next_interval_ticks =
+            if self.events_left != 0 || self.take_next_segment_of_block() { self.next_event() } else { self.next_segment() };
         TimerAction { step_mask, dir_mask, next_interval_ticks }
     }
 
-    /// The hot path: one more event of the running segment.
-    #[inline]
+    /// The hot path: one more event of the running segment. Always
+    /// inline: out of line (as `opt-level = "z"` chose) it cost the AVR's
+    /// step interrupt a call and six register saves, ~33 cycles an event.
+    #[inline(always)]
     fn next_event(&mut self) -> u16 {
         self.events_left -= 1;
         let sum = self.frac as u32 + self.interval;
