@@ -278,7 +278,7 @@ pub fn run(gcode: &str, options: &Options, mut progress: impl FnMut(usize, usize
         if elapsed % u64::from(sample_ms) == 0 {
             report.samples.push(Sample { time_s, steps: board.steps.positions(), offset });
         }
-        if xy_sample_ms.is_some_and(|ms| elapsed % ms == 0) {
+        if xy_sample_ms.is_some_and(|ms| elapsed.is_multiple_of(ms)) {
             report.xy_steps.push((time_s, xy(board.steps.positions())));
         }
         if elapsed % 100 == 0 {
@@ -306,7 +306,7 @@ pub fn run(gcode: &str, options: &Options, mut progress: impl FnMut(usize, usize
     while !report.timed_out && elapsed - last_move_ms < 20 {
         board.advance(1);
         elapsed += 1;
-        if xy_sample_ms.is_some_and(|ms| elapsed % ms == 0) {
+        if xy_sample_ms.is_some_and(|ms| elapsed.is_multiple_of(ms)) {
             report.xy_steps.push((elapsed as f64 / 1000.0, xy(board.steps.positions())));
         }
         if board.steps.positions() != positions {
