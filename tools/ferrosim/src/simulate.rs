@@ -275,13 +275,13 @@ pub fn run(gcode: &str, options: &Options, mut progress: impl FnMut(usize, usize
         report.underruns += u32::from(underruns.wrapping_sub(last_underruns));
         last_underruns = underruns;
         let time_s = elapsed as f64 / 1000.0;
-        if elapsed % u64::from(sample_ms) == 0 {
+        if elapsed.is_multiple_of(u64::from(sample_ms)) {
             report.samples.push(Sample { time_s, steps: board.steps.positions(), offset });
         }
         if xy_sample_ms.is_some_and(|ms| elapsed.is_multiple_of(ms)) {
             report.xy_steps.push((time_s, xy(board.steps.positions())));
         }
-        if elapsed % 100 == 0 {
+        if elapsed.is_multiple_of(100) {
             let (hotend, bed) = board.link.machine.heater_duties();
             report.thermal.push(ThermalSample {
                 time_s,
@@ -291,7 +291,7 @@ pub fn run(gcode: &str, options: &Options, mut progress: impl FnMut(usize, usize
                 bed_duty: f64::from(bed) / 255.0,
             });
         }
-        if elapsed % 1000 == 0 {
+        if elapsed.is_multiple_of(1000) {
             progress(next, lines.len());
         }
         if elapsed >= max_ms || board.link.machine.is_halted() && !in_flight && next >= lines.len() {
@@ -350,6 +350,7 @@ impl Report {
             if dt <= 0.0 {
                 continue;
             }
+            #[allow(clippy::needless_range_loop)] // six arrays in step
             for motor in 0..4 {
                 let steps = (pair[1].steps[motor] - pair[0].steps[motor]) as f64;
                 let units = steps / self.steps_per_unit[motor];
