@@ -49,6 +49,22 @@ fn main() {
             *cycles as f64 * 100.0 / total as f64
         );
     }
+    // Who calls memcpy, how often (FERROSTEP_PROFILE_CALLS=memcpy): each
+    // `call` instruction's cycles / 5 = its executions.
+    if let Ok(callee) = std::env::var("FERROSTEP_PROFILE_CALLS") {
+        let dump = std::process::Command::new("avr-objdump").arg("-d").arg(&elf).output().expect("avr-objdump");
+        let mut sites: Vec<(u64, String)> = String::from_utf8_lossy(&dump.stdout)
+            .lines()
+            .filter(|l| l.contains("call") && l.contains(&format!("<{callee}>")))
+            .filter_map(|l| u32::from_str_radix(l.trim().split(':').next()?, 16).ok())
+            .map(|pc| (board.profile_at(pc) / 5, board.symbol_at(pc).map_or(format!("{pc:#x}"), |s| format!("{} at {pc:#x}", avr_bench::board::demangle(s)))))
+            .filter(|(n, _)| *n > 0)
+            .collect();
+        sites.sort_by_key(|s| std::cmp::Reverse(s.0));
+        for (n, site) in sites.iter().take(15) {
+            println!("{n:>8} calls of {callee} from {site}");
+        }
+    }
     let (cycles, functions) = board.longest_pass_samples();
     println!("longest main-loop pass: {cycles} cycles ({:.2} ms); PC samples every 2000 cycles in it:", cycles as f64 / 16_000.0);
     for (function, samples) in functions.iter().take(15) {

@@ -1113,6 +1113,12 @@ impl Board {
         self.shared.profile = on.then(|| vec![0; (crate::elf::FLASH_BYTES / 2) as usize]);
     }
 
+    /// Cycles spent on the instruction at flash byte address `pc` since
+    /// profiling started (a `call` takes 5: its count of executions ×5).
+    pub fn profile_at(&self, pc: u32) -> u64 {
+        self.shared.profile.as_ref().and_then(|p| p.get((pc / 2) as usize).copied()).unwrap_or(0)
+    }
+
     /// Cycles per function since profiling started, highest first
     /// (demangled names; instructions outside any sized symbol are
     /// grouped under "?").
