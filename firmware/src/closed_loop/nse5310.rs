@@ -168,17 +168,24 @@ pub struct TrackerConfig {
     /// Consecutive failed or rejected reads before [`EncoderFault::NoReading`].
     pub max_bad_reads: u8,
     /// Commanded travel (units) with a bit-identical reading before
-    /// [`EncoderFault::Stuck`].
+    /// [`EncoderFault::Stuck`]...
     pub stuck_travel: i32,
+    /// ...over at least this many consecutive identical reads. One repeat
+    /// is not evidence: above 62.5 mm/s at a 250 Hz read rate one read
+    /// period is already 0.25 mm of command, and a carriage that pauses (a
+    /// reversal, the dead time after a start) with a quiet sensor repeats
+    /// a reading now and then; the simulated 60-minute print raised a false
+    /// "encoder stuck" that way with one repeat allowed.
+    pub stuck_reads: u8,
 }
 
 impl TrackerConfig {
     /// Defaults for SPEC §1's printer: index at count 0, ±256 counts
     /// (0.125 mm) window, jumps up to 1024 counts (0.5 mm) per read (500 mm/s
     /// at a 1 kHz read rate, 100 mm/s at 200 Hz), 5 bad reads, stuck after
-    /// 0.25 mm of commanded travel.
+    /// 0.25 mm of commanded travel over 4 identical reads.
     pub const fn default_for_printer() -> Self {
-        Self { index_phase: 0, index_window: 256, max_jump: 1024, max_bad_reads: 5, stuck_travel: UNITS_PER_MM / 4 }
+        Self { index_phase: 0, index_window: 256, max_jump: 1024, max_bad_reads: 5, stuck_travel: UNITS_PER_MM / 4, stuck_reads: 4 }
     }
 
     /// The printer defaults with `max_jump` sized for an axis that moves at
@@ -231,6 +238,8 @@ pub struct LinearTracker {
     consecutive_bad: u8,
     /// Commanded position when the raw reading last changed.
     commanded_at_change: i32,
+    /// Consecutive reads equal to the one before.
+    same_reads: u8,
     fault: Option<EncoderFault>,
     counters: TrackerCounters,
 }
@@ -245,6 +254,7 @@ impl LinearTracker {
             primed: false,
             consecutive_bad: 0,
             commanded_at_change: 0,
+            same_reads: 0,
             fault: None,
             counters: TrackerCounters {
                 index_accepted: 0,
@@ -289,9 +299,15 @@ impl LinearTracker {
         self.unwrapped = self.unwrapped.wrapping_add(jump);
         if raw != self.last_raw {
             self.commanded_at_change = commanded;
-        } else if (commanded.wrapping_sub(self.commanded_at_change)).unsigned_abs() > self.config.stuck_travel.unsigned_abs() {
-            self.fault = Some(EncoderFault::Stuck);
-            return Err(EncoderFault::Stuck);
+            self.same_reads = 0;
+        } else {
+            self.same_reads = self.same_reads.saturating_add(1);
+            if self.same_reads >= self.config.stuck_reads
+                && (commanded.wrapping_sub(self.commanded_at_change)).unsigned_abs() > self.config.stuck_travel.unsigned_abs()
+            {
+                self.fault = Some(EncoderFault::Stuck);
+                return Err(EncoderFault::Stuck);
+            }
         }
         self.last_raw = raw;
         Ok(self.position())
@@ -348,6 +364,7 @@ impl LinearTracker {
     pub fn set_position(&mut self, position: i32, commanded: i32) {
         self.zero = self.unwrapped.wrapping_sub(position);
         self.commanded_at_change = commanded;
+        self.same_reads = 0;
         self.consecutive_bad = 0;
         self.fault = None;
     }
@@ -510,11 +527,31 @@ mod tests {
     fn a_bit_identical_reading_while_commanded_travel_exceeds_a_quarter_mm_is_stuck() {
         let mut t = tracker();
         t.update(777, 0, 0).unwrap();
-        // 0.25 mm = 512 units of commanded travel is still fine...
-        assert!(t.update(777, 0, 512).is_ok());
+        // Four identical reads over 0.25 mm = 512 units of commanded
+        // travel are still fine...
+        for commanded in [128, 256, 384, 512] {
+            assert!(t.update(777, 0, commanded).is_ok());
+        }
         // ...one unit more is not.
         assert_eq!(t.update(777, 0, 513), Err(EncoderFault::Stuck));
         assert_eq!(t.fault(), Some(EncoderFault::Stuck));
+    }
+
+    #[test]
+    fn one_repeated_reading_during_fast_travel_is_not_stuck() {
+        // 100 mm/s read at 250 Hz: 0.4 mm = 819 units of command per read.
+        let mut t = tracker();
+        t.update(100, 0, 0).unwrap();
+        assert!(t.update(100, 0, 819).is_ok());
+        assert!(t.update(100, 0, 1638).is_ok());
+        assert!(t.update(100, 0, 2457).is_ok());
+        // The reading moves again: the count starts over.
+        assert!(t.update(900, 0, 3276).is_ok());
+        assert!(t.update(900, 0, 4095).is_ok());
+        // A fourth identical read with the command 0.25 mm on is stuck.
+        assert!(t.update(900, 0, 4914).is_ok());
+        assert!(t.update(900, 0, 5733).is_ok());
+        assert_eq!(t.update(900, 0, 6552), Err(EncoderFault::Stuck));
     }
 
     #[test]
