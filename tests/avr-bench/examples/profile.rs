@@ -28,6 +28,7 @@ fn main() {
     config.host = HostConfig::raw(115_200);
     let mut board = bench::boot(&elf, config).unwrap_or_else(|e| panic!("{e}"));
     board.profile(true);
+    board.inclusive_profile(true);
     board.sample_pcs(2_000);
     let start = board.cycle();
     let isr_start = board.stats().isr_cycles;
@@ -48,6 +49,10 @@ fn main() {
             "{cycles:>10} {:5.1} %  {function}",
             *cycles as f64 * 100.0 / total as f64
         );
+    }
+    println!("inclusive (with everything called; handlers count for what they interrupted):");
+    for (function, cycles) in board.inclusive_by_function().iter().take(40) {
+        println!("{cycles:>10} {:5.1} %  {function}", *cycles as f64 * 100.0 / total as f64);
     }
     // Who calls memcpy, how often (FERROSTEP_PROFILE_CALLS=memcpy): each
     // `call` instruction's cycles / 5 = its executions.

@@ -609,6 +609,9 @@ pub fn stream_rate(elf: &Path, baud: u32, segments: usize) -> Result<StreamResul
 /// few hundredths). Also the lines per second the host got acknowledged.
 pub fn segment_speed(elf: &Path, baud: u32, segments: usize, length_mm: f64) -> Result<(f64, f64, PhaseLog), String> {
     let mut board = boot(elf, RampsConfig::stock(baud))?;
+    if std::env::var_os("FERROSTEP_OK_LATENCY").is_some() {
+        board.sample_pcs(97);
+    }
     let job = segments_of(segments, length_mm);
     board.send(job.iter());
     let timeout = segments as f64 * length_mm / 20.0 + 10.0;
@@ -631,6 +634,28 @@ pub fn segment_speed(elf: &Path, baud: u32, segments: usize, length_mm: f64) -> 
     let (a, b) = (sent.first().ok_or("nothing sent")?, sent.last().ok_or("nothing sent")?);
     let ok = &host.replies[b.ok_reply.ok_or("last segment without ok")?];
     let lines_per_s = sent.len() as f64 / ((ok.arrived_cycle - a.start_cycle) as f64 / f64::from(CPU_HZ));
+    if std::env::var_os("FERROSTEP_OK_LATENCY").is_some() {
+        let mut latencies = ok_latencies(&board);
+        latencies.sort_unstable();
+        let at = |q: f64| latencies[((latencies.len() - 1) as f64 * q) as usize] as f64 / 16_000.0;
+        eprintln!("{length_mm} mm: last byte -> ok: median {:.2} ms, 90 % {:.2} ms, max {:.2} ms", at(0.5), at(0.9), at(1.0));
+        // Where the firmware was while lines waited for their ok.
+        let mut total: std::collections::BTreeMap<String, usize> = Default::default();
+        let host = board.host();
+        for s in &host.sent {
+            if let (Some(last), Some(ok)) = (s.last_byte_start_cycle, s.ok_reply) {
+                for (name, n) in board.samples_between(last, host.replies[ok].first_byte_cycle) {
+                    *total.entry(name).or_default() += n;
+                }
+            }
+        }
+        let mut total: Vec<_> = total.into_iter().collect();
+        total.sort_by(|a, b| b.1.cmp(&a.1));
+        let all: usize = total.iter().map(|t| t.1).sum();
+        for (name, n) in total.iter().take(25) {
+            eprintln!("    {:5.1} %  {name}", *n as f64 * 100.0 / all as f64);
+        }
+    }
     Ok((ideal / seconds, lines_per_s, PhaseLog::of(&format!("{length_mm} mm segments"), &board)))
 }
 
@@ -695,4 +720,19 @@ pub fn loop_tick_cycles(bench_elf: &Path) -> Result<LoopTickCycles, String> {
         Ok((get(&key)?, get(&format!("{key}_min"))?, get(&format!("{key}_max"))?))
     };
     Ok(LoopTickCycles { fixed: triple("fixed")?, float: triple("f32")? })
+}
+
+/// Per line of a finished stream: cycles from the start bit of its last
+/// byte to the first byte of its `ok` (the firmware's part of the round
+/// trip), in job order.
+pub fn ok_latencies(board: &Board) -> Vec<u64> {
+    let host = board.host();
+    host.sent
+        .iter()
+        .filter_map(|s| {
+            let last = s.last_byte_start_cycle?;
+            let ok = &host.replies[s.ok_reply?];
+            Some(ok.first_byte_cycle.saturating_sub(last))
+        })
+        .collect()
 }

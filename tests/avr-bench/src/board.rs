@@ -365,6 +365,9 @@ struct Shared {
     main_cli_open: Option<(u32, u64)>,
     /// Cycles per flash word address, when profiling.
     profile: Option<Vec<u64>>,
+    /// Inclusive profile: cycles per function entry (word address) with
+    /// everything it called, and the shadow call stack that feeds it.
+    inclusive: Option<(Vec<u64>, Vec<(u32, u16)>)>,
 }
 
 /// The simulated board.
@@ -494,6 +497,7 @@ impl Board {
                 main_cli: Vec::new(),
                 main_cli_open: None,
                 profile: None,
+                inclusive: None,
             });
             shared.next_sample = shared.sample_period_cycles;
             if shared.uart0.is_null() {
@@ -702,6 +706,24 @@ impl Board {
                 if let Some(profile) = &mut (*shared).profile {
                     if let Some(slot) = profile.get_mut((pc_before / 2) as usize) {
                         *slot += spent;
+                    }
+                }
+                if let Some((cycles, stack)) = &mut (*shared).inclusive {
+                    // Frames are (entry pc, SP just after the return address
+                    // was pushed): a frame ends when SP rises above it,
+                    // whatever popped it (ret, reti, a tail call's ret).
+                    let word = u16::from(*(*avr).flash.add(pc_before as usize)) | u16::from(*(*avr).flash.add(pc_before as usize + 1)) << 8;
+                    for &(entry, _) in stack.iter() {
+                        cycles[(entry / 2) as usize] += spent;
+                    }
+                    let sp = u16::from(*(*avr).data.add(SPL)) | u16::from(*(*avr).data.add(SPH)) << 8;
+                    while stack.last().is_some_and(|&(_, at)| sp > at) {
+                        stack.pop();
+                    }
+                    let entered_interrupt = (*avr).interrupts.running_ptr > nesting;
+                    let is_call = word & 0xFE0E == 0x940E || word & 0xF000 == 0xD000 || word == 0x9509 || word == 0x9519;
+                    if entered_interrupt || is_call {
+                        stack.push(((*avr).pc, sp));
                     }
                 }
                 if (*shared).pc_sample_every != 0 {
@@ -1111,6 +1133,29 @@ impl Board {
     /// Start (or stop and discard) the per-instruction cycle profile.
     pub fn profile(&mut self, on: bool) {
         self.shared.profile = on.then(|| vec![0; (crate::elf::FLASH_BYTES / 2) as usize]);
+    }
+
+    /// Start (or stop and discard) the inclusive profile: each function's
+    /// cycles including what it calls (a shadow stack of call/ret and
+    /// interrupt entries; a handler's cycles count for what it interrupted).
+    pub fn inclusive_profile(&mut self, on: bool) {
+        self.shared.inclusive = on.then(|| (vec![0; (crate::elf::FLASH_BYTES / 2) as usize], Vec::new()));
+    }
+
+    /// Inclusive cycles per function, highest first.
+    pub fn inclusive_by_function(&self) -> Vec<(String, u64)> {
+        let Some((cycles, _)) = &self.shared.inclusive else { return Vec::new() };
+        let mut list: Vec<(String, u64)> = cycles
+            .iter()
+            .enumerate()
+            .filter(|(_, &c)| c > 0)
+            .map(|(word, &c)| {
+                let pc = word as u32 * 2;
+                (self.symbol_at(pc).map_or(format!("{pc:#x}"), demangle), c)
+            })
+            .collect();
+        list.sort_by_key(|entry| std::cmp::Reverse(entry.1));
+        list
     }
 
     /// Cycles spent on the instruction at flash byte address `pc` since
