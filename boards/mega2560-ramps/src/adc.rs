@@ -15,6 +15,9 @@
 //! judges a shorted sensor: a board whose thermistors cannot be read never
 //! heats.
 
+// Without heaters (the powder bed) the conversions run but nothing reads them.
+#![cfg_attr(not(feature = "heaters"), allow(dead_code))]
+
 use avr_device::atmega2560::Peripherals;
 use firmware::thermal::{Oversampled, SampleAverager};
 

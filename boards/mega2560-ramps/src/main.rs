@@ -32,7 +32,9 @@ mod watchdog;
 use avr_device::atmega2560::Peripherals;
 use firmware::host_link::HostLink;
 use firmware::machine::Machine;
-use firmware::motion::{MotionConfig, StepperRequest};
+use firmware::motion::MotionConfig;
+#[cfg(feature = "printer")]
+use firmware::motion::StepperRequest;
 use firmware::rx::{self, RxQueue};
 
 /// How often the thermistors are read, in milliseconds.
@@ -57,6 +59,7 @@ fn main() -> ! {
     let _ = link.machine.load_settings(&mut eeprom, &mut tx);
     let mut next_thermal_ms = 0u32;
     // Hot end and bed thermistors, averaged in the ADC interrupt.
+    #[cfg(feature = "heaters")]
     let mut readings = adc::Readings::new();
     #[cfg(feature = "display-hd44780")]
     let (mut lcd, mut next_screen_ms) = (display::init(), 0u32);
@@ -70,6 +73,9 @@ fn main() -> ! {
     loop {
         watchdog::feed();
         let now = clock::millis();
+        // The printers' motion: planner, segments, homing (the extrusion
+        // line and the powder bed drive their motors themselves).
+        #[cfg(feature = "printer")]
         match link.machine.poll_motion(&stepping::status(), now, &mut tx) {
             Ok(StepperRequest::ClearFault) => stepping::clear_fault(),
             Ok(StepperRequest::Halt) => stepping::halt(),
@@ -95,8 +101,11 @@ fn main() -> ! {
         }
         if now.wrapping_sub(next_thermal_ms) < u32::MAX / 2 {
             next_thermal_ms = now.wrapping_add(THERMAL_PERIOD_MS);
-            let [hotend, bed] = readings.take();
-            let _ = link.machine.on_thermal_samples(hotend, bed, &mut tx);
+            #[cfg(feature = "heaters")]
+            {
+                let [hotend, bed] = readings.take();
+                let _ = link.machine.on_thermal_samples(hotend, bed, &mut tx);
+            }
             link.machine.set_endstop_levels(pins::endstop_levels(&dp));
         }
         #[cfg(feature = "display-hd44780")]

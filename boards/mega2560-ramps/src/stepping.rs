@@ -28,6 +28,10 @@
 //! with this handler; it writes those ports only with interrupts off (see
 //! [`crate::pins::make_output`]), so neither side loses the other's bits.
 
+// Without the printers (`printer` feature off) the queues are still split
+// (the core's machine holds the feeder) but nothing steps: the rest is unused.
+#![cfg_attr(not(feature = "printer"), allow(dead_code))]
+
 use avr_device::atmega2560::{Peripherals, TC1};
 use avr_device::interrupt::{self, CriticalSection};
 use core::ptr::addr_of_mut;
@@ -72,6 +76,8 @@ pub fn init(dp: &Peripherals, config: StepperConfig) -> StepFeeder<'static> {
     timer.tccr1a.write(|w| unsafe { w.bits(0) });
     timer.tccr1b.write(|w| unsafe { w.bits(1 << 1) });
     timer.ocr1a.write(|w| w.bits(timer.tcnt1.read().bits().wrapping_add(1000)));
+    // Without the printers nothing queues steps: no step interrupt.
+    #[cfg(feature = "printer")]
     timer.timsk1.write(|w| unsafe { w.bits(1 << 1) });
     feeder
 }
@@ -138,6 +144,7 @@ fn endstops(dp: &Peripherals) -> u8 {
     (e >> 5 & 1) | (j >> 1 & 1) << 1 | (d >> 3 & 1) << 2 | (e >> 4 & 1) << 4 | (j & 1) << 5 | (d >> 2 & 1) << 6
 }
 
+#[cfg(feature = "printer")]
 #[avr_device::interrupt(atmega2560)]
 fn TIMER1_COMPA() {
     // SAFETY: interrupts are off in this handler, so it has the generator

@@ -16,6 +16,11 @@
 //! queue is full ([`Machine::can_accept_line`]); `M112`, `M108` and `M410`
 //! still act from the receive interrupt (see [`crate::emergency`]).
 
+// A build without the printers' motion or without heaters (the extrusion
+// line, the powder bed) compiles the commands it leaves out but never
+// calls them, and the linker drops them.
+#![cfg_attr(not(all(feature = "printer", feature = "heaters")), allow(dead_code, unused_imports))]
+
 pub mod error;
 pub mod modal;
 mod motion_commands;
@@ -24,6 +29,7 @@ mod thermal;
 pub mod line;
 #[cfg(feature = "powder-bed")]
 pub mod powder_bed;
+
 
 use crate::gcode::{self, Code, Command, ParseError};
 use crate::motion::{Motion, MotionConfig, StepFeeder};
@@ -172,7 +178,10 @@ impl<'q> Machine<'q> {
         // SAFETY: `motion` is initialised (caller), so reading it is sound.
         let settings = Settings::for_machine(unsafe { &(*p).motion.config });
         // SAFETY: as above; `apply_settings` touches `motion` only.
-        unsafe { (*p).motion.apply_settings(&settings) };
+        #[cfg(feature = "printer")]
+        unsafe {
+            (*p).motion.apply_settings(&settings)
+        };
         // SAFETY: each write is to a field of the valid slot `p`; none of
         // these fields has been initialised, so nothing is dropped.
         unsafe {
@@ -365,7 +374,7 @@ impl<'q> Machine<'q> {
     /// outcome; on any problem the defaults stay in force.
     pub fn load_settings<W: uWrite + ?Sized>(&mut self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
         let reported = self.report_loaded_settings(storage, out);
-        self.motion.apply_settings(&self.settings);
+        self.apply_motion_settings();
         self.apply_heater_settings();
         reported
     }
@@ -585,11 +594,19 @@ impl<'q> Machine<'q> {
             });
         }
         let result = match command.code {
+            #[cfg(feature = "printer")]
             Code::G(0 | 1) | Code::Modal => self.linear_move(command, out),
+            #[cfg(feature = "printer")]
             Code::G(2 | 3) => self.arc_move(command, out),
             Code::G(4) => return Ok(self.dwell(command)),
+            #[cfg(feature = "printer")]
             Code::G(28) if self.driver_alarms != 0 => Err(CommandError::DriverAlarm),
+            #[cfg(feature = "printer")]
             Code::G(28) => return Ok(self.home(command)),
+            // A build without the printers (the extrusion line or the
+            // powder bed alone): their motion commands are not here.
+            #[cfg(not(feature = "printer"))]
+            Code::G(0..=3 | 28) | Code::Modal | Code::M(114 | 119 | 120 | 121) => Err(CommandError::NotThisMachine),
             code if gcode::is_mode_setting(code) => self.apply_setting(code, out)?,
             Code::M(2 | 30) => {
                 self.end_program();
@@ -615,14 +632,18 @@ impl<'q> Machine<'q> {
                 self.kill(out)?;
                 Ok(())
             }
+            #[cfg(feature = "printer")]
             Code::M(114) => self.report_position(out).map(Ok)?,
             Code::M(115) => write_capabilities(out).map(Ok)?,
             Code::M(117) => Ok(()),
             Code::M(118) => self.echo(text, out).map(Ok)?,
+            #[cfg(feature = "printer")]
             Code::M(119) => self.report_endstops(out).map(Ok)?,
             Code::M(155) => self.set_auto_report(command, now_ms),
             Code::M(400) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false })),
+            #[cfg(feature = "printer")]
             Code::M(120) => Ok(self.motion.set_endstops_always(true)),
+            #[cfg(feature = "printer")]
             Code::M(121) => Ok(self.motion.set_endstops_always(false)),
             #[cfg(feature = "delta")]
             Code::M(665) => self.delta_geometry(command, out),
@@ -642,7 +663,7 @@ impl<'q> Machine<'q> {
             }
             Code::M(502) => {
                 self.settings = self.defaults.clone();
-                self.motion.apply_settings(&self.settings);
+                self.apply_motion_settings();
                 self.apply_heater_settings();
                 out.write_str("echo:Hardcoded Default Settings Loaded\n")?;
                 Ok(())
@@ -653,15 +674,25 @@ impl<'q> Machine<'q> {
                 ufmt::uwrite!(out, "echo:T{} Invalid extruder\n", tool)?;
                 Ok(())
             }
-            // Parsed and acknowledged; their subsystems land with later work.
+            // The heaters (not on the powder bed, which has none).
+            #[cfg(feature = "heaters")]
             Code::M(104) => return self.set_temperature(command, HeaterSlot::Hotend, None, now_ms, out),
+            #[cfg(feature = "heaters")]
             Code::M(140) => return self.set_temperature(command, HeaterSlot::Bed, None, now_ms, out),
+            #[cfg(feature = "heaters")]
             Code::M(109) => return self.set_temperature(command, HeaterSlot::Hotend, Some(WaitConfig::HOTEND), now_ms, out),
+            #[cfg(feature = "heaters")]
             Code::M(190) => return self.set_temperature(command, HeaterSlot::Bed, Some(WaitConfig::BED), now_ms, out),
+            #[cfg(feature = "heaters")]
             Code::M(301) => self.set_pid(command, HeaterSlot::Hotend, out),
+            #[cfg(feature = "heaters")]
             Code::M(304) => self.set_pid(command, HeaterSlot::Bed, out),
+            #[cfg(feature = "heaters")]
             Code::M(302) => self.cold_extrusion_command(command, out),
+            #[cfg(feature = "heaters")]
             Code::M(303) => return self.autotune(command, out),
+            #[cfg(not(feature = "heaters"))]
+            Code::M(104 | 109 | 140 | 190 | 301 | 302 | 303 | 304) => Err(CommandError::NotThisMachine),
             // Grbl's G10 L2 / L20: work offsets. Without L it would be
             // Marlin's firmware retraction, which this build does not have.
             Code::G(10) if command.has(b'L') => match command.value(b'L').map(|l| l.and_then(|l| l.to_int())) {
@@ -685,6 +716,13 @@ impl<'q> Machine<'q> {
         })
     }
 
+    /// Hand the settings to the motion core (printers only: the extrusion
+    /// line and the powder bed do not move through it).
+    fn apply_motion_settings(&mut self) {
+        #[cfg(feature = "printer")]
+        self.motion.apply_settings(&self.settings);
+    }
+
     fn not_yet_available<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
         ufmt::uwrite!(out, "echo:\"{}\" is not available yet in this build\n", Printable(trim(text)))
     }
@@ -704,7 +742,7 @@ impl<'q> Machine<'q> {
         let mut settings = self.settings.clone();
         change(command, &mut settings)?;
         self.settings = settings;
-        self.motion.apply_settings(&self.settings);
+        self.apply_motion_settings();
         Ok(())
     }
 

@@ -116,8 +116,17 @@ pub fn build_variant(target: &Path, features: &[&str], force: bool) -> Result<Pa
         .args(["+nightly", "avr"])
         .current_dir(workspace_root())
         .env("CARGO_TARGET_DIR", target);
-    if !features.is_empty() {
-        command.arg("--features").arg(features.join(","));
+    // `--no-default-features` may come first (the extrusion line and the
+    // powder bed are built without the printers); the rest are features.
+    let (no_default, named) = match features.split_first() {
+        Some((&"--no-default-features", rest)) => (true, rest),
+        _ => (false, features),
+    };
+    if no_default {
+        command.arg("--no-default-features");
+    }
+    if !named.is_empty() {
+        command.arg("--features").arg(named.join(","));
     }
     // Tests run under `cargo test`, which sets variables for the host
     // toolchain; the nested build must pick its own.

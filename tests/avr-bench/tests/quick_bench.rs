@@ -22,9 +22,10 @@ fn boot_raw() -> Board {
 
 /// Boot a variant of the firmware (built with `feature` into
 /// `target/machines/<dir>`, as the test command does) with a raw host.
-fn boot_variant(dir: &str, feature: &str) -> Board {
-    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join(dir), &[feature], false)
-        .unwrap_or_else(|e| panic!("the {feature} build: {e}"));
+/// A machine's build (`features` as `build_variant` takes them) on simavr.
+fn boot_variant(dir: &str, features: &[&str]) -> Board {
+    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join(dir), features, false)
+        .unwrap_or_else(|e| panic!("the {features:?} build: {e}"));
     let mut config = RampsConfig::stock(115_200);
     config.host = HostConfig::raw(115_200);
     bench::boot(&elf, config).expect("the firmware boots")
@@ -719,7 +720,7 @@ fn a_hung_main_loop_is_reset_by_the_watchdog_with_everything_off() {
 /// a kill lowers the pin for good, though the window runs in the tick.
 #[test]
 fn the_ssr_bed_switches_in_200_ms_windows_with_slots_of_at_least_10_ms() {
-    let mut board = boot_variant("bed-ssr", "mega2560-ramps/bed-ssr");
+    let mut board = boot_variant("bed-ssr", &["mega2560-ramps/bed-ssr"]);
     // A few degrees short of the target: the PID asks for part power.
     board.set_plant_celsius(14, 59.5);
     board.record_bed_edges(true);
@@ -790,7 +791,7 @@ fn one_stepper_holds_15000_steps_per_s_beside_the_other_interrupts() {
 /// rewritten twice a second.
 #[test]
 fn the_display_build_shows_state_z_and_temperatures() {
-    let mut board = boot_variant("display", "mega2560-ramps/display-hd44780");
+    let mut board = boot_variant("display", &["mega2560-ramps/display-hd44780"]);
     board.run_for_ms(700.0);
     assert_eq!(board.lcd().rows(), ["Ready      Z0.00".to_string(), "T25/0 B25/0     ".to_string()]);
     assert_eq!(replies(&mut board, &["M104 S210", "G92 Z12.345"]), ["ok", "ok"]);
@@ -823,7 +824,7 @@ fn fixed_point_is_the_faster_loop_arithmetic_on_the_avr() {
 /// moves are refused, and M112 stops both at once.
 #[test]
 fn the_extrusion_line_build_turns_its_screw_and_puller_at_their_set_speeds() {
-    let mut board = boot_variant("extrusion-line", "mega2560-ramps/machine-extrusion-line");
+    let mut board = boot_variant("extrusion-line", &["--no-default-features", "mega2560-ramps/machine-extrusion-line"]);
     let said = replies(&mut board, &["M115"]);
     assert!(said.iter().any(|l| l == "Cap:EXTRUSION_LINE:1"), "{said:?}");
     let refused = replies(&mut board, &["M3 S10"]);
@@ -869,7 +870,7 @@ fn the_extrusion_line_build_turns_its_screw_and_puller_at_their_set_speeds() {
 /// roller follows M3/M5 on D10.
 #[test]
 fn the_powder_bed_build_measures_its_feed_platform_travel() {
-    let mut board = boot_variant("powder-bed", "mega2560-ramps/machine-powder-bed");
+    let mut board = boot_variant("powder-bed", &["--no-default-features", "mega2560-ramps/machine-powder-bed"]);
     // The bench counts DIR high as +, the platform's down: bench −(platform).
     // A closes at platform −200 steps, B at +800: 1 000 steps = 5 mm apart.
     board.set_endstop(4, Some(Endstop { axis: Z, at_steps: 200, is_min: false, pressed_level: false }));
@@ -893,7 +894,7 @@ fn the_powder_bed_build_measures_its_feed_platform_travel() {
     board.run_for_ms(5.0);
     assert_eq!(portb(&board) & (1 << 4), 0, "roller off");
     // This build's static RAM is the fullest: its stack still fits.
-    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join("powder-bed"), &["mega2560-ramps/machine-powder-bed"], false).unwrap();
+    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join("powder-bed"), &["--no-default-features", "mega2560-ramps/machine-powder-bed"], false).unwrap();
     let ram_static = ElfInfo::read(&elf).unwrap().ram_static_bytes();
     let stack = board.stack_peak_sp();
     println!("powder bed: static RAM {ram_static} B, stack peak {stack} B of {} B", stack_budget(ram_static));
