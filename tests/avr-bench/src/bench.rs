@@ -509,19 +509,24 @@ pub fn short_segments(count: usize) -> Vec<String> {
 }
 
 /// The same spiral cut into `length_mm` segments (a turn of the segment
-/// direction of `length_mm / 20` rad each: a gentle curve).
+/// direction of `length_mm / 20` rad each: a gentle curve). The position is
+/// set to the spiral's first point, so the path is exactly
+/// `count × length_mm`: until session 5 it started at the centre, and a
+/// 20 mm lead-in move (with a 90° corner into the spiral) was counted as
+/// if it were no path at all, which made every ratio look worse (1 mm
+/// segments ran at full speed and reported 0.66).
 pub fn segments_of(count: usize, length_mm: f64) -> Vec<String> {
     let mut lines = vec![
         "G90".to_string(),
         "M83".to_string(),
-        "G92 X100 Y100 E0".to_string(),
+        "G92 X120 Y100 E0".to_string(),
         "G1 F6000".to_string(),
         // The hot end is cold on the bench: allow the extrusion (else every
         // line also draws `echo: cold extrusion prevented`).
         "M302 P1".to_string(),
     ];
     let (cx, cy) = (100.0f64, 100.0f64);
-    for i in 0..count {
+    for i in 1..=count {
         let angle = i as f64 * length_mm / 20.0;
         let r = 20.0 + i as f64 * 0.002 * length_mm;
         lines.push(format!(
@@ -610,6 +615,7 @@ pub fn stream_rate(elf: &Path, baud: u32, segments: usize) -> Result<StreamResul
 pub fn segment_speed(elf: &Path, baud: u32, segments: usize, length_mm: f64) -> Result<(f64, f64, PhaseLog), String> {
     let mut board = boot(elf, RampsConfig::stock(baud))?;
     if std::env::var_os("FERROSTEP_OK_LATENCY").is_some() {
+        board.inclusive_profile(true);
         board.sample_pcs(97);
     }
     let job = segments_of(segments, length_mm);
@@ -628,6 +634,19 @@ pub fn segment_speed(elf: &Path, baud: u32, segments: usize, length_mm: f64) -> 
         .collect();
     let (first, last) = (edges.iter().min().ok_or("no steps")?, edges.iter().max().ok_or("no steps")?);
     let seconds = (last - first) as f64 / f64::from(CPU_HZ);
+    if std::env::var_os("FERROSTEP_SPEED_TRACE").is_some() {
+        // Path speed in 20 ms windows (X and Y steps, 100 steps/mm).
+        let window = u64::from(CPU_HZ) / 50;
+        let mut t = *first;
+        let mut trace = String::new();
+        while t < *last {
+            let count = |axis: usize| board.step_edges(axis).iter().filter(|e| e.rising && e.cycle >= t && e.cycle < t + window).count() as f64;
+            let (x, y) = (count(X) / 100.0, count(Y) / 100.0);
+            trace.push_str(&format!("{:.0} ", (x * x + y * y).sqrt() * 50.0));
+            t += window;
+        }
+        eprintln!("{length_mm} mm: speed every 20 ms (mm/s, path length from |X|,|Y| steps): {trace}");
+    }
     let ideal = segments as f64 * length_mm / 100.0;
     let host = board.host();
     let sent: Vec<_> = host.sent.iter().filter(|s| s.job_index.is_some_and(|i| i >= 5)).collect();
@@ -644,14 +663,14 @@ pub fn segment_speed(elf: &Path, baud: u32, segments: usize, length_mm: f64) -> 
         let host = board.host();
         for s in &host.sent {
             if let (Some(last), Some(ok)) = (s.last_byte_start_cycle, s.ok_reply) {
-                for (name, n) in board.samples_between(last, host.replies[ok].first_byte_cycle) {
+                for (name, n) in board.stack_samples_between(last, host.replies[ok].first_byte_cycle) {
                     *total.entry(name).or_default() += n;
                 }
             }
         }
         let mut total: Vec<_> = total.into_iter().collect();
         total.sort_by(|a, b| b.1.cmp(&a.1));
-        let all: usize = total.iter().map(|t| t.1).sum();
+        let all: usize = host.sent.iter().filter_map(|s| Some((s.last_byte_start_cycle?, host.replies[s.ok_reply?].first_byte_cycle))).map(|(a, b)| board.samples_between(a, b).iter().map(|t| t.1).sum::<usize>()).sum();
         for (name, n) in total.iter().take(25) {
             eprintln!("    {:5.1} %  {name}", *n as f64 * 100.0 / all as f64);
         }

@@ -349,6 +349,9 @@ struct Shared {
     record_isr_intervals: bool,
     /// (cycle, pc) every `pc_sample_every` cycles, when sampling.
     pc_samples: Vec<(u64, u32)>,
+    /// With the inclusive profile on: the call stack (function entries) at
+    /// each PC sample.
+    stack_samples: Vec<Vec<u32>>,
     pc_sample_every: u64,
     next_pc_sample: u64,
     /// Cycles of every `wdr` (main-loop pass boundaries), when sampling.
@@ -487,6 +490,7 @@ impl Board {
                 rx_log: Vec::new(),
                 record_isr_intervals: false,
                 pc_samples: Vec::new(),
+                stack_samples: Vec::new(),
                 pc_sample_every: 0,
                 next_pc_sample: 0,
                 watchdog_feeds_at: Vec::new(),
@@ -730,6 +734,10 @@ impl Board {
                     if cycle >= (*shared).next_pc_sample {
                         (*shared).next_pc_sample = cycle + (*shared).pc_sample_every;
                         (*shared).pc_samples.push((cycle, pc_before));
+                        if let Some((_, stack)) = &(*shared).inclusive {
+                            let frames = stack.iter().map(|&(entry, _)| entry).collect();
+                            (*shared).stack_samples.push(frames);
+                        }
                     }
                     if is_wdr {
                         (*shared).watchdog_feeds_at.push(cycle);
@@ -984,7 +992,29 @@ impl Board {
     pub fn sample_pcs(&mut self, every: u64) {
         self.shared.pc_sample_every = every;
         self.shared.pc_samples.clear();
+        self.shared.stack_samples.clear();
         self.shared.watchdog_feeds_at.clear();
+    }
+
+    /// Like [`Board::samples_between`], counting each function once per
+    /// sample in which it was anywhere on the call stack (needs the
+    /// inclusive profile on while sampling).
+    pub fn stack_samples_between(&self, from: u64, to: u64) -> Vec<(String, usize)> {
+        let mut counts: std::collections::BTreeMap<String, usize> = Default::default();
+        for (&(cycle, pc), frames) in self.shared.pc_samples.iter().zip(&self.shared.stack_samples) {
+            if cycle >= from && cycle < to {
+                let mut seen = std::collections::BTreeSet::new();
+                for &entry in frames.iter().chain(std::iter::once(&pc)) {
+                    let name = self.symbol_at(entry).map(demangle).unwrap_or_else(|| format!("{entry:#x}"));
+                    if seen.insert(name.clone()) {
+                        *counts.entry(name).or_default() += 1;
+                    }
+                }
+            }
+        }
+        let mut counts: Vec<_> = counts.into_iter().collect();
+        counts.sort_by(|a, b| b.1.cmp(&a.1));
+        counts
     }
 
     /// Functions sampled (see [`Board::sample_pcs`]) between two cycles,
