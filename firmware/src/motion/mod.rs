@@ -466,7 +466,10 @@ pub struct Motion<'q> {
     /// The stepper configuration changed; the interrupt has the old one.
     stepper_changed: bool,
     fault_seen: bool,
-    status: StepperStatus,
+    /// The interrupt still had steps at the last `poll` (only this of its
+    /// status is kept: copying the whole status every main-loop pass was a
+    /// `memcpy` call a pass).
+    stepper_busy: bool,
 }
 
 impl<'q> Motion<'q> {
@@ -506,7 +509,7 @@ impl<'q> Motion<'q> {
             addr_of_mut!((*p).stop_requested).write(false);
             addr_of_mut!((*p).stepper_changed).write(false);
             addr_of_mut!((*p).fault_seen).write(false);
-            addr_of_mut!((*p).status).write(StepperStatus::default());
+            addr_of_mut!((*p).stepper_busy).write(false);
             slot.assume_init_mut()
         };
         motion.configure();
@@ -540,7 +543,7 @@ impl<'q> Motion<'q> {
             stop_requested: _,
             stepper_changed: _,
             fault_seen: _,
-            status: _,
+            stepper_busy: _,
         } = self;
     }
 
@@ -597,7 +600,7 @@ impl<'q> Motion<'q> {
 
     /// Everything accepted has been stepped out.
     pub fn is_idle(&self) -> bool {
-        self.ready() && self.planner.is_empty() && !self.prep.is_active() && !self.status.busy
+        self.ready() && self.planner.is_empty() && !self.prep.is_active() && !self.stepper_busy
     }
 
     pub fn is_homing(&self) -> bool {
@@ -737,7 +740,7 @@ impl<'q> Motion<'q> {
     /// queues.
     #[inline(never)]
     pub fn poll(&mut self, status: &StepperStatus, now_ms: u32) -> StepperRequest {
-        self.status = *status;
+        self.stepper_busy = status.busy;
         if let Some(fault) = status.fault {
             if !self.fault_seen {
                 self.fault_seen = true;
