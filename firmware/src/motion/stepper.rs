@@ -257,6 +257,8 @@ pub struct StepGenerator<'a> {
     direction: u8,
     watch: u8,
     watch_release: bool,
+    /// [`Self::endstop_mask`].
+    endstops_to_read: u8,
     in_block: bool,
     discarding: bool,
 
@@ -265,6 +267,9 @@ pub struct StepGenerator<'a> {
     pending_dir: u8,
     /// Ticks still to wait before the pending event fires.
     long_wait: u32,
+    /// `long_wait != 0`, kept as one byte: the interrupt tests it twice an
+    /// event, and a 32-bit test costs the AVR four loads.
+    long_waiting: bool,
 
     stopped: u8,
     stopped_steps: [u16; MOTORS],
@@ -298,11 +303,13 @@ impl<'a> StepGenerator<'a> {
             direction: 0,
             watch: 0,
             watch_release: false,
+            endstops_to_read: 0,
             in_block: false,
             discarding: false,
             pending_mask: 0,
             pending_dir: 0,
             long_wait: 0,
+            long_waiting: false,
             stopped: 0,
             stopped_steps: [0; MOTORS],
             fault: None,
@@ -318,7 +325,7 @@ impl<'a> StepGenerator<'a> {
     #[inline(always)]
     pub fn pins_now(&self) -> (u8, u8) {
         let dir_mask = self.pending_dir ^ self.config.dir_invert;
-        if self.long_wait != 0 {
+        if self.long_waiting {
             (0, dir_mask)
         } else {
             (self.pending_mask & !self.stopped, dir_mask)
@@ -329,7 +336,7 @@ impl<'a> StepGenerator<'a> {
     /// the next one.
     #[inline(always)]
     pub fn on_timer(&mut self) -> TimerAction {
-        if self.long_wait != 0 {
+        if self.long_waiting {
             return self.wait_longer();
         }
         let step_mask = self.pending_mask & !self.stopped;
@@ -351,7 +358,7 @@ impl<'a> StepGenerator<'a> {
         self.pending_mask = self.bresenham();
         let ticks = sum >> INTERVAL_FRACTION_BITS;
         if ticks > 0xFFFF {
-            self.long_wait = ticks - LONG_WAIT_PIECE;
+            self.set_long_wait(ticks - LONG_WAIT_PIECE);
             return LONG_WAIT_PIECE as u16;
         }
         ticks as u16
@@ -394,7 +401,7 @@ impl<'a> StepGenerator<'a> {
     #[inline(never)]
     fn wait_longer(&mut self) -> TimerAction {
         let piece = if self.long_wait > 0xFFFF { LONG_WAIT_PIECE } else { self.long_wait };
-        self.long_wait -= piece;
+        self.set_long_wait(self.long_wait - piece);
         TimerAction { step_mask: 0, dir_mask: self.pending_dir ^ self.config.dir_invert, next_interval_ticks: piece as u16 }
     }
 
@@ -421,6 +428,11 @@ impl<'a> StepGenerator<'a> {
         self.events_left = segment.events;
         self.segments.release();
         true
+    }
+
+    fn set_long_wait(&mut self, ticks: u32) {
+        self.long_wait = ticks;
+        self.long_waiting = ticks != 0;
     }
 
     /// The running segment is used up: take the next one (and its block).
@@ -476,7 +488,7 @@ impl<'a> StepGenerator<'a> {
         let setup = self.config.dir_setup_ticks.max(1) as u32;
         let lead = if ticks > setup + 1 { ticks - setup } else { 1 };
         let lead = lead.min(LONG_WAIT_PIECE);
-        self.long_wait = (ticks - lead.min(ticks)).max(setup);
+        self.set_long_wait((ticks - lead.min(ticks)).max(setup));
         lead as u16
     }
 
@@ -492,7 +504,7 @@ impl<'a> StepGenerator<'a> {
 
     fn split_wait(&mut self, ticks: u32) -> u16 {
         if ticks > 0xFFFF {
-            self.long_wait = ticks - LONG_WAIT_PIECE;
+            self.set_long_wait(ticks - LONG_WAIT_PIECE);
             LONG_WAIT_PIECE as u16
         } else {
             ticks as u16
@@ -526,10 +538,12 @@ impl<'a> StepGenerator<'a> {
         // Motors that stay still keep their direction pins: no needless
         // direction change (and its set-up lead) when another motor turns.
         self.direction = (block.direction & self.moving) | (self.pending_dir & !self.moving & 0x0F);
+        self.update_endstop_mask();
     }
 
     fn finish_block(&mut self) {
         self.in_block = false;
+        self.endstops_to_read = 0;
         self.moving = 0;
         self.always = 0;
         self.minor = 0;
@@ -537,12 +551,15 @@ impl<'a> StepGenerator<'a> {
     }
 
     /// Endstop bits worth reading now (0: the board may skip the reads).
-    #[inline]
+    /// Kept up to date at block start and end and on a new configuration:
+    /// computing it on every step cost the interrupt ~20 cycles.
+    #[inline(always)]
     pub fn endstop_mask(&self) -> u8 {
-        if !self.in_block {
-            return 0;
-        }
-        self.watch | (self.config.limit_endstops & self.endstops_ahead())
+        self.endstops_to_read
+    }
+
+    fn update_endstop_mask(&mut self) {
+        self.endstops_to_read = if self.in_block { self.watch | (self.config.limit_endstops & self.endstops_ahead()) } else { 0 };
     }
 
     /// Endstops that the running block moves towards.
@@ -601,7 +618,7 @@ impl<'a> StepGenerator<'a> {
     fn abandon_block(&mut self) {
         self.events_left = 0;
         self.pending_mask = 0;
-        self.long_wait = 0;
+        self.set_long_wait(0);
         self.discarding = true;
         self.events_done = self.events;
         while let Some(segment) = self.segments.front() {
@@ -620,7 +637,7 @@ impl<'a> StepGenerator<'a> {
         self.fault = Some(fault);
         self.events_left = 0;
         self.pending_mask = 0;
-        self.long_wait = 0;
+        self.set_long_wait(0);
         self.drain();
     }
 
@@ -684,7 +701,7 @@ impl<'a> StepGenerator<'a> {
     pub fn is_running(&self) -> bool {
         // Bitwise, not short-circuit: fewer branches, and the board reads
         // this under an interrupt lock.
-        (u8::from(self.in_block) | self.pending_mask | u8::from(self.long_wait != 0)) != 0
+        (u8::from(self.in_block) | self.pending_mask | u8::from(self.long_waiting)) != 0
     }
 
     pub fn fault(&self) -> Option<StepFault> {
@@ -710,6 +727,7 @@ impl<'a> StepGenerator<'a> {
 
     pub fn set_config(&mut self, config: StepperConfig) {
         self.config = config;
+        self.update_endstop_mask();
     }
 }
 
