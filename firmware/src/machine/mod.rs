@@ -606,7 +606,15 @@ impl<'q> Machine<'q> {
             // A build without the printers (the extrusion line or the
             // powder bed alone): their motion commands are not here.
             #[cfg(not(feature = "printer"))]
-            Code::G(0..=3 | 28) | Code::Modal | Code::M(114 | 119 | 120 | 121) => Err(CommandError::NotThisMachine),
+            Code::G(0..=3 | 28) | Code::Modal => Err(CommandError::NotThisMachine),
+            // Reports and switches hosts send on their own (OctoPrint and
+            // Printrun poll M114): an echo, not an `Error:` a host might
+            // take as fatal.
+            #[cfg(not(feature = "printer"))]
+            Code::M(code @ (114 | 119 | 120 | 121)) => {
+                ufmt::uwrite!(out, "echo:M{} ignored: this machine has no printer axes\n", code)?;
+                Ok(())
+            }
             code if gcode::is_mode_setting(code) => self.apply_setting(code, out)?,
             Code::M(2 | 30) => {
                 self.end_program();

@@ -830,6 +830,9 @@ fn the_extrusion_line_build_turns_its_screw_and_puller_at_their_set_speeds() {
     let refused = replies(&mut board, &["M3 S10"]);
     assert!(refused[0].starts_with("Error:Cold extrusion prevented: barrel "), "{refused:?}");
     assert_eq!(replies(&mut board, &["G1 X10"]), ["Error:Not available on this machine", "ok"]);
+    // Built without the printers' motion: a host's position poll gets an
+    // echo, not an error.
+    assert_eq!(replies(&mut board, &["M114"]), ["echo:M114 ignored: this machine has no printer axes", "ok"]);
     board.run_for_ms(200.0);
     assert_eq!((board.step_count(E0), board.step_count(X)), (0, 0));
     // The override, then 10 rpm (8000 steps/s) and 4 rpm (2560 steps/s),
