@@ -1,6 +1,7 @@
 //! Shared helpers of the end-to-end tests: finding (or building) the Mega
 //! 2560 release ELF, and talking to it on an emulated board.
 
+pub mod emulated;
 pub mod printcore;
 pub mod qemu;
 pub mod qemu_arm;

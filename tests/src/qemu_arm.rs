@@ -9,12 +9,12 @@
 //! the bootloader's jump amounts to.
 
 use std::collections::HashMap;
-use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, Command, Stdio};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::process::{Command, Stdio};
 use std::sync::OnceLock;
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+use crate::emulated::EmulatedSerial;
 
 use crate::workspace_root;
 
@@ -162,90 +162,16 @@ pub fn qemu_arm_command(elf: &Path) -> Command {
     command
 }
 
-/// A running emulated SKR Pro.
-pub struct ArmBoard {
-    child: Child,
-    input: ChildStdin,
-    lines: Receiver<String>,
+/// A running emulated SKR Pro (its serial port: see [`EmulatedSerial`]).
+pub type ArmBoard = EmulatedSerial;
+
+/// Boot `elf` on the emulated SKR Pro.
+pub fn boot(elf: &Path) -> ArmBoard {
+    boot_with(qemu_arm_command(elf))
 }
 
-impl ArmBoard {
-    pub fn boot(elf: &Path) -> Self {
-        Self::boot_with(qemu_arm_command(elf))
-    }
-
-    fn boot_with(mut command: Command) -> Self {
-        let mut child = command
-            .spawn()
-            .expect("cannot start qemu-system-arm (apt-get install --no-install-recommends qemu-system-arm)");
-        let input = child.stdin.take().expect("piped stdin");
-        let output = child.stdout.take().expect("piped stdout");
-        let (sender, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(output).lines() {
-                let Ok(line) = line else { break };
-                if sender.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        Self { child, input, lines }
-    }
-
-    /// Send bytes at 115200 baud (QEMU's USART has no baud rate and would
-    /// hand them over faster than any host line; see `qemu.rs`).
-    pub fn send(&mut self, bytes: &[u8]) {
-        const CHUNK: usize = 8;
-        let chunk_time = Duration::from_micros(CHUNK as u64 * 10 * 1_000_000 / 115_200);
-        for chunk in bytes.chunks(CHUNK) {
-            let started = Instant::now();
-            let _ = self.input.write_all(chunk);
-            let _ = self.input.flush();
-            if let Some(left) = chunk_time.checked_sub(started.elapsed()) {
-                std::thread::sleep(left);
-            }
-        }
-    }
-
-    /// Bytes in one write, as fast as QEMU takes them: a host (or a stalled
-    /// emulator catching up) that outruns the main loop.
-    pub fn send_burst(&mut self, bytes: &[u8]) {
-        let _ = self.input.write_all(bytes);
-        let _ = self.input.flush();
-    }
-
-    /// Reply lines until one satisfies `last` (inclusive); panics with what
-    /// was received after `timeout`.
-    pub fn read_until(&mut self, timeout: Duration, last: impl Fn(&str) -> bool) -> Vec<String> {
-        let deadline = Instant::now() + timeout;
-        let mut received = Vec::new();
-        loop {
-            match self.lines.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
-                Ok(line) => {
-                    let done = last(&line);
-                    received.push(line);
-                    if done {
-                        return received;
-                    }
-                }
-                Err(RecvTimeoutError::Timeout) => panic!("no matching reply within {timeout:?}; received {received:?}"),
-                Err(RecvTimeoutError::Disconnected) => panic!("QEMU exited; received {received:?}"),
-            }
-        }
-    }
-
-    /// One command line, its replies up to the final `ok`.
-    pub fn command(&mut self, line: &str) -> Vec<String> {
-        self.send(format!("{line}\n").as_bytes());
-        self.read_until(Duration::from_secs(10), |l| l == "ok" || l.starts_with("ok "))
-    }
-}
-
-impl Drop for ArmBoard {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+fn boot_with(command: Command) -> ArmBoard {
+    EmulatedSerial::spawn(command, "cannot start qemu-system-arm (apt-get install --no-install-recommends qemu-system-arm)")
 }
 
 // --- the step-interrupt benchmark ------------------------------------------------------
@@ -398,7 +324,7 @@ pub fn measure_step_cost(bench_elf: &Path) -> StepCost {
         .args(["-dfilter", &format!("{:#x}..{:#x}", handler, handler + handler_size)])
         .arg("-D")
         .arg(&log);
-    let mut board = ArmBoard::boot_with(command);
+    let mut board = boot_with(command);
     let lines = board.read_until(Duration::from_secs(120), |l| l == "done");
     drop(board);
     let printed: HashMap<String, String> =

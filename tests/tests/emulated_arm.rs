@@ -13,7 +13,7 @@ fn bench_cost() -> &'static StepCost {
 }
 
 fn booted_board() -> ArmBoard {
-    let mut board = ArmBoard::boot(&skr_pro_elf());
+    let mut board = end_to_end::qemu_arm::boot(&skr_pro_elf());
     let banner =
         board.read_until(Duration::from_secs(20), |l| l.ends_with("Settings Loaded") || l.contains("retrieved"));
     assert_eq!(banner[0], "start", "banner: {banner:?}");

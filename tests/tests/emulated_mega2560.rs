@@ -5,7 +5,7 @@ use end_to_end::{mega2560_elf, qemu::QemuBoard};
 use std::time::Duration;
 
 fn booted_board() -> QemuBoard {
-    let mut board = QemuBoard::boot(&mega2560_elf());
+    let mut board = end_to_end::qemu::boot(&mega2560_elf());
     let banner = board.read_until(Duration::from_secs(20), |l| l.ends_with("Settings Loaded") || l.contains("retrieved"));
     assert_eq!(banner[0], "start", "banner: {banner:?}");
     assert!(banner[1].starts_with("echo:Ferrostep "), "banner: {banner:?}");

@@ -2,7 +2,7 @@
 //! keeps answering, asks for what it lost, and executes nothing that did
 //! not arrive intact.
 
-use end_to_end::{mega2560_elf, qemu::QemuBoard};
+use end_to_end::mega2560_elf;
 use hal_sim::board::SimBoard;
 use std::time::Duration;
 
@@ -145,7 +145,7 @@ fn a_receive_overrun_is_reported_and_the_damaged_line_never_runs() {
 /// command, answered.
 #[test]
 fn the_emulated_mega2560_survives_random_bytes_at_full_baud() {
-    let mut board = QemuBoard::boot(&mega2560_elf());
+    let mut board = end_to_end::qemu::boot(&mega2560_elf());
     board.read_until(Duration::from_secs(20), |l| l.ends_with("Settings Loaded") || l.contains("retrieved"));
     let mut noise = Noise(7);
     let garbage: Vec<u8> = noise.bytes(23_040).into_iter().map(|b| if b == b'M' || b == b'm' { b'#' } else { b }).collect();
