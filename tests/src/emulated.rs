@@ -4,7 +4,7 @@
 //! test drivers (`qemu`, `qemu_arm`) are this plus how to start them.
 
 use std::io::{BufRead, BufReader, Write};
-use std::process::{Child, ChildStdin, Command};
+use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
@@ -82,6 +82,20 @@ impl Drop for EmulatedSerial {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// `program` with `args`, its serial port on stdin/stdout (stderr
+/// dropped), killed when the test process dies (so an aborted test leaves
+/// no emulator behind).
+pub fn emulator_command<S: AsRef<std::ffi::OsStr>>(program: &str, args: impl IntoIterator<Item = S>) -> Command {
+    use std::os::unix::process::CommandExt;
+    let mut command = Command::new(program);
+    command.args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::null());
+    // SAFETY: prctl is async-signal-safe; nothing else runs in the child.
+    unsafe {
+        command.pre_exec(|| nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGKILL).map_err(std::io::Error::from));
+    }
+    command
 }
 
 /// See [`EmulatedSerial::send`].

@@ -4,29 +4,16 @@
 //! it checks that the real build boots and talks. Timing and pins are the
 //! simavr bench's job (`tests/avr-bench`).
 
-use crate::emulated::{send_at_line_rate, EmulatedSerial};
+use crate::emulated::{emulator_command, send_at_line_rate, EmulatedSerial};
 use std::path::Path;
-use std::process::{Child, ChildStdin, Command, Stdio};
+use std::process::{Child, ChildStdin, Command};
 use std::sync::mpsc::{self, Receiver};
 
 /// `qemu-system-avr` for `elf`, with USART0 on stdin/stdout, dying with
 /// the test process (so an aborted test leaves no emulator behind).
 fn qemu_command(elf: &Path) -> Command {
-    use std::os::unix::process::CommandExt;
-    let mut command = Command::new("qemu-system-avr");
-    command
-        .args(["-M", "mega2560", "-display", "none", "-serial", "stdio", "-monitor", "none", "-bios"])
-        .arg(elf)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null());
-    // SAFETY: prctl is async-signal-safe; nothing else runs in the child.
-    unsafe {
-        command.pre_exec(|| {
-            nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGKILL).map_err(std::io::Error::from)
-        });
-    }
-    command
+    let args = ["-M", "mega2560", "-display", "none", "-serial", "stdio", "-monitor", "none", "-bios"];
+    emulator_command("qemu-system-avr", args.iter().map(std::ffi::OsStr::new).chain([elf.as_os_str()]))
 }
 
 /// A running emulated board (its serial port: see [`EmulatedSerial`]).

@@ -10,11 +10,11 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::sync::OnceLock;
 use std::time::Duration;
 
-use crate::emulated::EmulatedSerial;
+use crate::emulated::{emulator_command, EmulatedSerial};
 
 use crate::workspace_root;
 
@@ -143,23 +143,9 @@ impl Elf {
 /// `qemu-system-arm -M netduinoplus2` for `elf`, USART1 on stdin/stdout,
 /// dying with the test process.
 pub fn qemu_arm_command(elf: &Path) -> Command {
-    use std::os::unix::process::CommandExt;
     let vtor = format!("armv7m.init-nsvtor={:#010x}", Elf::read(elf).vector_table());
-    let mut command = Command::new("qemu-system-arm");
-    command
-        .args(["-M", "netduinoplus2", "-global", &vtor, "-display", "none", "-serial", "stdio", "-monitor", "none"])
-        .arg("-kernel")
-        .arg(elf)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null());
-    // SAFETY: prctl is async-signal-safe; nothing else runs in the child.
-    unsafe {
-        command.pre_exec(|| {
-            nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGKILL).map_err(std::io::Error::from)
-        });
-    }
-    command
+    let args = ["-M", "netduinoplus2", "-global", &vtor, "-display", "none", "-serial", "stdio", "-monitor", "none", "-kernel"];
+    emulator_command("qemu-system-arm", args.iter().map(std::ffi::OsStr::new).chain([elf.as_os_str()]))
 }
 
 /// A running emulated SKR Pro (its serial port: see [`EmulatedSerial`]).
