@@ -185,7 +185,7 @@ mod tests {
             self.bytes[offset]
         }
         fn program(&mut self, offset: usize, bytes: &[u8]) -> bool {
-            assert!(offset % 4 == 0 && bytes.len() % 4 == 0, "word programming");
+            assert!(offset.is_multiple_of(4) && bytes.len().is_multiple_of(4), "word programming");
             if !self.broken {
                 for (cell, byte) in self.bytes[offset..offset + bytes.len()].iter_mut().zip(bytes) {
                     *cell &= *byte;

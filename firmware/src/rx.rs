@@ -215,7 +215,7 @@ mod tests {
         for b in b"3\nM105\n" {
             p.push(*b, false);
         }
-        assert_eq!(drain(&mut c), b"\0\n\0\n\03\nM105\n");
+        assert_eq!(drain(&mut c), b"\0\n\0\n\x003\nM105\n");
         assert_eq!(p.take_dropped(), 13);
     }
 

@@ -29,6 +29,20 @@ fn oks_for(lines: &[Vec<u8>]) -> (usize, String) {
     (oks, output)
 }
 
+/// A command whose `ok` comes only once something has finished.
+fn waits(line: &[u8]) -> bool {
+    use firmware::gcode::Code;
+    // Line numbers and checksums first: the parser sees the command.
+    let text = std::str::from_utf8(line).unwrap_or("");
+    let command = text.split('*').next().unwrap_or("").trim_start();
+    let command = match command.strip_prefix(['N', 'n']) {
+        Some(rest) => rest.trim_start_matches(|c: char| c.is_ascii_digit() || c == '-' || c == '.').trim_start(),
+        None => command,
+    };
+    matches!(gcode::parse(command.as_bytes()).map(|c| c.code), Ok(Code::G(4 | 28) | Code::M(109 | 190 | 303 | 400)))
+        || line.windows(2).any(|w| w.eq_ignore_ascii_case(b"g4"))
+}
+
 /// A line that is not empty after the assembler (which splits at CR/LF)
 /// and is not made only of spaces and comments: it must be answered.
 fn expects_reply(line: &[u8]) -> bool {
@@ -65,8 +79,10 @@ proptest! {
                 Just(b' '), Just(b'.'), Just(b'-'), Just(b';'), Just(b'('), Just(b')'), b'0'..=b'9', b'a'..=b'z'], 1..40),
             1..12)
     ) {
-        // Keep blocking commands short: G4 here may wait, so skip lines with G4.
-        let lines: Vec<Vec<u8>> = lines.into_iter().filter(|l| !l.windows(2).any(|w| w.eq_ignore_ascii_case(b"g4"))).collect();
+        // Commands that wait (a dwell, homing, heating, a tune, motion to
+        // finish) get their `ok` when done, which can be longer than the
+        // window below: leave them out (a random "G28;" once did).
+        let lines: Vec<Vec<u8>> = lines.into_iter().filter(|l| !waits(l)).collect();
         let (oks, output) = oks_for(&lines);
         let expected = lines.iter().filter(|l| expects_reply(l)).count();
         // M112 halts; later lines still get `Error:` and `ok`.

@@ -352,12 +352,12 @@ impl SimBoard {
     /// averaged thermistor readings into the firmware (as the Mega's main
     /// loop does).
     fn run_heaters(&mut self) {
-        if self.now_ms % PLANT_STEP_MS as u32 == 0 {
+        if self.now_ms.is_multiple_of(PLANT_STEP_MS as u32) {
             let (hotend, bed) = self.link.machine.heater_duties();
             self.hotend_plant.step(f64::from(hotend) / 255.0);
             self.bed_plant.step(f64::from(bed) / 255.0);
         }
-        if self.now_ms % 100 == 0 {
+        if self.now_ms.is_multiple_of(100) {
             // The line's barrel thermistor has SPEC §4's 4.8 kΩ pull-up.
             let hotend_circuit = if self.line.is_some() { ThermistorCircuit::SPEC_4K8 } else { ThermistorCircuit::RAMPS };
             let read = |sensor: Thermistor, plant: &HeaterPlant, circuit: ThermistorCircuit| {

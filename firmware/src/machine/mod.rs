@@ -621,9 +621,18 @@ impl<'q> Machine<'q> {
                 return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false }));
             }
             Code::G(92) => self.modal.set_logical_position(command),
-            Code::M(82) => Ok(self.modal.extruder_distance = Distance::Absolute),
-            Code::M(83) => Ok(self.modal.extruder_distance = Distance::Relative),
-            Code::M(17) => Ok(self.steppers_enabled = true),
+            Code::M(82) => {
+                self.modal.extruder_distance = Distance::Absolute;
+                Ok(())
+            }
+            Code::M(83) => {
+                self.modal.extruder_distance = Distance::Relative;
+                Ok(())
+            }
+            Code::M(17) => {
+                self.steppers_enabled = true;
+                Ok(())
+            }
             Code::M(18 | 84) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: true })),
             Code::M(105) => {
                 // Marlin puts the report on the `ok` line itself.
@@ -632,7 +641,10 @@ impl<'q> Machine<'q> {
                 return Ok(Outcome::Acknowledged);
             }
             Code::M(106) => self.set_fan(command),
-            Code::M(107) => Ok(self.fan_duty = 0),
+            Code::M(107) => {
+                self.fan_duty = 0;
+                Ok(())
+            }
             // M108 and M410 act from the receive interrupt; M110 in the
             // protocol layer. Here they only get their `ok`.
             Code::M(108 | 110 | 410) => Ok(()),
@@ -650,9 +662,15 @@ impl<'q> Machine<'q> {
             Code::M(155) => self.set_auto_report(command, now_ms),
             Code::M(400) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false })),
             #[cfg(feature = "printer")]
-            Code::M(120) => Ok(self.motion.set_endstops_always(true)),
+            Code::M(120) => {
+                self.motion.set_endstops_always(true);
+                Ok(())
+            }
             #[cfg(feature = "printer")]
-            Code::M(121) => Ok(self.motion.set_endstops_always(false)),
+            Code::M(121) => {
+                self.motion.set_endstops_always(false);
+                Ok(())
+            }
             #[cfg(feature = "delta")]
             Code::M(665) => self.delta_geometry(command, out),
             #[cfg(feature = "delta")]

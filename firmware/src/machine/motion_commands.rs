@@ -257,13 +257,13 @@ impl<'q> Machine<'q> {
             self.motion.config.must_home,
         ) {
             let homed = self.motion.homed();
-            for axis in 0..3 {
+            for (axis, value) in target.iter_mut().enumerate().take(3) {
                 if homed & (1 << axis) != 0 {
                     let (min, max) = (
                         (limits.min[axis] * 1000.0) as i32,
                         (limits.max[axis] * 1000.0) as i32,
                     );
-                    target[axis] = target[axis].clamp(min, max);
+                    *value = (*value).clamp(min, max);
                 }
             }
         }

@@ -57,7 +57,8 @@ impl Plane {
         [p[a], p[b], p[l], p[3]]
     }
 
-    /// The inverse of [`Self::to_frame`].
+    /// The inverse of [`Self::to_frame`] (named as its pair).
+    #[allow(clippy::wrong_self_convention)]
     fn from_frame(self, q: Point) -> Point {
         let [a, b, l] = self.axes();
         let mut p = [0.0; 4];

@@ -93,7 +93,7 @@
 //!   [`Motion::motor_steps`] for `Count`.
 //! - `M665`/`M666`: change `config.kinematics` (`Delta::set_geometry`,
 //!   `endstop_trim`) while idle, then re-home.
-
+//!
 //! **Flash.** Functions marked `#[inline(never)]` here and in
 //! `machine/` are cold (once per line or per block): inlined into the
 //! board's main loop they were duplicated, 8 KB more on the AVR.
