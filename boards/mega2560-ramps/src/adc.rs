@@ -15,11 +15,14 @@
 //! judges a shorted sensor: a board whose thermistors cannot be read never
 //! heats.
 
-// Without heaters (the powder bed) the conversions run but nothing reads them.
-#![cfg_attr(not(feature = "heaters"), allow(dead_code))]
+// Without heaters (the powder bed) the conversions run but nothing reads
+// them: the main loop's reader is compiled for heated machines only.
+
 
 use avr_device::atmega2560::Peripherals;
-use firmware::thermal::{Oversampled, SampleAverager};
+#[cfg(feature = "heaters")]
+use firmware::thermal::Oversampled;
+use firmware::thermal::SampleAverager;
 
 use crate::pins;
 
@@ -27,6 +30,7 @@ use crate::pins;
 /// average every 32 ms, so every 100 ms sample period has a fresh one.
 const SAMPLES_PER_READING: u8 = 16;
 
+#[cfg(feature = "heaters")]
 /// Sample periods without a reading before the channel counts as dead.
 pub const MISSING_PERIODS_LIMIT: u8 = 3;
 
@@ -99,11 +103,13 @@ pub unsafe extern "avr-non-blocking-interrupt" fn __vector_29() {
     sampling.averagers[index].push(value);
 }
 
+#[cfg(feature = "heaters")]
 /// Per-channel count of sample periods without a reading.
 pub struct Readings {
     missing: [u8; 2],
 }
 
+#[cfg(feature = "heaters")]
 impl Readings {
     pub const fn new() -> Self {
         Self { missing: [0; 2] }

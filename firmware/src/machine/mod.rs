@@ -16,10 +16,6 @@
 //! queue is full ([`Machine::can_accept_line`]); `M112`, `M108` and `M410`
 //! still act from the receive interrupt (see [`crate::emergency`]).
 
-// A build without the printers' motion or without heaters (the extrusion
-// line, the powder bed) compiles the commands it leaves out but never
-// calls them, and the linker drops them.
-#![cfg_attr(not(all(feature = "printer", feature = "heaters")), allow(dead_code, unused_imports))]
 
 pub mod error;
 pub mod modal;
@@ -37,11 +33,15 @@ use core::mem::MaybeUninit;
 use core::ptr::addr_of_mut;
 use crate::line::{Line, MAX_LINE};
 use crate::protocol::HostProtocol;
-use crate::reply::{Fixed, Printable};
+use crate::reply::Printable;
+#[cfg(feature = "printer")]
+use crate::reply::Fixed;
 use crate::settings::Settings;
 use crate::storage::{self, LoadError, NonVolatile};
 use crate::thermal::channel::{BED, HOTEND_0};
-use crate::thermal::{AutoReport, Autotune, ColdExtrusionGuard, Gains, HeaterChannel, TemperatureWait, WaitConfig};
+use crate::thermal::{AutoReport, Autotune, ColdExtrusionGuard, Gains, HeaterChannel, TemperatureWait};
+#[cfg(feature = "heaters")]
+use crate::thermal::WaitConfig;
 use thermal::HeaterSlot;
 use error::CommandError;
 use modal::{Distance, ModalState, MotionMode, Plane, Units, AXES, AXIS_LETTERS};
@@ -69,10 +69,13 @@ enum Running {
     /// queued motion to finish.
     WaitForMotion { then_disable: bool },
     /// `G28`: homing runs in the main loop.
+    #[cfg_attr(not(feature = "printer"), allow(dead_code))] // never built without it; its match arms stay
     Homing,
     /// `M109`/`M190`: waiting for a heater.
+    #[cfg_attr(not(feature = "heaters"), allow(dead_code))] // never built without it; its match arms stay
     HeatWait { slot: HeaterSlot, wait: TemperatureWait },
     /// `M303`: the relay auto-tune runs on the samples.
+    #[cfg_attr(not(feature = "heaters"), allow(dead_code))] // never built without it; its match arms stay
     Autotune { slot: HeaterSlot, apply: bool, tune: Autotune },
     /// `M303` ended (its report is out): `ok` at the next poll.
     AutotuneDone,
@@ -85,6 +88,7 @@ enum Running {
 /// bit 0 X_MIN, 1 X_MAX, 2 Y_MIN, 3 Y_MAX, 4 Z_MIN, 5 Z_MAX.
 pub type EndstopLevels = u8;
 
+#[cfg(feature = "printer")]
 /// The endstop names `M119` reports, in bit order.
 const ENDSTOP_NAMES: [&str; 6] = ["x_min", "x_max", "y_min", "y_max", "z_min", "z_max"];
 
@@ -795,6 +799,7 @@ impl<'q> Machine<'q> {
         Ok(())
     }
 
+    #[cfg(feature = "printer")]
     /// `M114`: `X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0`.
     #[inline(never)]
     fn report_position<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
@@ -819,6 +824,7 @@ impl<'q> Machine<'q> {
         ufmt::uwrite!(out, "{}\n", Printable(message))
     }
 
+    #[cfg(feature = "printer")]
     /// `M119`: Marlin's endstop report.
     #[inline(never)]
     fn report_endstops<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
@@ -859,6 +865,7 @@ enum Outcome {
     Started(Running),
 }
 
+#[cfg(feature = "printer")]
 /// Micrometres shown as millimetres with two decimals, rounded.
 fn micrometres_as_mm(um: i32) -> Fixed {
     let rounded = if um >= 0 { (um + 5) / 10 } else { (um - 5) / 10 };

@@ -21,12 +21,19 @@
 //! `Error:` until the machine is homed again.
 
 use super::error::CommandError;
+#[cfg(feature = "printer")]
 use super::modal::{MotionMode, AXES};
+#[cfg(feature = "printer")]
 use crate::motion::Plane;
 use super::{Machine, Outcome, Running};
-use crate::gcode::{Code, Command};
+use crate::gcode::Command;
+#[cfg(feature = "printer")]
+use crate::gcode::Code;
+#[cfg(feature = "printer")]
 use crate::motion::kinematics::MachineKinematics;
-use crate::motion::{ArcCentre, MotionError, StepFault, StepperRequest, StepperStatus, E};
+#[cfg(feature = "printer")]
+use crate::motion::{ArcCentre, E};
+use crate::motion::{MotionError, StepFault, StepperRequest, StepperStatus};
 use ufmt::uWrite;
 
 impl<'q> Machine<'q> {
@@ -157,6 +164,7 @@ impl<'q> Machine<'q> {
         })
     }
 
+    #[cfg(feature = "printer")]
     /// `G0`/`G1` (or bare axis words): validate fully, then hand over.
     #[inline(never)]
     pub(super) fn linear_move<W: uWrite + ?Sized>(
@@ -186,6 +194,7 @@ impl<'q> Machine<'q> {
         self.commit_move(target, result)
     }
 
+    #[cfg(feature = "printer")]
     /// `G2`/`G3`: an arc needs a centre (`I`/`J`, relative to the start) or
     /// a radius (`R`; negative for the arc over half a turn).
     #[inline(never)]
@@ -238,6 +247,7 @@ impl<'q> Machine<'q> {
         self.commit_move(target, result)
     }
 
+    #[cfg(feature = "printer")]
     /// Checks shared by lines and arcs, and the Marlin adjustments of the
     /// target (soft-limit clamp, cold extrusion).
     fn prepare_target<W: uWrite + ?Sized>(
@@ -276,6 +286,7 @@ impl<'q> Machine<'q> {
         Ok(target)
     }
 
+    #[cfg(feature = "printer")]
     fn commit_move(
         &mut self,
         target: [i32; AXES],
@@ -310,6 +321,7 @@ impl<'q> Machine<'q> {
         }
     }
 
+    #[cfg(feature = "printer")]
     /// `G28 [X] [Y] [Z]`: home the named axes (all when none is named),
     /// after the queued moves.
     pub(super) fn home(&mut self, command: &Command) -> Outcome {

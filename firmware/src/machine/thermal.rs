@@ -13,13 +13,17 @@
 //! - `M303 E<n> S<°C> C<cycles> U1` tunes, prints each cycle and Marlin's
 //!   closing block, and with `U1` applies the gains (`M500` saves them).
 
+use super::{Machine, Running};
+use crate::thermal::{write_temperatures, Gains, HeaterChannel, Oversampled, TuneProgress, WaitStatus};
+// The heater commands (not on the powder bed, which has no heaters).
+#[cfg(feature = "heaters")]
 use super::error::CommandError;
-use super::{Machine, Outcome, Running};
+#[cfg(feature = "heaters")]
+use super::Outcome;
+#[cfg(feature = "heaters")]
 use crate::gcode::Command;
-use crate::thermal::{
-    write_temperatures, Autotune, Celsius, Gains, HeaterChannel, Oversampled, TemperatureWait, TuneConfig,
-    TuneProgress, WaitConfig, WaitStatus,
-};
+#[cfg(feature = "heaters")]
+use crate::thermal::{Autotune, Celsius, TemperatureWait, TuneConfig, WaitConfig};
 use ufmt::uWrite;
 
 /// Which of the machine's heaters a command means.
@@ -172,6 +176,7 @@ impl<'q> Machine<'q> {
         write_temperatures(&self.hotend, Some(&self.bed), out)
     }
 
+    #[cfg(feature = "heaters")]
     /// `M104`/`M140` (`wait: None`) and `M109`/`M190`: set the target;
     /// the waits start a [`Running::HeatWait`].
     pub(super) fn set_temperature<W: uWrite + ?Sized>(
@@ -242,6 +247,7 @@ impl<'q> Machine<'q> {
         }
     }
 
+    #[cfg(feature = "heaters")]
     /// `M301 [P] [I] [D]` (hot end, Marlin's units): set what is given;
     /// bare `M301` reports.
     /// `M301` (hot end) and `M304` (bed): `P`, `I`, `D` in Marlin's units;
@@ -267,6 +273,7 @@ impl<'q> Machine<'q> {
         Ok(())
     }
 
+    #[cfg(feature = "heaters")]
     /// `M302 [S<°C>] [P<0|1>]`: the cold-extrusion interlock.
     pub(super) fn cold_extrusion_command<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
         let min = match command.value(b'S')? {
@@ -283,6 +290,7 @@ impl<'q> Machine<'q> {
         Ok(())
     }
 
+    #[cfg(feature = "heaters")]
     /// `M303 E<0|-1> S<°C> C<cycles> [U1]`: relay auto-tune of the hot end
     /// (`E0`) or the bed (`E-1`).
     pub(super) fn autotune<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<Outcome, W::Error> {
