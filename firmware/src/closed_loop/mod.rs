@@ -101,6 +101,8 @@ pub mod axis;
 pub mod control;
 pub mod nse5310;
 pub mod output;
+#[cfg(feature = "encoders")]
+pub mod printer;
 pub mod quadrature;
 pub mod reference;
 pub mod relay;

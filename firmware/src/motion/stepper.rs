@@ -276,6 +276,63 @@ pub struct StepGenerator<'a> {
     fault: Option<StepFault>,
     blocks_done: u16,
     underruns: u16,
+    /// X's and Y's step positions at the start of the running block, for
+    /// the encoder loops (SPEC §1): counted from boot, not from any homing
+    /// zero, and kept at block granularity so that the per-event path pays
+    /// nothing for them (see [`AxisProgress`]).
+    #[cfg(feature = "encoders")]
+    origin: [i32; ENCODED_MOTORS],
+}
+
+/// X and Y: the motors an encoder watches (SPEC §1).
+#[cfg(feature = "encoders")]
+pub const ENCODED_MOTORS: usize = 2;
+
+/// A copy of what the interrupt knows about X's and Y's progress, taken
+/// with interrupts off (a few bytes); [`Self::positions`] does the
+/// arithmetic afterwards, outside the lock.
+#[cfg(feature = "encoders")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct AxisProgress {
+    origin: [i32; ENCODED_MOTORS],
+    steps: [u16; ENCODED_MOTORS],
+    events: u16,
+    fired: u16,
+    direction: u8,
+    stopped: u8,
+    stopped_steps: [u16; ENCODED_MOTORS],
+}
+
+#[cfg(feature = "encoders")]
+impl AxisProgress {
+    /// X's and Y's step positions now (since boot), within one step: the
+    /// steps of a block are spread evenly over its events (Bresenham), so
+    /// after `fired` of `events` a motor has made `fired·steps/events`.
+    pub fn positions(&self) -> [i32; ENCODED_MOTORS] {
+        let mut positions = self.origin;
+        for motor in 0..ENCODED_MOTORS {
+            let done = block_steps_done(self, motor);
+            positions[motor] = if self.direction & (1 << motor) != 0 {
+                positions[motor].wrapping_add(done)
+            } else {
+                positions[motor].wrapping_sub(done)
+            };
+        }
+        positions
+    }
+}
+
+/// Steps `motor` has made in the block `progress` describes.
+#[cfg(feature = "encoders")]
+fn block_steps_done(progress: &AxisProgress, motor: usize) -> i32 {
+    if progress.stopped & (1 << motor) != 0 {
+        return i32::from(progress.stopped_steps[motor]);
+    }
+    let steps = u32::from(progress.steps[motor]);
+    if progress.events == 0 || progress.fired >= progress.events {
+        return steps as i32;
+    }
+    (u32::from(progress.fired) * steps / u32::from(progress.events)) as i32
 }
 
 impl<'a> StepGenerator<'a> {
@@ -315,7 +372,26 @@ impl<'a> StepGenerator<'a> {
             fault: None,
             blocks_done: 0,
             underruns: 0,
+            #[cfg(feature = "encoders")]
+            origin: [0; ENCODED_MOTORS],
         }
+    }
+
+    /// X's and Y's progress for the encoder loops (copy it with the step
+    /// interrupt held off, then call [`AxisProgress::positions`]).
+    #[cfg(feature = "encoders")]
+    pub fn axis_progress(&self) -> AxisProgress {
+        let mut progress = AxisProgress { origin: self.origin, ..AxisProgress::default() };
+        if self.in_block {
+            progress.steps = [self.steps[0], self.steps[1]];
+            progress.events = self.events;
+            // The pending event has not fired yet.
+            progress.fired = self.events_done - (self.pending_mask != 0) as u16;
+            progress.direction = self.direction;
+            progress.stopped = self.stopped;
+            progress.stopped_steps = [self.stopped_steps[0], self.stopped_steps[1]];
+        }
+        progress
     }
 
     /// What the next [`Self::on_timer`] call fires (STEP mask, DIR levels),
@@ -543,6 +619,12 @@ impl<'a> StepGenerator<'a> {
     }
 
     fn finish_block(&mut self) {
+        #[cfg(feature = "encoders")]
+        {
+            // Whole blocks need no division; an abandoned or halted one
+            // (cold) takes the proportional count.
+            self.origin = self.axis_progress().positions();
+        }
         self.in_block = false;
         self.endstops_to_read = 0;
         self.moving = 0;
