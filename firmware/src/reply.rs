@@ -44,6 +44,11 @@ impl Fixed {
     pub const fn hundredths(mantissa: i32) -> Self {
         Self { mantissa, digits: 2 }
     }
+
+    /// Thousandths (`1234` → `1.234`).
+    pub const fn thousandths(mantissa: i32) -> Self {
+        Self { mantissa, digits: 3 }
+    }
 }
 
 impl ufmt::uDisplay for Fixed {

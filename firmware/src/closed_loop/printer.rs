@@ -146,13 +146,22 @@ impl CorrectedAxis {
 /// A snapshot for `M822`, taken by the board now and then.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct AxisReport {
-    pub enabled: bool,
     /// Units from the encoder's zero.
     pub measured: i32,
     pub reference: i32,
     pub corrections: i32,
     pub counters: TrackerCounters,
     pub fault: Option<AxisFault>,
+}
+
+impl AxisReport {
+    pub const EMPTY: Self = Self {
+        measured: 0,
+        reference: 0,
+        corrections: 0,
+        counters: TrackerCounters { index_accepted: 0, index_glitches: 0, index_bounces: 0, index_missed: 0, bad_reads: 0 },
+        fault: None,
+    };
 }
 
 /// X's and Y's loops, as the board keeps them (in a `static`, shared by
@@ -293,7 +302,6 @@ impl EncoderLoops {
     pub fn report(&self, axis: usize) -> AxisReport {
         let Some(corrected) = self.axes.get(axis) else { return AxisReport::default() };
         AxisReport {
-            enabled: corrected.enabled,
             measured: corrected.axis.measured(),
             reference: corrected.reference,
             corrections: corrected.corrections,

@@ -25,6 +25,8 @@ mod thermal;
 pub mod line;
 #[cfg(feature = "powder-bed")]
 pub mod powder_bed;
+#[cfg(feature = "encoders")]
+pub mod encoders;
 
 
 use crate::gcode::{self, Code, Command, ParseError};
@@ -135,6 +137,9 @@ pub struct Machine<'q> {
     /// ([`Machine::become_powder_bed`]).
     #[cfg(feature = "powder-bed")]
     powder: Option<powder_bed::BedState>,
+    /// `M820`–`M824`: the printer's X/Y encoder loops.
+    #[cfg(feature = "encoders")]
+    encoders: encoders::EncoderState,
 }
 
 /// How one M-code changes the settings (`M92`, `M201`, …).
@@ -215,6 +220,8 @@ impl<'q> Machine<'q> {
             addr_of_mut!((*p).line).write(None);
             #[cfg(feature = "powder-bed")]
             addr_of_mut!((*p).powder).write(None);
+            #[cfg(feature = "encoders")]
+            addr_of_mut!((*p).encoders).write(encoders::EncoderState::new());
         }
     }
 
@@ -249,6 +256,8 @@ impl<'q> Machine<'q> {
             line: _,
             #[cfg(feature = "powder-bed")]
             powder: _,
+            #[cfg(feature = "encoders")]
+            encoders: _,
         } = self;
     }
 
@@ -590,6 +599,13 @@ impl<'q> Machine<'q> {
                 Err(error) => Outcome::Failed(error),
             });
         }
+        #[cfg(feature = "encoders")]
+        if let Some(result) = self.encoder_command(command, out)? {
+            return Ok(match result {
+                Ok(()) => Outcome::Done,
+                Err(error) => Outcome::Failed(error),
+            });
+        }
         #[cfg(feature = "extrusion-line")]
         if let Some(result) = self.line_command(command, out)? {
             return Ok(match result {
@@ -846,7 +862,7 @@ fn is_known(code: Code) -> bool {
         Code::M(n) => matches!(
             n,
             2..=5 | 7..=9 | 30 | 17 | 18 | 82..=84 | 92 | 104..=110 | 112 | 114..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221 | 301..=304 | 400 | 410
-                | 500..=503 | 665 | 666
+                | 500..=503 | 665 | 666 | 820..=824
         ),
         Code::T(_) | Code::Modal => true,
         Code::Other => false,
@@ -972,7 +988,11 @@ pub fn write_capabilities<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Erro
         crate::FIRMWARE_VERSION,
         EXTRUDERS
     )?;
-    crate::flash_str!(CAPABILITIES).write_to(out)
+    crate::flash_str!(CAPABILITIES).write_to(out)?;
+    // M820-M824 (machine/encoders.rs).
+    #[cfg(feature = "encoders")]
+    crate::flash_str!("Cap:CLOSED_LOOP:1\n").write_to(out)?;
+    Ok(())
 }
 
 /// The capabilities reported by `M115`, honestly: 1 only when implemented.

@@ -346,6 +346,8 @@ impl<'q> Machine<'q> {
     #[inline(never)]
     fn homing_finished<W: uWrite + ?Sized>(&mut self, _out: &mut W) -> Result<(), W::Error> {
         let homed = self.motion.homed();
+        #[cfg(feature = "encoders")]
+        self.encoders_homed(homed);
         let position = self.motion.position_um();
         for axis in 0..3 {
             if homed & (1 << axis) != 0 {

@@ -583,7 +583,10 @@ impl Machine<'_> {
             })(),
             Code::M(115) => {
                 super::write_capabilities(out)?;
-                crate::flash_str!("Cap:POWDER_BED:1\nCap:CLOSED_LOOP:1\n").write_to(out)?;
+                crate::flash_str!("Cap:POWDER_BED:1\n").write_to(out)?;
+                // With the printer's encoder loops built in, M115 already says so.
+                #[cfg(not(feature = "encoders"))]
+                crate::flash_str!("Cap:CLOSED_LOOP:1\n").write_to(out)?;
                 Ok(None)
             }
             _ => return Ok(None),

@@ -11,7 +11,7 @@ use std::string::String;
 
 /// An executor for the Prusa i3 whose step interrupt never runs (for
 /// commands that do not wait for motion; hal-sim's board steps).
-fn new_machine() -> Machine<'static> {
+pub(super) fn new_machine() -> Machine<'static> {
     let queues: &'static mut StepQueues = Box::leak(Box::new(StepQueues::new()));
     let config = MotionConfig::prusa_i3();
     let (feeder, _generator) = queues.split(config.stepper());
@@ -19,7 +19,7 @@ fn new_machine() -> Machine<'static> {
 }
 
 /// Feed `input` byte by byte as the board does, polling at `now_ms`.
-fn converse(machine: &mut Machine, now_ms: u32, input: &str) -> String {
+pub(super) fn converse(machine: &mut Machine, now_ms: u32, input: &str) -> String {
     let mut out = Text::default();
     let mut assembler = LineAssembler::new();
     for &byte in input.as_bytes() {

@@ -860,6 +860,29 @@ mod tests {
         assert!(!generator.status().busy);
     }
 
+    #[cfg(feature = "encoders")]
+    #[test]
+    fn x_and_y_positions_follow_the_steps_within_one_step_and_exactly_at_block_ends() {
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        // X +1000, Y +500; then X −300, Y −700.
+        assert!(feeder.push_block(block([1000, 500, 0, 0], 0b0011)));
+        assert!(feeder.push_segment(Segment { interval: 200 << 8, add: 0, events: 1000, starts_block: true }));
+        assert!(feeder.push_block(block([300, 700, 0, 0], 0b0000)));
+        assert!(feeder.push_segment(Segment { interval: 200 << 8, add: 0, events: 700, starts_block: true }));
+        assert_eq!(generator.axis_progress().positions(), [0, 0]);
+        // Part of the way through the first block: count the STEP pulses.
+        let events = run(&mut generator, 100_000);
+        let count = |motor: u8| events.iter().filter(|e| e.1 & (1 << motor) != 0).count() as i32;
+        let [x, y] = generator.axis_progress().positions();
+        assert!((x - count(0)).abs() <= 1 && (y - count(1)).abs() <= 1, "{x} {y} vs {} {}", count(0), count(1));
+        for _ in 0..5_000 {
+            generator.on_timer();
+        }
+        assert_eq!(generator.status().blocks_done, 2);
+        assert_eq!(generator.axis_progress().positions(), [700, -200]);
+    }
+
     #[test]
     fn direction_change_comes_before_the_step() {
         let mut queues = StepQueues::new();
