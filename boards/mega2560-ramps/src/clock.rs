@@ -20,6 +20,26 @@ pub fn init(dp: &Peripherals) {
     timer.timsk3.write(|w| unsafe { w.bits(1 << 1) });
 }
 
+/// Microseconds since boot (wraps after 71 minutes), to 4 µs: the count
+/// plus Timer3's progress into the millisecond (prescaler 64). Called with
+/// interrupts off; a compare match not yet taken reads up to 1 ms early.
+#[cfg(feature = "encoders")]
+pub fn micros(cs: avr_device::interrupt::CriticalSection<'_>) -> u32 {
+    // SAFETY: reading TCNT3 (the 16-bit read goes through TEMP, and
+    // interrupts are off).
+    let ticks = unsafe { Peripherals::steal() }.TC3.tcnt3.read().bits();
+    MILLIS.borrow(cs).get().wrapping_mul(1000).wrapping_add(u32::from(ticks) * 4)
+}
+
+/// Hold the tick interrupt off (`true`) or let it in again: the encoder
+/// loops are shared with the tick this way, without holding the step
+/// interrupt off. A tick that falls due meanwhile runs when unmasked.
+#[cfg(feature = "encoders")]
+pub fn mask_tick(dp: &Peripherals, masked: bool) {
+    // SAFETY: OCIE3A is the only interrupt of Timer3 in use.
+    dp.TC3.timsk3.write(|w| unsafe { w.bits(if masked { 0 } else { 1 << 1 }) });
+}
+
 /// Milliseconds since boot (wraps after 49 days).
 pub fn millis() -> u32 {
     avr_device::interrupt::free(|cs| MILLIS.borrow(cs).get())
@@ -38,7 +58,7 @@ pub unsafe extern "avr-non-blocking-interrupt" fn __vector_32() {
     crate::adc::start_conversion(&unsafe { Peripherals::steal() });
     // The count changes with interrupts off because the main loop reads
     // it so (four bytes); the step interrupt never reads it.
-    avr_device::interrupt::free(|cs| {
+    let _now = avr_device::interrupt::free(|cs| {
         let millis = MILLIS.borrow(cs);
         let now = millis.get().wrapping_add(1);
         millis.set(now);
@@ -46,5 +66,9 @@ pub unsafe extern "avr-non-blocking-interrupt" fn __vector_32() {
         crate::bed::on_tick(&unsafe { Peripherals::steal() }, cs, now);
         #[cfg(any(feature = "bed-ssr", feature = "machine-extrusion-line"))]
         crate::ssr::on_tick(&unsafe { Peripherals::steal() }, cs, now);
+        now
     });
+    // The encoder loops, with interrupts on (the I²C reads take ≈ 120 µs).
+    #[cfg(feature = "encoders")]
+    crate::encoders::on_tick(&unsafe { Peripherals::steal() }, _now);
 }

@@ -19,6 +19,8 @@ mod clock;
 #[cfg(feature = "display-hd44780")]
 mod display;
 mod eeprom;
+#[cfg(feature = "encoders")]
+mod encoders;
 #[cfg(feature = "machine-extrusion-line")]
 mod line;
 mod pins;
@@ -57,6 +59,13 @@ fn main() -> ! {
     // SAFETY: the EEPROM registers are used by this driver only.
     let mut eeprom = eeprom::Eeprom::new(unsafe { Peripherals::steal() }.EEPROM);
     let _ = link.machine.load_settings(&mut eeprom, &mut tx);
+    #[cfg(feature = "encoders")]
+    {
+        let settings = link.machine.settings();
+        let axis = |i: usize| (settings.steps_per_mm_milli[i] as f32 / 1000.0, (settings.max_feed_um_per_s[i] / 1000) as u16);
+        let (x, y) = (axis(0), axis(1));
+        encoders::init(&dp, [x.0, y.0], [x.1, y.1]);
+    }
     let mut next_thermal_ms = 0u32;
     // Hot end and bed thermistors, averaged in the ADC interrupt.
     #[cfg(feature = "heaters")]
@@ -86,6 +95,9 @@ fn main() -> ! {
         #[cfg(feature = "machine-arm")]
         let _ = link.machine.on_driver_alarms(pins::driver_alarms(&dp), &mut tx);
         let _ = link.service(&mut rx, &mut eeprom, now, &mut tx);
+        // SPEC §1: the encoder loops' settings, faults and reports.
+        #[cfg(feature = "encoders")]
+        let _ = encoders::service(&dp, &mut link.machine, now.wrapping_sub(next_thermal_ms) < u32::MAX / 2, &mut tx);
         // The powder bed's millisecond: read, decide, drive.
         #[cfg(feature = "machine-powder-bed")]
         if now != last_bed_ms {

@@ -139,6 +139,38 @@ pub fn configure(config: StepperConfig) {
     interrupt::free(|cs| with_generator(cs, |g| g.set_config(config)));
 }
 
+/// X's and Y's step positions since boot (the encoder loops' reference):
+/// a short copy with interrupts off, the arithmetic after.
+#[cfg(feature = "encoders")]
+pub fn xy_positions() -> [i32; 2] {
+    interrupt::free(|cs| with_generator(cs, |g| g.axis_progress())).unwrap_or_default().positions()
+}
+
+/// One correction step on X and/or Y (`steps` bit 0 X, bit 1 Y; `positive`
+/// the same bits for +) for the encoder loops, between the planner's steps:
+/// with interrupts off, the directions are set for the correction, held
+/// for the configured set-up time, pulsed for 2 µs, then put back as the
+/// step interrupt left them (≈ 2 × set-up + 3 µs with interrupts off, at
+/// most once a millisecond).
+#[cfg(feature = "encoders")]
+pub fn correction_steps(dp: &Peripherals, steps: u8, positive: u8) {
+    interrupt::free(|cs| {
+        let Some(config) = with_generator(cs, |g| g.config()) else { return };
+        // SAFETY: interrupts are off; the step interrupt owns DIR_LEVELS otherwise.
+        let levels = unsafe { *addr_of_mut!(DIR_LEVELS) };
+        let wanted = (levels & !steps) | ((positive ^ config.dir_invert) & steps);
+        let setup_cycles = u32::from(config.dir_setup_ticks.max(2)) * 8;
+        write_dirs(dp, wanted);
+        avr_device::asm::delay_cycles(setup_cycles);
+        let f_steps = steps & 1 | (steps & 2) << 5;
+        dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | f_steps) });
+        avr_device::asm::delay_cycles(32);
+        dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !f_steps) });
+        avr_device::asm::delay_cycles(setup_cycles);
+        write_dirs(dp, levels);
+    });
+}
+
 pub fn halt() {
     interrupt::free(|cs| with_generator(cs, |g| g.halt(StepFault::Stopped)));
 }

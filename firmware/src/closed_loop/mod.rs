@@ -136,20 +136,24 @@ impl AxisFault {
     /// The `Error:` line for `axis` (its letter), with the error in mm for a
     /// following error (`units_per_mm`: 2048 on the NSE-5310 axes).
     pub fn write_error<W: ufmt::uWrite + ?Sized>(self, axis: u8, units_per_mm: i32, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "Error:{} ", char::from(axis))?;
+        use crate::flash_str;
+        // The texts stay in flash (on the AVR a `&str` literal costs SRAM).
+        flash_str!("Error:").write_to(out)?;
+        ufmt::uwrite!(out, "{}", char::from(axis))?;
+        out.write_str(" ")?;
         match self {
             AxisFault::FollowingError { error } => {
-                out.write_str("following error ")?;
+                flash_str!("following error ").write_to(out)?;
                 write_millimetres(out, error, units_per_mm)?;
-                out.write_str(" mm")?;
+                flash_str!(" mm").write_to(out)?;
             }
-            AxisFault::DriverAlarm => out.write_str("driver ALARM")?,
-            AxisFault::BridgeFault => out.write_str("motor bridge fault (EN/DIAG)")?,
-            AxisFault::Encoder(EncoderFault::Stuck) => out.write_str("encoder stuck")?,
-            AxisFault::Encoder(EncoderFault::NoReading) => out.write_str("encoder not responding")?,
-            AxisFault::Stopped => out.write_str("stopped")?,
+            AxisFault::DriverAlarm => flash_str!("driver ALARM").write_to(out)?,
+            AxisFault::BridgeFault => flash_str!("motor bridge fault (EN/DIAG)").write_to(out)?,
+            AxisFault::Encoder(EncoderFault::Stuck) => flash_str!("encoder stuck").write_to(out)?,
+            AxisFault::Encoder(EncoderFault::NoReading) => flash_str!("encoder not responding").write_to(out)?,
+            AxisFault::Stopped => flash_str!("stopped").write_to(out)?,
         }
-        out.write_str(", job stopped (re-home with G28)\n")
+        flash_str!(", job stopped (re-home with G28)\n").write_to(out)
     }
 }
 

@@ -92,6 +92,17 @@ fn gain<A: LoopArithmetic>(value: f32) -> Result<A::Gain, TuningError> {
     A::gain(value).ok_or(TuningError::GainOutOfRange)
 }
 
+/// The terms of a parallel PID u = Kff·vd + Kp·e + Ki∫e + Kd·s/(1 + Tf·s)(·):
+/// `ki` in 1/s² (or duty/(unit·s)), `kd` and `tf` in s.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParallelPid {
+    pub feedforward: f32,
+    pub kp: f32,
+    pub ki: f32,
+    pub kd: f32,
+    pub tf: f32,
+}
+
 impl<A: LoopArithmetic> LoopGains<A> {
     /// u = ẋd + Kp·e.
     pub fn p_feedforward(kp: f32) -> Result<Self, TuningError> {
@@ -102,12 +113,16 @@ impl<A: LoopArithmetic> LoopGains<A> {
     /// see [`control`](super::control)), discretised for `period_s`:
     /// backward Euler for the integral and the filtered derivative.
     pub fn robust_pid(pid: &RobustPid, period_s: f32) -> Result<Self, TuningError> {
-        Self::parallel(1.0, pid.k0 + pid.kp, pid.kp / pid.ti, pid.kp * pid.td, pid.tf, period_s, DerivativeOn::Error)
+        let terms = ParallelPid { feedforward: 1.0, kp: pid.k0 + pid.kp, ki: pid.kp / pid.ti, kd: pid.kp * pid.td, tf: pid.tf };
+        Self::parallel(&terms, period_s, DerivativeOn::Error)
     }
 
     /// A parallel PID u = Kff·vd + Kp·e + Ki∫e + Kd·s/(1 + Tf·s)(·), for
-    /// `period_s`. `ki` in 1/s² (or duty/(unit·s)), `kd` in s.
-    pub fn parallel(feedforward: f32, kp: f32, ki: f32, kd: f32, tf: f32, period_s: f32, derivative_on: DerivativeOn) -> Result<Self, TuningError> {
+    /// `period_s`. The terms travel by reference: on the ATmega2560 more
+    /// than 18 bytes of arguments go on the stack, which LLVM's AVR back end
+    /// reads one byte off (tests/scripts/size-check.sh).
+    pub fn parallel(terms: &ParallelPid, period_s: f32, derivative_on: DerivativeOn) -> Result<Self, TuningError> {
+        let ParallelPid { feedforward, kp, ki, kd, tf } = *terms;
         if !(period_s > 0.0) || !(tf >= 0.0) {
             return Err(TuningError::NotPositive);
         }
@@ -129,7 +144,8 @@ impl<A: LoopArithmetic> LoopGains<A> {
     /// derivative filter Tf = Td/10 (ours), no feedforward.
     pub fn servo_pid(gains: &RelayGains, period_s: f32) -> Result<Self, TuningError> {
         let td = if gains.kp > 0.0 { gains.kd / gains.kp } else { 0.0 };
-        Self::parallel(0.0, gains.kp, gains.ki, gains.kd, td / 10.0, period_s, DerivativeOn::Measurement)
+        let terms = ParallelPid { feedforward: 0.0, kp: gains.kp, ki: gains.ki, kd: gains.kd, tf: td / 10.0 };
+        Self::parallel(&terms, period_s, DerivativeOn::Measurement)
     }
 }
 

@@ -27,8 +27,22 @@ use crate::closed_loop::control::{FollowingErrorLimit, LoopGains};
 use crate::closed_loop::printer::{AxisReport, LoopSettings, AXES, AXIS_LETTERS, LOOP_HZ};
 use crate::closed_loop::{AxisFault, Strategy};
 use crate::gcode::{Code, Command};
+use crate::flash_str;
+use crate::progmem::FlashStr;
 use crate::reply::Fixed;
-use ufmt::uWrite;
+use ufmt::{uDisplay, uWrite};
+
+/// `label` (kept in flash: on the AVR a `uwrite!` literal costs SRAM)
+/// then `value`.
+fn field<W: uWrite + ?Sized>(out: &mut W, label: FlashStr, value: impl uDisplay) -> Result<(), W::Error> {
+    label.write_to(out)?;
+    ufmt::uwrite!(out, "{}", value)
+}
+
+/// `echo:X` (the reply lines' common start).
+fn echo_axis<W: uWrite + ?Sized>(out: &mut W, letter: u8) -> Result<(), W::Error> {
+    field(out, flash_str!("echo:"), char::from(letter))
+}
 
 /// What the executor keeps of the loops.
 pub struct EncoderState {
@@ -93,7 +107,9 @@ impl Machine<'_> {
         }
     }
 
-    /// `M820`–`M824`; `None` for every other code.
+    /// `M820`–`M824`; `None` for every other code. Out of line: inlined,
+    /// its replies made the dispatch 4 KB larger.
+    #[inline(never)]
     pub(super) fn encoder_command<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<Option<Result<(), CommandError>>, W::Error> {
         let result = match command.code {
             Code::M(820) => self.switch_loops(command, out)?,
@@ -104,6 +120,7 @@ impl Machine<'_> {
         Ok(Some(result))
     }
 
+    #[inline(never)]
     fn switch_loops<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<Result<(), CommandError>, W::Error> {
         let mut enabled = [self.encoders.settings[0].enabled, self.encoders.settings[1].enabled];
         for (axis, letter) in AXIS_LETTERS.into_iter().enumerate() {
@@ -120,11 +137,14 @@ impl Machine<'_> {
                 self.encoders.changed |= 1 << axis;
             }
         }
-        ufmt::uwrite!(out, "echo:Closed loop X:{} Y:{}\n", u8::from(enabled[0]), u8::from(enabled[1]))?;
+        field(out, flash_str!("echo:Closed loop X:"), u8::from(enabled[0]))?;
+        field(out, flash_str!(" Y:"), u8::from(enabled[1]))?;
+        out.write_str("\n")?;
         Ok(Ok(()))
     }
 
     /// `M821`, `M823`, `M824` on the named axes (both reported if none).
+    #[inline(never)]
     fn change_loops<W: uWrite + ?Sized>(&mut self, code: u16, command: &Command, out: &mut W) -> Result<Result<(), CommandError>, W::Error> {
         let named: [bool; AXES] = [command.has(b'X'), command.has(b'Y')];
         let mut updated = self.encoders.settings;
@@ -149,31 +169,33 @@ impl Machine<'_> {
         Ok(Ok(()))
     }
 
+    #[inline(never)]
     fn report_loops<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         for (report, letter) in self.encoders.reports.iter().zip(AXIS_LETTERS) {
             let settings = &self.encoders.settings[usize::from(letter - b'X')];
-            ufmt::uwrite!(
+            echo_axis(out, letter)?;
+            field(out, flash_str!(" loop:"), u8::from(settings.enabled))?;
+            field(out, flash_str!(" enc:"), millimetres(report.measured))?;
+            field(out, flash_str!(" ref:"), millimetres(report.reference))?;
+            field(out, flash_str!(" err:"), millimetres(report.reference.wrapping_sub(report.measured)))?;
+            field(out, flash_str!(" corr:"), report.corrections)?;
+            let counters = &report.counters;
+            field(out, flash_str!(" idx:"), counters.index_accepted)?;
+            field(out, flash_str!(" glitch:"), counters.index_glitches)?;
+            field(out, flash_str!(" bounce:"), counters.index_bounces)?;
+            field(out, flash_str!(" missed:"), counters.index_missed)?;
+            field(out, flash_str!(" bad:"), counters.bad_reads)?;
+            field(
                 out,
-                "echo:{} loop:{} enc:{} ref:{} err:{} corr:{} idx:{} glitch:{} bounce:{} missed:{} bad:{} fault:",
-                char::from(letter),
-                u8::from(settings.enabled),
-                millimetres(report.measured),
-                millimetres(report.reference),
-                millimetres(report.reference.wrapping_sub(report.measured)),
-                report.corrections,
-                report.counters.index_accepted,
-                report.counters.index_glitches,
-                report.counters.index_bounces,
-                report.counters.index_missed,
-                report.counters.bad_reads
+                flash_str!(" fault:"),
+                match report.fault {
+                    None => flash_str!("none\n"),
+                    Some(AxisFault::FollowingError { .. }) => flash_str!("following error\n"),
+                    Some(AxisFault::Encoder(crate::closed_loop::EncoderFault::Stuck)) => flash_str!("encoder stuck\n"),
+                    Some(AxisFault::Encoder(crate::closed_loop::EncoderFault::NoReading)) => flash_str!("no reading\n"),
+                    Some(_) => flash_str!("stopped\n"),
+                },
             )?;
-            out.write_str(match report.fault {
-                None => "none\n",
-                Some(AxisFault::FollowingError { .. }) => "following error\n",
-                Some(AxisFault::Encoder(crate::closed_loop::EncoderFault::Stuck)) => "encoder stuck\n",
-                Some(AxisFault::Encoder(crate::closed_loop::EncoderFault::NoReading)) => "no reading\n",
-                Some(_) => "stopped\n",
-            })?;
         }
         Ok(())
     }
@@ -255,12 +277,15 @@ fn change_settings(code: u16, command: &Command, settings: &mut LoopSettings) ->
     Ok(())
 }
 
+#[inline(never)]
 fn write_settings<W: uWrite + ?Sized>(letter: u8, code: u16, settings: &LoopSettings, out: &mut W) -> Result<(), W::Error> {
-    let letter = char::from(letter);
+    echo_axis(out, letter)?;
     if code == 823 {
         let FollowingErrorLimit { limit, hold_ticks } = settings.following;
         let hold_ms = u32::from(hold_ticks) * 1000 / u32::from(LOOP_HZ);
-        return ufmt::uwrite!(out, "echo:{} following error {} mm for {} s\n", letter, millimetres(limit), Fixed::thousandths(hold_ms as i32));
+        field(out, flash_str!(" following error "), millimetres(limit))?;
+        field(out, flash_str!(" mm for "), Fixed::thousandths(hold_ms as i32))?;
+        return flash_str!(" s\n").write_to(out);
     }
     let (code, kp, gamma) = match settings.strategy {
         Strategy::OpenLoop => (0, 0, 0),
@@ -268,14 +293,15 @@ fn write_settings<W: uWrite + ?Sized>(letter: u8, code: u16, settings: &LoopSett
         Strategy::RobustPid { gamma_milli } => (2, 0, gamma_milli),
         Strategy::ServoPid { .. } => (3, 0, 0),
     };
-    ufmt::uwrite!(out, "echo:{} S{}", letter, code)?;
+    field(out, flash_str!(" S"), code)?;
     if kp != 0 {
-        ufmt::uwrite!(out, " P{}", Fixed::thousandths(i32::from(kp)))?;
+        field(out, flash_str!(" P"), Fixed::thousandths(i32::from(kp)))?;
     }
     if gamma != 0 {
-        ufmt::uwrite!(out, " G{}", Fixed::thousandths(i32::from(gamma)))?;
+        field(out, flash_str!(" G"), Fixed::thousandths(i32::from(gamma)))?;
     }
-    ufmt::uwrite!(out, " theta {} s\n", Fixed::thousandths(i32::from(settings.theta_ms)))
+    field(out, flash_str!(" theta "), Fixed::thousandths(i32::from(settings.theta_ms)))?;
+    flash_str!(" s\n").write_to(out)
 }
 
 #[cfg(test)]
