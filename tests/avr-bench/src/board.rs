@@ -371,6 +371,56 @@ struct Shared {
     /// Inclusive profile: cycles per function entry (word address) with
     /// everything it called, and the shadow call stack that feeds it.
     inclusive: Option<(Vec<u64>, Vec<(u32, u16)>)>,
+    /// SPEC §1's NSE-5310s on the TWI bus, once attached.
+    nse: Option<Nse5310Pair>,
+}
+
+/// Two NSE-5310 linear encoders on the TWI bus (SPEC §1), answering for
+/// X and Y: each reads where its carriage is, i.e. the STEP pulses the
+/// bench counted on its axis (the planner's and the loops' corrections)
+/// times `units_per_step`, plus a slip the test sets (a belt that jumped
+/// teeth). 4096 counts per 2 mm pole pair; the frame is the chip's: D11..D4,
+/// then D3..D0 with OCF set.
+#[derive(Clone, Debug)]
+pub struct Nse5310Pair {
+    /// 7-bit addresses of the X and Y chips.
+    pub addresses: [u8; 2],
+    /// Encoder counts (1/2048 mm) per step of the axis.
+    pub units_per_step: f64,
+    /// +1 when the strip counts up with the axis' STEP edges as the bench
+    /// counts them (by DIR pin level), −1 when the motor is wired inverted
+    /// (the Prusa's Y): the encoder counts up with the firmware's +axis.
+    pub count_sign: [f64; 2],
+    /// Where each carriage is relative to its steps, counts.
+    pub slip_units: [f64; 2],
+    /// A chip that does not answer (unplugged) leaves its address NACKed.
+    pub answering: [bool; 2],
+    /// A jammed carriage: the encoder keeps reading this many counts (± 1
+    /// of noise) whatever the steps do.
+    pub jammed_at: [Option<f64>; 2],
+    /// Completed reads per chip.
+    pub reads: [u64; 2],
+    selected: Option<usize>,
+    byte: u8,
+    twi_input: *mut ffi::avr_irq_t,
+}
+
+impl Nse5310Pair {
+    /// The SPEC §1 printer: X at 0x40, Y at 0x41, 100 steps/mm.
+    pub fn prusa() -> Self {
+        Self {
+            addresses: [0x40, 0x41],
+            units_per_step: 2048.0 / 100.0,
+            count_sign: [1.0, -1.0],
+            slip_units: [0.0; 2],
+            answering: [true; 2],
+            jammed_at: [None; 2],
+            reads: [0; 2],
+            selected: None,
+            byte: 0,
+            twi_input: std::ptr::null_mut(),
+        }
+    }
 }
 
 /// The simulated board.
@@ -502,6 +552,7 @@ impl Board {
                 main_cli_open: None,
                 profile: None,
                 inclusive: None,
+                nse: None,
             });
             shared.next_sample = shared.sample_period_cycles;
             if shared.uart0.is_null() {
@@ -592,6 +643,26 @@ impl Board {
                 halted_reason: None,
             })
         }
+    }
+
+    /// Put two NSE-5310s on the TWI bus (X's and Y's encoders).
+    pub fn attach_nse5310(&mut self, mut pair: Nse5310Pair) {
+        // SAFETY: `avr` is valid; the notify's param is the boxed `Shared`,
+        // which outlives the instance.
+        unsafe {
+            // simavr's ATmega2560 TWI has no name: its ioctl ends in 0, not '0'.
+            let twi = ioctl(b't', b'w', b'i', 0);
+            pair.twi_input = ffi::avr_io_getirq(self.avr, twi, ffi::TWI_IRQ_INPUT as i32);
+            let output = ffi::avr_io_getirq(self.avr, twi, ffi::TWI_IRQ_OUTPUT as i32);
+            self.shared.nse = Some(pair);
+            let param = &mut *self.shared as *mut Shared as *mut c_void;
+            ffi::avr_irq_register_notify(output, Some(on_twi_output), param);
+        }
+    }
+
+    /// The encoders, to read their counters or change a slip.
+    pub fn nse5310(&mut self) -> Option<&mut Nse5310Pair> {
+        self.shared.nse.as_mut()
     }
 
     pub fn cycle(&self) -> u64 {
@@ -1652,3 +1723,46 @@ unsafe extern "C" fn on_plant_tick(
     shared.plant_tick(when);
     when + shared.plant_period_cycles
 }
+
+/// The TWI master's side of a transfer (simavr raises its output IRQ with
+/// a message: condition bits, the address byte, data); a chip answers by
+/// raising the TWI input IRQ at once, as simavr's own I²C devices do.
+unsafe extern "C" fn on_twi_output(_irq: *mut ffi::avr_irq_t, value: u32, param: *mut c_void) {
+    const START: u32 = 1 << 0;
+    const STOP: u32 = 1 << 1;
+    const ACK: u32 = 1 << 3;
+    const READ: u32 = 1 << 5;
+    let shared = &mut *(param as *mut Shared);
+    let positions = [shared.axes[0].position, shared.axes[1].position];
+    let Some(nse) = shared.nse.as_mut() else { return };
+    // avr_twi_msg_t: unused (bits 0-7), msg, addr, data.
+    let msg = (value >> 8) & 0xFF;
+    let addr = ((value >> 16) & 0xFF) as u8;
+    let reply = |msg: u32, addr: u8, data: u8| msg << 8 | u32::from(addr) << 16 | u32::from(data) << 24;
+    if msg & START != 0 {
+        nse.selected = nse.addresses.iter().position(|a| *a == addr >> 1).filter(|i| nse.answering[*i] && addr & 1 == 1);
+        nse.byte = 0;
+        if nse.selected.is_some() {
+            ffi::avr_raise_irq(nse.twi_input, reply(ACK, addr, 1));
+        }
+        return;
+    }
+    if msg & STOP != 0 {
+        nse.selected = None;
+        return;
+    }
+    if msg & READ != 0 {
+        let Some(chip) = nse.selected else { return };
+        // A jammed carriage still vibrates: a count of noise.
+        let noise = (nse.reads[chip] % 2) as f64;
+        let carriage = nse.jammed_at[chip].map(|at| at + noise).unwrap_or(nse.count_sign[chip] * positions[chip] as f64 * nse.units_per_step + nse.slip_units[chip]);
+        let counts = (carriage.round() as i64).rem_euclid(4096) as u16;
+        let data = if nse.byte == 0 { (counts >> 4) as u8 } else { ((counts & 0xF) << 4) as u8 | 0x08 };
+        nse.byte = nse.byte.saturating_add(1);
+        if nse.byte == 2 {
+            nse.reads[chip] += 1;
+        }
+        ffi::avr_raise_irq(nse.twi_input, reply(READ, addr, data));
+    }
+}
+

@@ -6,7 +6,7 @@
 //! `cargo +nightly avr` once per test process when missing or stale.
 
 use avr_bench::bench::{self, exchange, stack_budget, STATIC_RAM_BUDGET_BYTES};
-use avr_bench::board::{Board, Endstop, RampsConfig, CPU_HZ, E0, X, Y, Z};
+use avr_bench::board::{Board, Endstop, Nse5310Pair, RampsConfig, CPU_HZ, E0, X, Y, Z};
 use avr_bench::build::mega2560_elf;
 use avr_bench::elf::ElfInfo;
 use avr_bench::host::{with_checksum, Flow, HostConfig};
@@ -902,4 +902,76 @@ fn the_powder_bed_build_measures_its_feed_platform_travel() {
     let stack = board.stack_peak_sp();
     println!("powder bed: static RAM {ram_static} B, stack peak {stack} B of {} B", stack_budget(ram_static));
     assert!(ram_static <= STATIC_RAM_BUDGET_BYTES && stack > 0 && stack <= stack_budget(ram_static), "{ram_static} {stack}");
+}
+
+/// SPEC §1 on the real ELF (#7): the `encoders` build reads both NSE-5310s
+/// over I²C once the loops are on, puts back the steps a slipped belt lost
+/// (correction steps on the STEP pin), reports them in M822, and stops the
+/// job with an `Error:` line when an encoder stops answering or the
+/// carriage jams; moves then wait for G28.
+#[test]
+fn the_encoder_build_corrects_a_belt_slip_and_stops_the_job_on_a_jam_or_a_silent_encoder() {
+    let mut board = boot_variant("encoders", &["mega2560-ramps/encoders"]);
+    board.attach_nse5310(Nse5310Pair::prusa());
+    // Off at boot: nothing on the bus.
+    board.run_for_ms(50.0);
+    assert_eq!(board.nse5310().unwrap().reads, [0, 0]);
+    assert_eq!(replies(&mut board, &["M820 X1 Y1"]), ["echo:Closed loop X:1 Y:1", "ok"]);
+    board.run_for_ms(400.0);
+    let reads = board.nse5310().unwrap().reads;
+    // 250 Hz: about 100 reads each in 0.4 s.
+    assert!(reads.iter().all(|r| (90..=110).contains(r)), "reads {reads:?}");
+    assert_eq!(replies(&mut board, &["G1 X20 F600"]), ["ok"]);
+    board.run_for_ms(500.0);
+    // The belt slips 0.5 mm (1024 counts, 50 steps) back while X moves.
+    board.nse5310().unwrap().slip_units[0] = -1024.0;
+    assert_eq!(replies(&mut board, &["M400"]), ["ok"]);
+    board.run_for_ms(1000.0);
+    // 2000 planned steps and 50 corrections put the carriage back at 20 mm.
+    let x = board.position(X);
+    assert!((2049..=2051).contains(&x), "X made {x} steps");
+    assert_eq!(board.position(Y), 0);
+    let report = replies(&mut board, &["M822"]);
+    let word = |line: &str, key: &str| -> f64 {
+        let start = line.find(key).unwrap_or_else(|| panic!("{key} in {line}")) + key.len();
+        line[start..].split(' ').next().unwrap().parse().unwrap()
+    };
+    // Within a step (0.01 mm) of 20 mm, after 49–51 correction steps.
+    assert!(report[0].starts_with("echo:X loop:1 ") && report[0].ends_with("fault:none"), "{report:?}");
+    assert!((word(&report[0], "enc:") - 20.0).abs() <= 0.0105, "{report:?}");
+    assert!((49.0..=51.0).contains(&word(&report[0], "corr:")), "{report:?}");
+    assert!(report[1].starts_with("echo:Y loop:1 enc:0.000 ref:0.000 err:0.000 corr:0 "), "{report:?}");
+
+    // Y's encoder unplugged: five failed reads (20 ms) stop the job.
+    board.nse5310().unwrap().answering[1] = false;
+    board.run_for_ms(100.0);
+    assert!(
+        board.host().transcript().contains("Error:Y encoder not responding, job stopped (re-home with G28)"),
+        "{}",
+        board.host().transcript()
+    );
+    assert_eq!(replies(&mut board, &["G1 X30 F600"]), ["Error:Position unknown after a motion stop: home with G28 first", "ok"]);
+    let x_before = board.position(X);
+    board.run_for_ms(300.0);
+    assert_eq!(board.position(X), x_before, "nothing moves after the fault");
+
+    // Plugged in again and re-homed (the bench's endstops trigger at once):
+    // a jammed X carriage stops the next move.
+    board.nse5310().unwrap().answering[1] = true;
+    // Switches 1 mm (X, Y) and 0.1 mm (Z) from where the axes stand; the
+    // Y motor is wired inverted, so its min switch lies on the pin's + side.
+    for (index, axis, offset, below) in [(0, X, -100, true), (2, Y, 100, false), (4, Z, -40, true)] {
+        let at_steps = board.position(axis) + offset;
+        board.set_endstop(index, Some(Endstop { axis, at_steps, is_min: below, pressed_level: true }));
+    }
+    let texts = exchange(&mut board, &["G28"], 30.0).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(texts.last().map(String::as_str), Some("ok"), "{texts:?}");
+    let jam = board.position(X) as f64 * 20.48;
+    board.nse5310().unwrap().jammed_at[0] = Some(jam);
+    let texts = exchange(&mut board, &["G1 X10 F1200"], 5.0).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(texts, ["ok"]);
+    board.run_for_ms(1500.0);
+    let texts = exchange(&mut board, &["M114"], 5.0).unwrap_or_else(|e| panic!("{e}"));
+    let all = board.host().transcript();
+    assert!(all.contains("Error:X following error "), "{all}\n{texts:?}");
 }
