@@ -30,6 +30,10 @@ say "building the Prusa i3 with its bed on a solid-state relay: cargo +nightly a
 CARGO_TARGET_DIR=$target/machines/bed-ssr cargo +nightly avr --features mega2560-ramps/bed-ssr
 bash tests/scripts/size-check.sh "$target/machines/bed-ssr/avr-none/release/mega2560-ramps.elf"
 
+say "building the Prusa i3 with NSE-5310 encoders on X and Y: cargo +nightly avr --features mega2560-ramps/encoders"
+CARGO_TARGET_DIR=$target/machines/encoders cargo +nightly avr --features mega2560-ramps/encoders
+bash tests/scripts/size-check.sh "$target/machines/encoders/avr-none/release/mega2560-ramps.elf"
+
 say "building the Prusa i3 with the RepRapDiscount display: cargo +nightly avr --features mega2560-ramps/display-hd44780"
 CARGO_TARGET_DIR=$target/machines/display cargo +nightly avr --features mega2560-ramps/display-hd44780
 bash tests/scripts/size-check.sh "$target/machines/display/avr-none/release/mega2560-ramps.elf"

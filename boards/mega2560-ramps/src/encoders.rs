@@ -75,6 +75,10 @@ pub fn init(dp: &Peripherals, steps_per_mm: [f32; AXES], max_speed_mm_s: [u16; A
     }
     // PCINT17/18 in PCMSK2 and PCIE2 in PCICR (safe writes: every value is valid).
     dp.EXINT.pcmsk2.modify(|r, w| w.bits(r.bits() | INDEX_BITS[0] | INDEX_BITS[1]));
+    // The levels now (pulled up) are the reference for the first change:
+    // no edge counted at start.
+    // SAFETY: before the pin-change interrupt is enabled.
+    unsafe { *addr_of_mut!(LAST_PINK) = dp.PORTK.pink.read().bits() };
     dp.EXINT.pcicr.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 2) });
     if let Some(loops) = EncoderLoops::new(steps_per_mm, max_speed_mm_s) {
         // SAFETY: called from main before any `with_loops`, with the tick

@@ -243,6 +243,9 @@ pub struct LinearTracker {
     commanded_at_read: i32,
     /// Consecutive reads equal to the one before.
     same_reads: u8,
+    /// The last read crossed the index phase without an edge: it may
+    /// still come with the next read.
+    edge_owed: bool,
     fault: Option<EncoderFault>,
     counters: TrackerCounters,
 }
@@ -259,6 +262,7 @@ impl LinearTracker {
             commanded_at_change: 0,
             commanded_at_read: 0,
             same_reads: 0,
+            edge_owed: false,
             fault: None,
             counters: TrackerCounters {
                 index_accepted: 0,
@@ -351,16 +355,25 @@ impl LinearTracker {
         let phase = i32::from(self.config.index_phase);
         let before = (i32::from(self.last_raw) - phase).rem_euclid(COUNTS_PER_POLE_PAIR);
         let after = before + jump;
-        let crossed = !(1..COUNTS_PER_POLE_PAIR).contains(&after);
+        let crossed = !(1..COUNTS_PER_POLE_PAIR).contains(&after) && jump != 0;
+        // The edges are collected apart from the read (the board takes
+        // them just after its I²C reads): an edge may reach the read after
+        // the one that saw its crossing. One read of grace, then missed.
+        let owed = core::mem::replace(&mut self.edge_owed, false);
         if index_edges == 0 {
-            if crossed && jump != 0 {
+            if owed {
                 self.counters.index_missed = self.counters.index_missed.saturating_add(1);
             }
+            self.edge_owed = crossed;
             return;
         }
         let relative = (i32::from(raw) - phase).rem_euclid(COUNTS_PER_POLE_PAIR);
         let distance = relative.min(COUNTS_PER_POLE_PAIR - relative);
-        if crossed || distance <= i32::from(self.config.index_window) {
+        if crossed || owed || distance <= i32::from(self.config.index_window) {
+            if crossed && owed && index_edges < 2 {
+                // Two crossings, one edge.
+                self.counters.index_missed = self.counters.index_missed.saturating_add(1);
+            }
             self.counters.index_accepted = self.counters.index_accepted.saturating_add(1);
             self.counters.index_bounces = self.counters.index_bounces.saturating_add(u16::from(index_edges - 1));
         } else {
@@ -497,7 +510,21 @@ mod tests {
         let mut t = tracker();
         t.update(4000, 0, 0).unwrap();
         t.update(50, 0, 0).unwrap();
+        // One read of grace for an edge that comes late...
+        assert_eq!(t.counters().index_missed, 0);
+        t.update(60, 0, 0).unwrap();
         assert_eq!(t.counters().index_missed, 1);
+    }
+
+    #[test]
+    fn an_index_edge_one_read_after_its_crossing_is_accepted_not_missed() {
+        let mut t = tracker();
+        t.update(4000, 0, 0).unwrap();
+        t.update(1000, 0, 1096).unwrap();
+        // 1000 counts past the phase: not near it, but the edge was owed.
+        t.update(1300, 1, 1396).unwrap();
+        assert_eq!(t.counters().index_accepted, 1);
+        assert_eq!((t.counters().index_missed, t.counters().index_glitches), (0, 0));
     }
 
     #[test]

@@ -400,9 +400,29 @@ pub struct Nse5310Pair {
     pub jammed_at: [Option<f64>; 2],
     /// Completed reads per chip.
     pub reads: [u64; 2],
+    /// Index pulses sent per chip (pole-pair crossings and injected glitches).
+    pub index_pulses: [u64; 2],
     selected: Option<usize>,
     byte: u8,
     twi_input: *mut ffi::avr_irq_t,
+    /// The Index outputs: A9 (PK1, X) and A10 (PK2, Y).
+    index_irqs: [*mut ffi::avr_irq_t; 2],
+    /// The pole pair each carriage was in at its last step.
+    pole: [i64; 2],
+    /// Cycle until which each Index output stays high.
+    index_high_until: [Option<u64>; 2],
+}
+
+/// How long an Index pulse stays high (the chip's is a few µs; 50 µs lets
+/// the firmware's pin-change handler see it even behind the step interrupt).
+const INDEX_PULSE_CYCLES: u64 = 800;
+
+impl Nse5310Pair {
+    /// Counts the X (0) or Y (1) chip reads now.
+    fn carriage_counts(&self, chip: usize, position: i64) -> f64 {
+        let noise = (self.reads[chip] % 2) as f64;
+        self.jammed_at[chip].map(|at| at + noise).unwrap_or(self.count_sign[chip] * position as f64 * self.units_per_step + self.slip_units[chip])
+    }
 }
 
 impl Nse5310Pair {
@@ -416,6 +436,10 @@ impl Nse5310Pair {
             answering: [true; 2],
             jammed_at: [None; 2],
             reads: [0; 2],
+            index_pulses: [0; 2],
+            index_irqs: [std::ptr::null_mut(); 2],
+            pole: [0; 2],
+            index_high_until: [None; 2],
             selected: None,
             byte: 0,
             twi_input: std::ptr::null_mut(),
@@ -653,6 +677,12 @@ impl Board {
             // simavr's ATmega2560 TWI has no name: its ioctl ends in 0, not '0'.
             let twi = ioctl(b't', b'w', b'i', 0);
             pair.twi_input = ffi::avr_io_getirq(self.avr, twi, ffi::TWI_IRQ_INPUT as i32);
+            pair.index_irqs = [port_irq(self.avr, pin(b'K', 1)), port_irq(self.avr, pin(b'K', 2))];
+            for chip in 0..2 {
+                ffi::avr_raise_irq(pair.index_irqs[chip], 0);
+                let counts = pair.carriage_counts(chip, self.shared.axes[chip].position);
+                pair.pole[chip] = (counts / 4096.0).floor() as i64;
+            }
             let output = ffi::avr_io_getirq(self.avr, twi, ffi::TWI_IRQ_OUTPUT as i32);
             self.shared.nse = Some(pair);
             let param = &mut *self.shared as *mut Shared as *mut c_void;
@@ -663,6 +693,13 @@ impl Board {
     /// The encoders, to read their counters or change a slip.
     pub fn nse5310(&mut self) -> Option<&mut Nse5310Pair> {
         self.shared.nse.as_mut()
+    }
+
+    /// A spurious pulse on chip `chip`'s Index line (the noise the thesis
+    /// saw), wherever the carriage is.
+    pub fn glitch_index(&mut self, chip: usize) {
+        // SAFETY: the shared state outlives the instance; called between runs.
+        unsafe { self.shared.pulse_index(chip) };
     }
 
     pub fn cycle(&self) -> u64 {
@@ -1419,6 +1456,31 @@ impl Shared {
         ffi::avr_raise_irq(self.uart_input_irq, u32::from(byte));
     }
 
+    /// X's or Y's carriage stepped: an Index pulse when it entered another
+    /// pole pair (the chip's Index fires at count 0 of each).
+    unsafe fn index_on_step(&mut self, axis: usize, position: i64) {
+        let Some(nse) = self.nse.as_mut() else { return };
+        if axis >= 2 || nse.jammed_at[axis].is_some() {
+            return;
+        }
+        let pole = (nse.carriage_counts(axis, position) / 4096.0).floor() as i64;
+        if pole != nse.pole[axis] {
+            nse.pole[axis] = pole;
+            self.pulse_index(axis);
+        }
+    }
+
+    /// Raise chip `chip`'s Index output for `INDEX_PULSE_CYCLES`.
+    unsafe fn pulse_index(&mut self, chip: usize) {
+        let now = (*self.avr).cycle;
+        let Some(nse) = self.nse.as_mut() else { return };
+        nse.index_pulses[chip] += 1;
+        ffi::avr_raise_irq(nse.index_irqs[chip], 1);
+        nse.index_high_until[chip] = Some(now + INDEX_PULSE_CYCLES);
+        let param = self as *mut Shared as *mut c_void;
+        ffi::avr_cycle_timer_register(self.avr, INDEX_PULSE_CYCLES, Some(on_index_pulse_end), param);
+    }
+
     unsafe fn update_endstops(&mut self, force: bool) {
         let mut per_port: Vec<(u8, u8, u8)> = Vec::new();
         for (i, p) in ENDSTOP_PINS.iter().enumerate() {
@@ -1619,7 +1681,9 @@ unsafe extern "C" fn on_axis_pin(irq: *mut ffi::avr_irq_t, value: u32, param: *m
             -1
         };
         state.last_rise = now;
+        let position = state.position;
         shared.update_endstops(false);
+        shared.index_on_step(axis, position);
     } else {
         let high = now.saturating_sub(state.last_rise);
         state.min_high_cycles = Some(state.min_high_cycles.map_or(high, |m| m.min(high)));
@@ -1753,9 +1817,7 @@ unsafe extern "C" fn on_twi_output(_irq: *mut ffi::avr_irq_t, value: u32, param:
     }
     if msg & READ != 0 {
         let Some(chip) = nse.selected else { return };
-        // A jammed carriage still vibrates: a count of noise.
-        let noise = (nse.reads[chip] % 2) as f64;
-        let carriage = nse.jammed_at[chip].map(|at| at + noise).unwrap_or(nse.count_sign[chip] * positions[chip] as f64 * nse.units_per_step + nse.slip_units[chip]);
+        let carriage = nse.carriage_counts(chip, positions[chip]);
         let counts = (carriage.round() as i64).rem_euclid(4096) as u16;
         let data = if nse.byte == 0 { (counts >> 4) as u8 } else { ((counts & 0xF) << 4) as u8 | 0x08 };
         nse.byte = nse.byte.saturating_add(1);
@@ -1766,3 +1828,22 @@ unsafe extern "C" fn on_twi_output(_irq: *mut ffi::avr_irq_t, value: u32, param:
     }
 }
 
+
+/// Index pulses end: lower the outputs whose time is up.
+unsafe extern "C" fn on_index_pulse_end(avr: *mut ffi::avr_t, when: ffi::avr_cycle_count_t, param: *mut c_void) -> ffi::avr_cycle_count_t {
+    let shared = &mut *(param as *mut Shared);
+    let _ = avr;
+    if let Some(nse) = shared.nse.as_mut() {
+        for chip in 0..2 {
+            if nse.index_high_until[chip].is_some_and(|until| until <= when) {
+                nse.index_high_until[chip] = None;
+                ffi::avr_raise_irq(nse.index_irqs[chip], 0);
+            }
+        }
+        // A pulse still high (started later) needs another look.
+        if let Some(next) = nse.index_high_until.iter().flatten().min() {
+            return *next;
+        }
+    }
+    0
+}

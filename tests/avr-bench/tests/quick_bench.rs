@@ -941,6 +941,24 @@ fn the_encoder_build_corrects_a_belt_slip_and_stops_the_job_on_a_jam_or_a_silent
     assert!((word(&report[0], "enc:") - 20.0).abs() <= 0.0105, "{report:?}");
     assert!((49.0..=51.0).contains(&word(&report[0], "corr:")), "{report:?}");
     assert!(report[1].starts_with("echo:Y loop:1 enc:0.000 ref:0.000 err:0.000 corr:0 "), "{report:?}");
+    // 20 mm is ten pole pairs: an Index pulse at each crossing (a few
+    // more where the slip and the one-step dither cross a boundary back and
+    // forth); the crossings' pulses are accepted, none is taken as a glitch.
+    let pulses = board.nse5310().unwrap().index_pulses[0];
+    assert!((10..=16).contains(&pulses), "{pulses} pulses");
+    let accepted = word(&report[0], "idx:") as u64;
+    assert!((10..=pulses).contains(&accepted) && report[0].contains(" glitch:0 "), "{pulses} pulses: {report:?}");
+    // Half a pole pair further on (21 mm), a spurious pulse is counted as a
+    // glitch and moves nothing.
+    assert_eq!(replies(&mut board, &["G1 X21 F600", "M400"]), ["ok", "ok"]);
+    board.run_for_ms(200.0);
+    let x = board.position(X);
+    board.glitch_index(0);
+    board.run_for_ms(20.0);
+    let report = replies(&mut board, &["M822"]);
+    assert!(report[0].contains(&format!(" idx:{accepted} glitch:1 ")), "{report:?}");
+    // (At most the loop's one step of dither.)
+    assert!((board.position(X) - x).abs() <= 1, "{x} {report:?}");
 
     // Y's encoder unplugged: five failed reads (20 ms) stop the job.
     board.nse5310().unwrap().answering[1] = false;
