@@ -992,4 +992,11 @@ fn the_encoder_build_corrects_a_belt_slip_and_stops_the_job_on_a_jam_or_a_silent
     let texts = exchange(&mut board, &["M114"], 5.0).unwrap_or_else(|e| panic!("{e}"));
     let all = board.host().transcript();
     assert!(all.contains("Error:X following error "), "{all}\n{texts:?}");
+    // The loops run in the tick with the step interrupt nesting inside:
+    // the stack still fits with its margin.
+    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join("encoders"), &["mega2560-ramps/encoders"], false).unwrap();
+    let ram_static = ElfInfo::read(&elf).unwrap().ram_static_bytes();
+    let stack = board.stack_peak_sp();
+    println!("encoders: static RAM {ram_static} B, stack peak {stack} B of {} B", stack_budget(ram_static));
+    assert!(ram_static <= STATIC_RAM_BUDGET_BYTES && stack > 0 && stack <= stack_budget(ram_static), "{ram_static} {stack}");
 }
