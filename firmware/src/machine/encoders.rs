@@ -115,6 +115,12 @@ impl Machine<'_> {
             Code::M(820) => self.switch_loops(command, out)?,
             Code::M(822) => self.report_loops(out).map(Ok)?,
             Code::M(code @ (821 | 823 | 824)) => self.change_loops(code, command, out)?,
+            // M114 adds the measured position (issue #7: "where there is
+            // one"), then runs as always.
+            Code::M(114) => {
+                self.report_measured(out)?;
+                return Ok(None);
+            }
             _ => return Ok(None),
         };
         Ok(Some(result))
@@ -167,6 +173,28 @@ impl Machine<'_> {
             }
         }
         Ok(Ok(()))
+    }
+
+    /// `echo:Measured X=20.010 Y=0.000` (mm, the `M114` frame: the
+    /// position less the loop's error) for the axes whose loop is on; not
+    /// `X:`, which hosts would take for the position line.
+    #[inline(never)]
+    fn report_measured<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        if !self.encoders.settings.iter().any(|s| s.enabled) {
+            return Ok(());
+        }
+        flash_str!("echo:Measured").write_to(out)?;
+        let position = self.modal.logical_position();
+        for (axis, letter) in AXIS_LETTERS.into_iter().enumerate() {
+            if !self.encoders.settings[axis].enabled {
+                continue;
+            }
+            let report = &self.encoders.reports[axis];
+            let error_um = millimetres(report.reference.wrapping_sub(report.measured)).mantissa;
+            ufmt::uwrite!(out, " {}", char::from(letter))?;
+            field(out, flash_str!("="), Fixed::thousandths(position[axis].saturating_sub(error_um)))?;
+        }
+        out.write_str("\n")
     }
 
     #[inline(never)]
@@ -387,6 +415,21 @@ mod tests {
         let reply = converse(&mut machine, 0, "G1 X10 F600\n");
         assert!(reply.starts_with("Error:") && reply.ends_with("ok\n"), "{reply}");
         assert!(reply.contains("G28"), "{reply}");
+    }
+
+    #[test]
+    fn m114_adds_the_measured_position_of_the_axes_whose_loop_is_on() {
+        let mut machine = new_machine();
+        let plain = converse(&mut machine, 0, "G92 X20 Y5\nM114\n");
+        assert!(!plain.contains("Measured"), "{plain}");
+        converse(&mut machine, 0, "M820 X1\n");
+        let mut x = AxisReport::EMPTY;
+        // 20 counts (0.010 mm) short of the reference.
+        x.reference = 40_960;
+        x.measured = 40_940;
+        machine.set_encoder_reports([x, AxisReport::EMPTY]);
+        let reply = converse(&mut machine, 0, "M114\n");
+        assert!(reply.starts_with("echo:Measured X=19.990\nX:20.00 Y:5.00 Z:0.00 E:0.00 Count X:"), "{reply}");
     }
 
     #[test]

@@ -413,9 +413,12 @@ pub struct Nse5310Pair {
     index_high_until: [Option<u64>; 2],
 }
 
-/// How long an Index pulse stays high (the chip's is a few µs; 50 µs lets
-/// the firmware's pin-change handler see it even behind the step interrupt).
-const INDEX_PULSE_CYCLES: u64 = 800;
+/// How long an Index pulse stays high: 200 µs. The firmware reads the
+/// level in its pin-change handler, so a pulse shorter than its longest
+/// interrupt latency (a segment change of the step interrupt, ≈ 50 µs)
+/// can be missed; the tracker then counts an Index miss, it never
+/// miscounts the position (README, the encoder loops).
+const INDEX_PULSE_CYCLES: u64 = 3200;
 
 impl Nse5310Pair {
     /// Counts the X (0) or Y (1) chip reads now.
