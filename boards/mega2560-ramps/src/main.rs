@@ -35,7 +35,7 @@ use avr_device::atmega2560::Peripherals;
 use firmware::host_link::HostLink;
 use firmware::machine::Machine;
 use firmware::motion::MotionConfig;
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 use firmware::motion::StepperRequest;
 use firmware::rx::{self, RxQueue};
 
@@ -84,7 +84,7 @@ fn main() -> ! {
         let now = clock::millis();
         // The printers' motion: planner, segments, homing (the extrusion
         // line and the powder bed drive their motors themselves).
-        #[cfg(feature = "printer")]
+        #[cfg(feature = "motion")]
         match link.machine.poll_motion(&stepping::status(), now, &mut tx) {
             Ok(StepperRequest::ClearFault) => stepping::clear_fault(),
             Ok(StepperRequest::Halt) => stepping::halt(),

@@ -34,22 +34,22 @@
 
 
 use avr_device::atmega2560::Peripherals;
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 use avr_device::atmega2560::TC1;
 use avr_device::interrupt::{self, CriticalSection};
 use core::ptr::addr_of_mut;
 use firmware::motion::{StepFault, StepFeeder, StepGenerator, StepQueues, StepperConfig};
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 use firmware::motion::StepperStatus;
 
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 /// Extra CPU cycles (16 MHz) the STEP pins stay high after `on_timer` and
 /// the compare update, which alone take ≥ 150 cycles (≈ 10 µs, measured by
 /// the bench's `min_step_pulse_cycles`): the A4988 needs 1 µs, the DRV8825
 /// 1.9 µs, a TB6600 or CL86T 5 µs; raise this for slower drivers.
 pub const STEP_PULSE_MIN_EXTRA_CYCLES: u32 = 0;
 
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 /// Least distance from now to the next compare when a handler ran late:
 /// 4 ticks = 32 cycles, twice what the handler takes from reading TCNT1 to
 /// writing OCR1A. A larger margin gives away time on every late handler
@@ -62,7 +62,7 @@ static mut QUEUES: StepQueues = StepQueues::new();
 /// The generator, touched by the step interrupt and, inside critical
 /// sections, by the main loop.
 static mut GENERATOR: Option<StepGenerator<'static>> = None;
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 /// Last DIR levels written (bit 0 X, 1 Y, 2 Z, 3 E0).
 static mut DIR_LEVELS: u8 = 0;
 
@@ -85,7 +85,7 @@ pub fn init(dp: &Peripherals, config: StepperConfig) -> StepFeeder<'static> {
     timer.tccr1b.write(|w| unsafe { w.bits(1 << 1) });
     timer.ocr1a.write(|w| w.bits(timer.tcnt1.read().bits().wrapping_add(1000)));
     // Without the printers nothing queues steps: no step interrupt.
-    #[cfg(feature = "printer")]
+    #[cfg(feature = "motion")]
     timer.timsk1.write(|w| unsafe { w.bits(1 << 1) });
     feeder
 }
@@ -102,7 +102,7 @@ fn with_generator<R>(_cs: CriticalSection<'_>, f: impl FnOnce(&mut StepGenerator
     unsafe { (*addr_of_mut!(GENERATOR)).as_mut().map(f) }
 }
 
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 /// The generator's status (a copy) for the main loop, in short interrupt
 /// locks: the progress a field or two at a time on every pass, the homing
 /// stops only while the generator is idle, when they are final and the
@@ -128,12 +128,12 @@ pub fn status() -> StepperStatus {
     status
 }
 
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 pub fn clear_fault() {
     interrupt::free(|cs| with_generator(cs, |g| g.clear_fault()));
 }
 
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 /// New stepper configuration (`M120`/`M121`).
 pub fn configure(config: StepperConfig) {
     interrupt::free(|cs| with_generator(cs, |g| g.set_config(config)));
@@ -175,7 +175,7 @@ pub fn halt() {
     interrupt::free(|cs| with_generator(cs, |g| g.halt(StepFault::Stopped)));
 }
 
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 /// Endstops in the generator's layout (bit i motor i min, 4 + i max),
 /// 1 = triggered: RAMPS switches with pull-ups read high when pressed
 /// (Marlin's `*_ENDSTOP_INVERTING false`).
@@ -188,7 +188,7 @@ fn endstops(dp: &Peripherals) -> u8 {
     (e >> 5 & 1) | (j >> 1 & 1) << 1 | (d >> 3 & 1) << 2 | (e >> 4 & 1) << 4 | (j & 1) << 5 | (d >> 2 & 1) << 6
 }
 
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 #[avr_device::interrupt(atmega2560)]
 fn TIMER1_COMPA() {
     // SAFETY: interrupts are off in this handler, so it has the generator
@@ -242,7 +242,7 @@ fn TIMER1_COMPA() {
     }
 }
 
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 /// OCR1A += interval, or a little ahead of now if that is already past.
 /// Returns the counter as read (the time the STEP pins went high, within a
 /// few cycles).
@@ -257,7 +257,7 @@ fn schedule_next(timer: &TC1, interval: u16) -> u16 {
     now
 }
 
-#[cfg(feature = "printer")]
+#[cfg(feature = "motion")]
 /// DIR levels: X PF1, Y PF7, Z PL1, E0 PA6.
 #[inline(always)]
 fn write_dirs(dp: &Peripherals, dir: u8) {
