@@ -40,6 +40,26 @@ pub fn mask_tick(dp: &Peripherals, masked: bool) {
     dp.TC3.timsk3.write(|w| unsafe { w.bits(if masked { 0 } else { 1 << 1 }) });
 }
 
+/// Mask the tick from an interrupt handler; returns the mask to put back
+/// with [`release_tick`] (the main loop may have masked it already).
+#[cfg(feature = "encoders")]
+#[inline(always)]
+pub fn hold_tick() -> u8 {
+    // SAFETY: Timer3's interrupt mask only (OCIE3A is its one interrupt).
+    let timer = unsafe { &*avr_device::atmega2560::TC3::ptr() };
+    let mask = timer.timsk3.read().bits();
+    timer.timsk3.write(|w| unsafe { w.bits(0) });
+    mask
+}
+
+#[cfg(feature = "encoders")]
+#[inline(always)]
+pub fn release_tick(mask: u8) {
+    // SAFETY: as in `hold_tick`.
+    let timer = unsafe { &*avr_device::atmega2560::TC3::ptr() };
+    timer.timsk3.write(|w| unsafe { w.bits(mask) });
+}
+
 /// Milliseconds since boot (wraps after 49 days).
 pub fn millis() -> u32 {
     avr_device::interrupt::free(|cs| MILLIS.borrow(cs).get())

@@ -59,10 +59,13 @@ static mut INDEX: [IndexDebouncer; AXES] = [IndexDebouncer::new(INDEX_MIN_SPACIN
 static mut LAST_PINK: u8 = 0;
 /// A copy of `any_enabled()`, so that the tick's common case is one load.
 static mut ACTIVE: bool = false;
+/// X's and Y's steps/mm (thousandths) the loops were last given (main
+/// loop only): `M92` is followed by the next `service`.
+static mut SCALE_MILLI: [i32; AXES] = [0; AXES];
 
 /// TWI at 400 kHz, the Index pins as pulled-up inputs with their
 /// pin-change interrupt, and the loops for X's and Y's steps/mm and
-/// fastest speed (from the settings; `M92` takes effect after a reset).
+/// fastest speed (from the settings; `service` follows later `M92`s).
 pub fn init(dp: &Peripherals, steps_per_mm: [f32; AXES], max_speed_mm_s: [u16; AXES]) {
     dp.TWI.twbr.write(|w| w.bits(TWBR_400KHZ));
     // SAFETY: prescaler bits 0 (×1); the status bits are read-only.
@@ -80,6 +83,8 @@ pub fn init(dp: &Peripherals, steps_per_mm: [f32; AXES], max_speed_mm_s: [u16; A
     // SAFETY: before the pin-change interrupt is enabled.
     unsafe { *addr_of_mut!(LAST_PINK) = dp.PORTK.pink.read().bits() };
     dp.EXINT.pcicr.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 2) });
+    // SAFETY: main loop only.
+    unsafe { *addr_of_mut!(SCALE_MILLI) = steps_per_mm.map(|spm| (spm * 1000.0) as i32) };
     if let Some(loops) = EncoderLoops::new(steps_per_mm, max_speed_mm_s) {
         // SAFETY: called from main before any `with_loops`, with the tick
         // not looking yet (`ACTIVE` is false until a loop is switched on).
@@ -143,6 +148,17 @@ pub fn service<W: uWrite + ?Sized>(dp: &Peripherals, machine: &mut Machine, refr
     while let Some((axis, settings, gains)) = machine.take_encoder_settings() {
         let steps = crate::stepping::xy_positions();
         with_loops(dp, |loops| loops.configure(axis, &settings, gains, steps[axis]));
+    }
+    // `M92 X… Y…`: the loops' scale follows (and re-zeroes that encoder).
+    for axis in 0..AXES {
+        let milli = machine.settings().steps_per_mm_milli[axis];
+        // SAFETY: main loop only.
+        let known = unsafe { &mut (*addr_of_mut!(SCALE_MILLI))[axis] };
+        if milli != *known {
+            *known = milli;
+            let steps = crate::stepping::xy_positions()[axis];
+            with_loops(dp, |loops| loops.set_steps_per_mm(axis, milli as f32 / 1000.0, steps));
+        }
     }
     if machine.take_encoder_rehome() {
         let steps = crate::stepping::xy_positions();

@@ -91,11 +91,19 @@ fn USART0_RX() {
     let overrun = usart.ucsr0a.read().dor0().bit_is_set();
     let byte = usart.udr0.read().bits();
     usart.ucsr0b.modify(|_, w| w.rxcie0().clear_bit());
+    // With the encoder loops the tick runs ≈ 0.5 ms with interrupts on: it
+    // must not sit on top of this handler while its source is off (two
+    // more bytes and the UART overruns; found on simavr). Its mask is put
+    // back as it was (the main loop masks it too).
+    #[cfg(feature = "encoders")]
+    let tick = crate::clock::hold_tick();
     // SAFETY: from here on only this handler's own source is off; the
     // producer is touched by nothing that can interrupt it.
     unsafe { avr_device::interrupt::enable() };
     receive(byte, overrun);
     avr_device::interrupt::disable();
+    #[cfg(feature = "encoders")]
+    crate::clock::release_tick(tick);
     usart.ucsr0b.modify(|_, w| w.rxcie0().set_bit());
 }
 

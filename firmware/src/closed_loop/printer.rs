@@ -209,6 +209,21 @@ impl EncoderLoops {
         }
     }
 
+    /// `M92` changed an axis' steps/mm: its scale follows, and its encoder
+    /// is re-zeroed on the step position (the reference's scale changed
+    /// under the loop). `false`: no usable scale, nothing changed.
+    pub fn set_steps_per_mm(&mut self, axis: usize, steps_per_mm: f32, steps_now: i32) -> bool {
+        let Some(corrected) = self.axes.get_mut(axis) else { return false };
+        let Some(fresh) = CorrectedAxis::new(steps_per_mm, 0) else { return false };
+        let controller = &corrected.axis.controller;
+        let (gains, following) = (controller.gains(), controller.following_error());
+        corrected.axis.controller = AxisController::new(gains, fresh.axis.controller.output_limit(), following);
+        corrected.axis.scale = fresh.axis.scale;
+        corrected.units_per_step = fresh.units_per_step;
+        Self::rezero(corrected, steps_now);
+        true
+    }
+
     /// Homing finished (or a fault is being cleared): each encoder reads
     /// the step position as its new zero, the loops forget their past.
     pub fn rehome(&mut self, steps_now: [i32; AXES]) {
@@ -489,6 +504,26 @@ mod tests {
         assert_eq!(loops.take_fault(), None);
         let report = loops.report(0);
         assert_eq!((report.reference, report.measured), (205, 205));
+    }
+
+    #[test]
+    fn a_new_steps_per_mm_rescales_the_reference_and_keeps_the_strategy() {
+        let mut loops = prusa();
+        switch_on(&mut loops, Strategy::PFeedforward { kp_milli: 4300 });
+        loops.tick([0, 0], [raw_at(0), raw_at(0)], [0, 0]);
+        // M92 X80: 25.6 counts a step; re-zeroed at 1000 steps.
+        assert!(loops.set_steps_per_mm(0, 80.0, 1000));
+        loops.tick([1000, 0], [raw_at(77), raw_at(0)], [0, 0]);
+        loops.tick([1010, 0], [raw_at(77 + 256), raw_at(0)], [0, 0]);
+        let report = loops.report(0);
+        assert_eq!((report.reference, report.measured, report.fault), (256, 256, None));
+        // 2 mm behind: P at 4.3/s asks 8.6 mm/s = 688 steps/s at 80 steps/mm.
+        for steps in (1010..=1170).step_by(20) {
+            loops.tick([steps, 0], [raw_at(77 + 256 + (steps / 20) % 2), raw_at(0)], [0, 0]);
+        }
+        let emitted: u32 = (0..100).map(|_| u32::from(loops.emit().0 & 1)).sum();
+        assert_eq!(emitted, 68);
+        assert!(!loops.set_steps_per_mm(0, 0.0, 0));
     }
 
     #[test]
