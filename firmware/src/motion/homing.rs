@@ -109,6 +109,19 @@ enum Phase {
     AfterRelease,
 }
 
+/// The kinds of homing move.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Stage {
+    /// Fast, towards the switch, up to the travel, watching it.
+    Approach,
+    /// Fast, away from the switch, not watching (bump homing).
+    BackOff,
+    /// Slow, towards the switch, twice the back-off, watching it.
+    Reapproach,
+    /// Slow, away from the switch until it releases (the arm).
+    Release,
+}
+
 /// The state machine.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Homing {
@@ -184,7 +197,7 @@ impl Homing {
             }
             Phase::AfterBackoff => {
                 self.phase = Phase::AfterReapproach;
-                self.group_move(config, true, |axis| (axis.backoff_steps.saturating_mul(2), axis.slow_rate), true, false)
+                self.group_move(config, Stage::Reapproach)
             }
             Phase::AfterReapproach | Phase::AfterRelease => {
                 if stopped & group != group {
@@ -215,7 +228,7 @@ impl Homing {
             if group != 0 {
                 self.group = group;
                 self.phase = Phase::AfterApproach;
-                return self.group_move(config, true, |axis| (axis.max_travel_steps, axis.fast_rate), true, false);
+                return self.group_move(config, Stage::Approach);
             }
         }
         self.active = false;
@@ -227,23 +240,20 @@ impl Homing {
         let lead = config.axes[self.group.trailing_zeros().min(2) as usize];
         if lead.release {
             self.phase = Phase::AfterRelease;
-            self.group_move(config, false, |axis| (axis.backoff_steps, axis.slow_rate), true, true)
+            self.group_move(config, Stage::Release)
         } else {
             self.phase = Phase::AfterBackoff;
-            self.group_move(config, false, |axis| (axis.backoff_steps, axis.fast_rate), false, false)
+            self.group_move(config, Stage::BackOff)
         }
     }
 
     /// A move of every motor of the group, towards (or away from) its
-    /// switch, watching it or not.
-    fn group_move(
-        &self,
-        config: &HomingConfig,
-        towards: bool,
-        distance_and_rate: impl Fn(&AxisHoming) -> (u32, f32),
-        watch: bool,
-        release: bool,
-    ) -> HomingStep {
+    /// switch, watching it or not. One function for the four kinds of move
+    /// (not generic over a closure, which compiled to four copies).
+    #[inline(never)]
+    fn group_move(&self, config: &HomingConfig, stage: Stage) -> HomingStep {
+        let towards = matches!(stage, Stage::Approach | Stage::Reapproach);
+        let watch = !matches!(stage, Stage::BackOff);
         let mut steps = [0_i32; MOTORS];
         let mut rate = f32::MAX;
         let mut watch_bits = 0;
@@ -251,7 +261,12 @@ impl Homing {
             if self.group & (1 << motor) == 0 {
                 continue;
             }
-            let (distance, axis_rate) = distance_and_rate(axis);
+            let (distance, axis_rate) = match stage {
+                Stage::Approach => (axis.max_travel_steps, axis.fast_rate),
+                Stage::BackOff => (axis.backoff_steps, axis.fast_rate),
+                Stage::Reapproach => (axis.backoff_steps.saturating_mul(2), axis.slow_rate),
+                Stage::Release => (axis.backoff_steps, axis.slow_rate),
+            };
             let distance = distance.min(i32::MAX as u32) as i32;
             let positive = axis.towards_max == towards;
             steps[motor] = if positive { distance } else { -distance };
@@ -260,7 +275,7 @@ impl Homing {
                 watch_bits |= endstop_bit(motor, axis.towards_max);
             }
         }
-        HomingStep::Move { steps, rate, watch: watch_bits, release }
+        HomingStep::Move { steps, rate, watch: watch_bits, release: matches!(stage, Stage::Release) }
     }
 
     fn fail(&mut self, motors: u8) -> HomingStep {
