@@ -98,48 +98,72 @@ pub struct ArcCutter {
     done: u32,
 }
 
+/// How an arc's centre is given, mm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Centre {
+    /// The centre's offset from the start in the plane's two axes (`I J`
+    /// in G17, `K I` in G18, `J K` in G19).
+    Offset([f32; 2]),
+    /// `R`: negative picks the arc over half a turn.
+    Radius(f32),
+}
+
 impl ArcCutter {
     /// `G2`/`G3` with the centre's offset from the start in the plane's two
     /// axes (`I J` in G17, `K I` in G18, `J K` in G19).
     pub fn with_centre(plane: Plane, start: Point, target: Point, offset: [f32; 2], clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
-        let exact_target = target;
-        let (start, target) = (plane.to_frame(start), plane.to_frame(target));
-        let centre = [start[0] + offset[0], start[1] + offset[1]];
-        let radius = sqrt(offset[0] * offset[0] + offset[1] * offset[1]);
-        if !(radius > 0.0) {
-            return Err(ArcError::ZeroRadius);
-        }
-        let (ex, ey) = (target[0] - centre[0], target[1] - centre[1]);
-        let mismatch = (sqrt(ex * ex + ey * ey) - radius).abs();
-        if mismatch > 0.5 || (mismatch > 0.005 && mismatch > 0.001 * radius) {
-            return Err(ArcError::RadiusMismatch);
-        }
-        Ok(Self { centre, radius, start_angle: 0.0, sweep: 0.0, start, target, exact_target, plane, chords: 0, done: 0 }.cut(clockwise, tolerance))
+        Self::new(plane, &start, &target, &Centre::Offset(offset), clockwise, tolerance)
     }
 
     /// `G2`/`G3` with `R`: the centre is where a circle of radius |R|
     /// passes through both points; R < 0 picks the arc over half a turn.
     pub fn with_radius(plane: Plane, start: Point, target: Point, radius: f32, clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
-        let exact_target = target;
-        let (start, target) = (plane.to_frame(start), plane.to_frame(target));
-        let (dx, dy) = (target[0] - start[0], target[1] - start[1]);
-        let chord = sqrt(dx * dx + dy * dy);
-        let r = radius.abs();
-        let half = chord / 2.0;
-        if !(chord > 0.0) || !(r >= half) {
-            return Err(ArcError::RadiusTooSmall);
-        }
-        // Distance from the chord's midpoint to the centre; for an arc of
-        // at most half a turn the centre lies to the right of the chord when
-        // going clockwise, to the left when counter-clockwise.
-        let rise = sqrt((r * r - half * half).max(0.0));
-        let (ux, uy) = (dx / chord, dy / chord);
-        let mut side = if clockwise { 1.0 } else { -1.0 };
-        if radius < 0.0 {
-            side = -side;
-        }
-        let centre = [start[0] + dx / 2.0 + side * rise * uy, start[1] + dy / 2.0 - side * rise * ux];
-        Ok(Self { centre, radius: r, start_angle: 0.0, sweep: 0.0, start, target, exact_target, plane, chords: 0, done: 0 }.cut(clockwise, tolerance))
+        Self::new(plane, &start, &target, &Centre::Radius(radius), clockwise, tolerance)
+    }
+
+    /// Either form: one constructor, so the AVR has one copy of the frame
+    /// changes and of the cutter's construction (a copy per form cost
+    /// flash). Points and centre by reference: arguments must stay within
+    /// 18 bytes (see [`Self::cut`]).
+    pub fn new(plane: Plane, start: &Point, target: &Point, centre: &Centre, clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
+        let exact_target = *target;
+        let (start, target) = (plane.to_frame(*start), plane.to_frame(*target));
+        let (centre, radius) = match *centre {
+            Centre::Offset(offset) => {
+                let centre = [start[0] + offset[0], start[1] + offset[1]];
+                let radius = sqrt(offset[0] * offset[0] + offset[1] * offset[1]);
+                if !(radius > 0.0) {
+                    return Err(ArcError::ZeroRadius);
+                }
+                let (ex, ey) = (target[0] - centre[0], target[1] - centre[1]);
+                let mismatch = (sqrt(ex * ex + ey * ey) - radius).abs();
+                if mismatch > 0.5 || (mismatch > 0.005 && mismatch > 0.001 * radius) {
+                    return Err(ArcError::RadiusMismatch);
+                }
+                (centre, radius)
+            }
+            Centre::Radius(radius) => {
+                let (dx, dy) = (target[0] - start[0], target[1] - start[1]);
+                let chord = sqrt(dx * dx + dy * dy);
+                let r = radius.abs();
+                let half = chord / 2.0;
+                if !(chord > 0.0) || !(r >= half) {
+                    return Err(ArcError::RadiusTooSmall);
+                }
+                // Distance from the chord's midpoint to the centre; for an
+                // arc of at most half a turn the centre lies to the right of
+                // the chord when going clockwise, to the left when
+                // counter-clockwise.
+                let rise = sqrt((r * r - half * half).max(0.0));
+                let (ux, uy) = (dx / chord, dy / chord);
+                let mut side = if clockwise { 1.0 } else { -1.0 };
+                if radius < 0.0 {
+                    side = -side;
+                }
+                ([start[0] + dx / 2.0 + side * rise * uy, start[1] + dy / 2.0 - side * rise * ux], r)
+            }
+        };
+        Ok(Self { centre, radius, start_angle: 0.0, sweep: 0.0, start, target, exact_target, plane, chords: 0, done: 0 }.cut(clockwise, tolerance))
     }
 
     /// The sweep and the number of chords of an arc whose centre, radius

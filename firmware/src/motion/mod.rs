@@ -114,7 +114,7 @@ pub mod stepper;
 #[cfg(test)]
 mod tests;
 
-use arc::{ArcCutter, ArcError};
+use arc::{ArcCutter, ArcError, Centre};
 pub use arc::Plane;
 use homing::{AxisHoming, Homing, HomingConfig, HomingStep};
 #[cfg(feature = "arm")]
@@ -676,12 +676,11 @@ impl<'q> Motion<'q> {
         self.check_accepting()?;
         self.check_target(target)?;
         let tolerance = self.config.arc_tolerance;
-        let arc = match centre {
-            ArcCentre::Offset([i, j]) => {
-                ArcCutter::with_centre(plane, self.position, target, [i as f32 / 1000.0, j as f32 / 1000.0], clockwise, tolerance)
-            }
-            ArcCentre::Radius(r) => ArcCutter::with_radius(plane, self.position, target, r as f32 / 1000.0, clockwise, tolerance),
-        }
+        let centre = match centre {
+            ArcCentre::Offset([i, j]) => Centre::Offset([i as f32 / 1000.0, j as f32 / 1000.0]),
+            ArcCentre::Radius(r) => Centre::Radius(r as f32 / 1000.0),
+        };
+        let arc = ArcCutter::new(plane, &self.position, &target, &centre, clockwise, tolerance)
         .map_err(MotionError::Arc)?;
         let feed = feed_um_per_s as f32 / 1000.0 * self.config.feed_factor;
         self.pending = Pending::Arc { arc, cut: None, feed };

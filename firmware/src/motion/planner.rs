@@ -95,6 +95,10 @@ pub struct PlannerMove {
     pub watch_release: bool,
 }
 
+/// [`Planner::push`] found the ring full.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Full;
+
 /// Per-motor limits in steps: rate (steps/s) and acceleration (steps/s²).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MotorLimits {
@@ -267,11 +271,12 @@ impl Planner {
         })
     }
 
-    /// Add a move. `Err` gives it back when the ring is full; a move without
+    /// Add a move. `Err` when the ring is full (the caller still has the
+    /// move: handing it back was a 40-byte copy on the AVR); a move without
     /// steps is accepted and dropped.
-    pub fn push(&mut self, motion: &PlannerMove, limits: &MotorLimits) -> Result<(), PlannerMove> {
+    pub fn push(&mut self, motion: &PlannerMove, limits: &MotorLimits) -> Result<(), Full> {
         if self.is_full() {
-            return Err(*motion);
+            return Err(Full);
         }
         let mut block = Block { watch: motion.watch, watch_release: motion.watch_release, ..Block::default() };
         // A motor covers steps/L steps per mm of path: the path's speed and
