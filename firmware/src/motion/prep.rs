@@ -279,6 +279,9 @@ impl Prep {
         queued
     }
 
+    // Out of line: inlined into `fill` (and so into `Motion::poll`) the
+    // float code spilled more registers, 172 bytes more on the AVR.
+    #[inline(never)]
     fn next_segment(&mut self, exit_speed_sqr: f32, starts_block: bool) -> Segment {
         let profile = Profile::new(
             self.speed,
