@@ -386,7 +386,11 @@ struct LineCut {
 }
 
 impl LineCut {
-    fn new(start: [f32; MOTORS], target: [f32; MOTORS], config: &MotionConfig) -> Self {
+    /// A line with no pieces left (an arc's, before its first chord).
+    const DONE: Self = Self { start: [0.0; MOTORS], delta: [0.0; MOTORS], target: [0.0; MOTORS], pieces: 0, done: 0 };
+
+    /// Points by reference: by value the AVR copied each (16 bytes) first.
+    fn new(start: &[f32; MOTORS], target: &[f32; MOTORS], config: &MotionConfig) -> Self {
         let mut delta = [0.0; MOTORS];
         for axis in 0..MOTORS {
             delta[axis] = target[axis] - start[axis];
@@ -407,27 +411,26 @@ impl LineCut {
         }
         pieces = pieces.max(math::abs(delta[E]) * spu[E] * config.flow_factor * PER_HEADROOM);
         let pieces = (pieces.min(1.0e7) as u32).saturating_add(1);
-        Self { start, delta, target, pieces, done: 0 }
+        Self { start: *start, delta, target: *target, pieces, done: 0 }
     }
-}
 
-impl Iterator for LineCut {
-    type Item = [f32; MOTORS];
-
-    fn next(&mut self) -> Option<[f32; MOTORS]> {
+    /// The next piece's end into `point`; `false` once the line is done.
+    /// (Not an `Iterator`: an `Option<[f32; 4]>` went back through a copy
+    /// on the AVR.)
+    fn next_into(&mut self, point: &mut [f32; MOTORS]) -> bool {
         if self.done >= self.pieces {
-            return None;
+            return false;
         }
         self.done += 1;
         if self.done == self.pieces {
-            return Some(self.target);
+            *point = self.target;
+            return true;
         }
         let fraction = self.done as f32 / self.pieces as f32;
-        let mut point = [0.0; MOTORS];
         for axis in 0..MOTORS {
             point[axis] = self.start[axis] + self.delta[axis] * fraction;
         }
-        Some(point)
+        true
     }
 }
 
@@ -436,7 +439,8 @@ impl Iterator for LineCut {
 enum Pending {
     Nothing,
     Line { cut: LineCut, feed: f32 },
-    Arc { arc: ArcCutter, cut: Option<LineCut>, feed: f32 },
+    /// `cut`: the chord being cut (`LineCut::DONE` before the first).
+    Arc { arc: ArcCutter, cut: LineCut, feed: f32 },
 }
 
 /// The main loop's motion state.
@@ -664,7 +668,7 @@ impl<'q> Motion<'q> {
         self.check_accepting()?;
         self.check_target(target)?;
         let feed = feed_um_per_s as f32 / 1000.0 * self.config.feed_factor;
-        self.pending = Pending::Line { cut: LineCut::new(self.position, target, &self.config), feed };
+        self.pending = Pending::Line { cut: LineCut::new(&self.position, &target, &self.config), feed };
         self.feed_planner();
         Ok(())
     }
@@ -683,7 +687,7 @@ impl<'q> Motion<'q> {
         let arc = ArcCutter::new(plane, &self.position, &target, &centre, clockwise, tolerance)
         .map_err(MotionError::Arc)?;
         let feed = feed_um_per_s as f32 / 1000.0 * self.config.feed_factor;
-        self.pending = Pending::Arc { arc, cut: None, feed };
+        self.pending = Pending::Arc { arc, cut: LineCut::DONE, feed };
         self.feed_planner();
         Ok(())
     }
@@ -785,36 +789,31 @@ impl<'q> Motion<'q> {
 
     /// Cut pending lines and arcs into the planner while it has room.
     fn feed_planner(&mut self) {
+        let mut point = [0.0; MOTORS];
         while !self.planner.is_full() {
-            let (point, feed) = match &mut self.pending {
+            let feed = match &mut self.pending {
                 Pending::Nothing => return,
-                Pending::Line { cut, feed } => match cut.next() {
-                    Some(point) => (point, *feed),
-                    None => {
+                Pending::Line { cut, feed } => {
+                    if !cut.next_into(&mut point) {
                         self.pending = Pending::Nothing;
                         return;
                     }
-                },
+                    *feed
+                }
                 Pending::Arc { arc, cut, feed } => {
-                    let feed = *feed;
-                    match cut.as_mut().and_then(|c| c.next()) {
-                        Some(point) => (point, feed),
-                        None => match arc.next() {
-                            Some(chord_end) => {
-                                let mut chord = LineCut::new(self.position, chord_end, &self.config);
-                                let point = chord.next().unwrap_or(chord_end);
-                                *cut = Some(chord);
-                                (point, feed)
-                            }
-                            None => {
-                                self.pending = Pending::Nothing;
-                                return;
-                            }
-                        },
+                    if !cut.next_into(&mut point) {
+                        let Some(chord_end) = arc.next() else {
+                            self.pending = Pending::Nothing;
+                            return;
+                        };
+                        *cut = LineCut::new(&self.position, &chord_end, &self.config);
+                        // A new cut has at least one piece: this sets `point`.
+                        cut.next_into(&mut point);
                     }
+                    *feed
                 }
             };
-            if let Err(error) = self.queue_piece(point, feed) {
+            if let Err(error) = self.queue_piece(&point, feed) {
                 self.error = Some(error);
                 self.pending = Pending::Nothing;
                 return;
@@ -824,7 +823,7 @@ impl<'q> Motion<'q> {
 
     /// One straight piece to the planner (the planner has room).
     #[inline(never)]
-    fn queue_piece(&mut self, target: [f32; MOTORS], feed: f32) -> Result<(), MotionError> {
+    fn queue_piece(&mut self, target: &[f32; MOTORS], feed: f32) -> Result<(), MotionError> {
         let spu = self.config.steps_per_unit();
         let motors = self.config.kinematics.inverse([target[0], target[1], target[2]]).map_err(MotionError::Unreachable)?;
         let linear = to_steps(motors, [spu[0], spu[1], spu[2]]);
@@ -856,7 +855,7 @@ impl<'q> Motion<'q> {
         self.motor_steps[..LINEAR_AXES].copy_from_slice(&linear);
         self.motor_steps[E] += e_steps;
         self.e_remainder = e_exact - e_steps as f32;
-        self.position = target;
+        self.position = *target;
         Ok(())
     }
 
