@@ -217,6 +217,8 @@ impl Prep {
 
     /// Forget the block under way (after a fault or an abandoned homing
     /// move; the interrupt drops what was queued).
+    // Out of line: it has several callers (24 bytes).
+    #[inline(never)]
     pub fn reset(&mut self) {
         self.active = false;
         self.events_left = 0;
