@@ -300,17 +300,17 @@ impl MotionConfig {
             // The arm's joints have no steps/mm: pulses per degree come from
             // the gearbox and the driver.
             if !(is_arm && (motor == 1 || motor == 2)) {
-                self.steps_per_mm[motor] = settings.steps_per_mm_milli[motor] as f32 / 1000.0;
+                self.steps_per_mm[motor] = milli(settings.steps_per_mm_milli[motor]);
             }
-            self.max_feed[motor] = settings.max_feed_um_per_s[motor] as f32 / 1000.0;
-            self.max_accel[motor] = settings.max_accel_um_per_s2[motor] as f32 / 1000.0;
+            self.max_feed[motor] = milli(settings.max_feed_um_per_s[motor]);
+            self.max_accel[motor] = milli(settings.max_accel_um_per_s2[motor]);
         }
-        self.print_accel = settings.print_accel_um_per_s2 as f32 / 1000.0;
-        self.retract_accel = settings.retract_accel_um_per_s2 as f32 / 1000.0;
-        self.travel_accel = settings.travel_accel_um_per_s2 as f32 / 1000.0;
-        self.junction_deviation = settings.junction_deviation_um as f32 / 1000.0;
-        self.feed_factor = settings.feed_percent as f32 / 100.0;
-        self.flow_factor = settings.flow_percent as f32 / 100.0;
+        self.print_accel = milli(settings.print_accel_um_per_s2);
+        self.retract_accel = milli(settings.retract_accel_um_per_s2);
+        self.travel_accel = milli(settings.travel_accel_um_per_s2);
+        self.junction_deviation = milli(settings.junction_deviation_um);
+        self.feed_factor = centi(settings.feed_percent);
+        self.flow_factor = centi(settings.flow_percent);
     }
 
     /// Steps per motor unit of every motor. Out of line: inlined into its
@@ -593,7 +593,7 @@ impl<'q> Motion<'q> {
     /// Declare E's position (µm) without moving it: `G92 E`-like, used
     /// when a cold extrusion is dropped from a move.
     pub fn set_extruder_position_um(&mut self, um: i32) {
-        let mm = um as f32 / 1000.0;
+        let mm = milli(um);
         self.position[E] = mm;
         self.motor_steps[E] = round_to_i32(mm * self.config.steps_per_unit()[E]);
         self.e_remainder = 0.0;
@@ -666,10 +666,10 @@ impl<'q> Motion<'q> {
     /// `G0`/`G1` to a machine position (µm) at a feed rate (µm/s).
     #[inline(never)]
     pub fn line_to(&mut self, target_um: [i32; MOTORS], feed_um_per_s: i32) -> Result<(), MotionError> {
-        let target = target_um.map(|um| um as f32 / 1000.0);
+        let target = target_um.map(milli);
         self.check_accepting()?;
         self.check_target(target)?;
-        let feed = feed_um_per_s as f32 / 1000.0 * self.config.feed_factor;
+        let feed = milli(feed_um_per_s) * self.config.feed_factor;
         self.pending = Pending::Line { cut: LineCut::new(&self.position, &target, &self.config), feed };
         self.feed_planner();
         Ok(())
@@ -678,17 +678,17 @@ impl<'q> Motion<'q> {
     /// `G2` (clockwise) / `G3` to a machine position (µm) around a centre.
     #[inline(never)]
     pub fn arc_to(&mut self, plane: Plane, target_um: [i32; MOTORS], centre: ArcCentre, clockwise: bool, feed_um_per_s: i32) -> Result<(), MotionError> {
-        let target = target_um.map(|um| um as f32 / 1000.0);
+        let target = target_um.map(milli);
         self.check_accepting()?;
         self.check_target(target)?;
         let tolerance = self.config.arc_tolerance;
         let centre = match centre {
-            ArcCentre::Offset([i, j]) => Centre::Offset([i as f32 / 1000.0, j as f32 / 1000.0]),
-            ArcCentre::Radius(r) => Centre::Radius(r as f32 / 1000.0),
+            ArcCentre::Offset([i, j]) => Centre::Offset([milli(i), milli(j)]),
+            ArcCentre::Radius(r) => Centre::Radius(milli(r)),
         };
         let arc = ArcCutter::new(plane, &self.position, &target, &centre, clockwise, tolerance)
         .map_err(MotionError::Arc)?;
-        let feed = feed_um_per_s as f32 / 1000.0 * self.config.feed_factor;
+        let feed = milli(feed_um_per_s) * self.config.feed_factor;
         self.pending = Pending::Arc { arc, cut: LineCut::DONE, feed };
         self.feed_planner();
         Ok(())
@@ -966,6 +966,19 @@ impl<'q> Motion<'q> {
             self.position[..LINEAR_AXES].copy_from_slice(&point);
         }
     }
+}
+
+/// Thousandths (µm, milli-units) to units as f32. Out of line: a
+/// conversion and a division inline at each of a dozen sites cost flash.
+#[inline(never)]
+fn milli(value: i32) -> f32 {
+    value as f32 / 1000.0
+}
+
+/// Hundredths (percent) to a factor.
+#[inline(never)]
+fn centi(value: i32) -> f32 {
+    value as f32 / 100.0
 }
 
 /// The executor's endstop layout (bit 0 X_MIN, 1 X_MAX, 2 Y_MIN, 3 Y_MAX,
