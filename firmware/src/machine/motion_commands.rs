@@ -189,9 +189,10 @@ impl<'q> Machine<'q> {
         if let Some(feed) = feed {
             self.modal.feed_um_per_s = feed;
         }
-        let target = self.prepare_target(target, out)?;
-        let result = self.motion.line_to(target, self.modal.feed_um_per_s);
-        self.commit_move(target, result)
+        let mut target = target;
+        self.prepare_target(&mut target, out)?;
+        let result = self.motion.line_to(&target, self.modal.feed_um_per_s);
+        self.commit_move(&target, result)
     }
 
     #[cfg(feature = "printer")]
@@ -240,21 +241,23 @@ impl<'q> Machine<'q> {
         if let Some(feed) = feed {
             self.modal.feed_um_per_s = feed;
         }
-        let target = self.prepare_target(target, out)?;
+        let mut target = target;
+        self.prepare_target(&mut target, out)?;
         let result = self
             .motion
-            .arc_to(plane, target, centre, clockwise, self.modal.feed_um_per_s);
-        self.commit_move(target, result)
+            .arc_to(plane, &target, centre, clockwise, self.modal.feed_um_per_s);
+        self.commit_move(&target, result)
     }
 
     #[cfg(feature = "printer")]
     /// Checks shared by lines and arcs, and the Marlin adjustments of the
-    /// target (soft-limit clamp, cold extrusion).
+    /// target (soft-limit clamp, cold extrusion), in place (by value the
+    /// AVR copied the target in and out).
     fn prepare_target<W: uWrite + ?Sized>(
         &mut self,
-        mut target: [i32; AXES],
+        target: &mut [i32; AXES],
         out: &mut W,
-    ) -> Result<[i32; AXES], CommandError> {
+    ) -> Result<(), CommandError> {
         if self.position_lost {
             return Err(CommandError::PositionLost);
         }
@@ -283,18 +286,18 @@ impl<'q> Machine<'q> {
             // position, so the next absolute E does not catch it up.
             self.motion.set_extruder_position_um(target[E]);
         }
-        Ok(target)
+        Ok(())
     }
 
     #[cfg(feature = "printer")]
     fn commit_move(
         &mut self,
-        target: [i32; AXES],
+        target: &[i32; AXES],
         result: Result<(), MotionError>,
     ) -> Result<(), CommandError> {
         match result {
             Ok(()) => {
-                self.modal.position = target;
+                self.modal.position = *target;
                 self.steppers_enabled = true;
                 Ok(())
             }

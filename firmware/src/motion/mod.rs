@@ -74,14 +74,14 @@
 //! **Executor.**
 //! - `G0`/`G1`: when [`Motion::ready`] is false, keep the command queued
 //!   and try again next pass (Marlin blocks the same way). Else
-//!   `motion.line_to(target_um, feed_um_per_s)` with the *machine*
+//!   `motion.line_to(&target_um, feed_um_per_s)` with the *machine*
 //!   coordinates of the target (X, Y, Z, E in µm, `G92` offsets removed) and
 //!   the modal feed in µm/s. `M220`/`M221` are applied inside from the
 //!   settings given to [`Motion::apply_settings`], as are `M92`, `M201`,
 //!   `M203`, `M204`, `M205 J`; they apply to moves accepted after the
 //!   change (blocks already planned keep their speeds). Errors (`Unreachable`, `OutsideSoftLimits`,
 //!   `NotHomed`) mean nothing moved: answer `Error:` and keep the position.
-//! - `G2`/`G3`: `motion.arc_to(plane, target_um, ArcCentre::Offset([i, j]) or
+//! - `G2`/`G3`: `motion.arc_to(plane, &target_um, ArcCentre::Offset([i, j]) or
 //!   ArcCentre::Radius(r), clockwise, feed_um_per_s)`, all µm.
 //! - `G28 [X][Y][Z]`: `motion.home(mask)` (bit i: motor i; 0 = all), then
 //!   wait (busy keep-alive) until `!motion.is_homing()`; `take_error()` tells
@@ -665,7 +665,7 @@ impl<'q> Motion<'q> {
 
     /// `G0`/`G1` to a machine position (µm) at a feed rate (µm/s).
     #[inline(never)]
-    pub fn line_to(&mut self, target_um: [i32; MOTORS], feed_um_per_s: i32) -> Result<(), MotionError> {
+    pub fn line_to(&mut self, target_um: &[i32; MOTORS], feed_um_per_s: i32) -> Result<(), MotionError> {
         let target = target_um.map(milli);
         self.check_accepting()?;
         self.check_target(target)?;
@@ -677,7 +677,7 @@ impl<'q> Motion<'q> {
 
     /// `G2` (clockwise) / `G3` to a machine position (µm) around a centre.
     #[inline(never)]
-    pub fn arc_to(&mut self, plane: Plane, target_um: [i32; MOTORS], centre: ArcCentre, clockwise: bool, feed_um_per_s: i32) -> Result<(), MotionError> {
+    pub fn arc_to(&mut self, plane: Plane, target_um: &[i32; MOTORS], centre: ArcCentre, clockwise: bool, feed_um_per_s: i32) -> Result<(), MotionError> {
         let target = target_um.map(milli);
         self.check_accepting()?;
         self.check_target(target)?;
