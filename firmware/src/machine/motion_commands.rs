@@ -32,7 +32,7 @@ use crate::gcode::Code;
 #[cfg(feature = "printer")]
 use crate::motion::kinematics::MachineKinematics;
 #[cfg(feature = "printer")]
-use crate::motion::{ArcCentre, E};
+use crate::motion::{math::to_i32, ArcCentre, E};
 use crate::motion::{MotionError, StepFault, StepperRequest, StepperStatus};
 use ufmt::uWrite;
 
@@ -273,8 +273,8 @@ impl<'q> Machine<'q> {
             for (axis, value) in target.iter_mut().enumerate().take(3) {
                 if homed & (1 << axis) != 0 {
                     let (min, max) = (
-                        (limits.min[axis] * 1000.0) as i32,
-                        (limits.max[axis] * 1000.0) as i32,
+                        to_i32(limits.min[axis] * 1000.0),
+                        to_i32(limits.max[axis] * 1000.0),
                     );
                     *value = (*value).clamp(min, max);
                 }

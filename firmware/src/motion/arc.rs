@@ -25,7 +25,7 @@
 //! and a negative R asks for the arc longer than half a turn. I/J with the
 //! end point on the start point is a full circle.
 
-use super::math::{atan2, sin_cos, sqrt, PI};
+use super::math::{atan2, sin_cos, sqrt, to_u32, PI};
 
 /// X, Y, Z, E in mm.
 pub type Point = [f32; 4];
@@ -187,7 +187,7 @@ impl ArcCutter {
         let chord = 2.0 * sqrt(tolerance * (2.0 * radius - tolerance));
         let chords = (sweep.abs() * radius / chord).max(1.0);
         // Round up, saturating far beyond any real arc.
-        let chords = (chords.min(1.0e6) as u32 + 1).min(1_000_000);
+        let chords = (to_u32(chords.min(1.0e6)) + 1).min(1_000_000);
         self.start_angle = start_angle;
         self.sweep = sweep;
         self.chords = chords;

@@ -173,7 +173,21 @@ pub fn round_to_i32(value: f32) -> i32 {
     }
     let rounded = if value >= 0.0 { value + 0.5 } else { value - 0.5 };
     // `as` saturates and truncates towards zero.
-    rounded as i32
+    to_i32(rounded)
+}
+
+/// `value as u32` (truncating, saturating, NaN → 0). Out of line: inline,
+/// each saturating conversion is four soft-float calls on the AVR.
+#[inline(never)]
+pub fn to_u32(value: f32) -> u32 {
+    value as u32
+}
+
+/// `value as i32` (truncating, saturating, NaN → 0), out of line as
+/// [`to_u32`].
+#[inline(never)]
+pub fn to_i32(value: f32) -> i32 {
+    value as i32
 }
 
 /// |value| without `std`.

@@ -412,7 +412,7 @@ impl LineCut {
             pieces = pieces.max(math::abs(delta[axis]) * config.steps_per_mm[axis].max(spu[axis]) * PER_HEADROOM);
         }
         pieces = pieces.max(math::abs(delta[E]) * spu[E] * config.flow_factor * PER_HEADROOM);
-        let pieces = (pieces.min(1.0e7) as u32).saturating_add(1);
+        let pieces = math::to_u32(pieces.min(1.0e7)).saturating_add(1);
         Self { start: *start, delta, target: *target, pieces, done: 0 }
     }
 
@@ -557,7 +557,7 @@ impl<'q> Motion<'q> {
         self.limits = self.config.motor_limits();
         self.planner.junction_deviation = self.config.junction_deviation;
         let min_ticks = (stepper::TIMER_HZ as f32 / self.config.max_step_rate).max(4.0);
-        self.prep.min_interval_q8 = (min_ticks * 256.0) as u32;
+        self.prep.min_interval_q8 = math::to_u32(min_ticks * 256.0);
     }
 
     /// New settings (`M92`, `M201`, `M203`, `M204`, `M205`, `M220`, `M221`).

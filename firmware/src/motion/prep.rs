@@ -34,7 +34,7 @@
 //! into the planner (`entry_speed_sqr`, `millimetres`), which is what lets
 //! the look-ahead raise the exit speed of a block already under way.
 
-use super::math::sqrt;
+use super::math::{sqrt, to_i32, to_u32};
 use super::planner::Planner;
 use super::stepper::{Segment, StepBlock, StepFeeder, TIMER_HZ};
 
@@ -182,7 +182,9 @@ impl Profile {
         if target > boundary {
             target = boundary + 0.5;
         }
-        let events = if target >= left as f32 { left } else { target as u16 };
+        // Below `left` here, so within u16 (NaN and negatives give 0, as
+        // `as u16` would).
+        let events = if target >= left as f32 { left } else { to_u32(target) as u16 };
         events.clamp(1, left.max(1))
     }
 }
@@ -313,7 +315,8 @@ impl Prep {
         let total_q8 = total_q8.max(min * k);
         if events == 1 {
             let interval = total_q8 + 0.5;
-            return (interval as u32, 0, (interval as u32) as f32);
+            let interval = to_u32(interval);
+            return (interval, 0, interval as f32);
         }
         let pairs = k * (k - 1.0) * 0.5;
         // One division: 1/k = ((k − 1)/2) · (1/pairs).
@@ -327,7 +330,7 @@ impl Prep {
             interval = round_f32(total_q8 * inv_k).max(min);
         }
         let actual = k * interval + add * pairs;
-        (interval as u32, add as i32, actual)
+        (to_u32(interval), to_i32(add), actual)
     }
 }
 
