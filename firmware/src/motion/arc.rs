@@ -25,7 +25,7 @@
 //! and a negative R asks for the arc longer than half a turn. I/J with the
 //! end point on the start point is a full circle.
 
-use super::math::{atan2, sin_cos, sqrt, to_u32, PI};
+use super::math::{atan2, clamp, sin_cos, sqrt, to_u32, PI};
 
 /// X, Y, Z, E in mm.
 pub type Point = [f32; 4];
@@ -183,7 +183,7 @@ impl ArcCutter {
         } else if sweep <= EPSILON {
             sweep += 2.0 * PI;
         }
-        let tolerance = tolerance.clamp(1.0e-4, radius);
+        let tolerance = clamp(tolerance, 1.0e-4, radius);
         let chord = 2.0 * sqrt(tolerance * (2.0 * radius - tolerance));
         let chords = (sweep.abs() * radius / chord).max(1.0);
         // Round up, saturating far beyond any real arc.

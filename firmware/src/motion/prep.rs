@@ -34,7 +34,7 @@
 //! into the planner (`entry_speed_sqr`, `millimetres`), which is what lets
 //! the look-ahead raise the exit speed of a block already under way.
 
-use super::math::{sqrt, to_i32, to_u32};
+use super::math::{clamp, sqrt, to_i32, to_u32};
 use super::planner::Planner;
 use super::stepper::{Segment, StepBlock, StepFeeder, TIMER_HZ};
 
@@ -126,7 +126,7 @@ impl Profile {
         // to the exit (likewise), decelerate throughout.
         let peak_sqr = ((2.0 * accel * distance + v0_sqr + exit_sqr) * 0.5).max(v0_sqr);
         let peak = sqrt(peak_sqr).max(start_speed);
-        let accel_end = ((peak_sqr - v0_sqr) * half_inv_a).clamp(0.0, distance);
+        let accel_end = clamp((peak_sqr - v0_sqr) * half_inv_a, 0.0, distance);
         let inv_peak = if peak > 0.0 { 1.0 / peak } else { 0.0 };
         Self { start_speed, accel, inv_accel, inv_peak, peak, accel_end, decel_start: accel_end }
     }
