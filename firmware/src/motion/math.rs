@@ -39,6 +39,9 @@ const SQRT_3: f32 = 1.732_050_8;
 ///
 /// One guess from the exponent bits, then four Newton steps on 1/√x, which
 /// need only multiplications (a soft-float division costs several of them).
+// Out of line: the zero/negative test inlined at every call cost 284
+// bytes on the AVR.
+#[inline(never)]
 pub fn sqrt(value: f32) -> f32 {
     if !(value > 0.0) {
         return 0.0;
@@ -205,13 +208,10 @@ pub fn clamp(value: f32, min: f32, max: f32) -> f32 {
     value
 }
 
-/// |value| without `std`.
+/// |value| without `std`: the sign bit cleared (`f32::abs` of `core`),
+/// no soft-float comparison. (−0.0 gives +0.0, which compares equal.)
 pub fn abs(value: f32) -> f32 {
-    if value < 0.0 {
-        -value
-    } else {
-        value
-    }
+    value.abs()
 }
 
 /// Degrees to radians.
