@@ -127,7 +127,7 @@ impl Profile {
         let peak_sqr = ((2.0 * accel * distance + v0_sqr + exit_sqr) * 0.5).max(v0_sqr);
         let peak = sqrt(peak_sqr).max(start_speed);
         let accel_end = clamp((peak_sqr - v0_sqr) * half_inv_a, 0.0, distance);
-        let inv_peak = if peak > 0.0 { 1.0 / peak } else { 0.0 };
+        let inv_peak = inverse(peak);
         Self { start_speed, accel, inv_accel, inv_peak, peak, accel_end, decel_start: accel_end }
     }
 
@@ -257,9 +257,9 @@ impl Prep {
                 self.mm_per_event = block.millimetres / block.events as f32;
                 self.speed = sqrt(block.entry_speed_sqr) * self.events_per_mm;
                 self.nominal = sqrt(block.nominal_speed_sqr) * self.events_per_mm;
-                self.inv_nominal = if self.nominal > 0.0 { 1.0 / self.nominal } else { 0.0 };
+                self.inv_nominal = inverse(self.nominal);
                 self.accel = block.acceleration * self.events_per_mm;
-                self.inv_accel = if self.accel > 0.0 { 1.0 / self.accel } else { 0.0 };
+                self.inv_accel = inverse(self.accel);
                 self.events_left = block.events;
                 self.active = true;
                 feeder.push_block(step_block);
@@ -331,6 +331,17 @@ impl Prep {
         }
         let actual = k * interval + add * pairs;
         (to_u32(interval), to_i32(add), actual)
+    }
+}
+
+/// 1/`value`, or 0 for a speed or acceleration that is not positive.
+/// Out of line: three sites.
+#[inline(never)]
+fn inverse(value: f32) -> f32 {
+    if value > 0.0 {
+        1.0 / value
+    } else {
+        0.0
     }
 }
 
