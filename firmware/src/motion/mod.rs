@@ -826,35 +826,46 @@ impl<'q> Motion<'q> {
     /// One straight piece to the planner (the planner has room).
     #[inline(never)]
     fn queue_piece(&mut self, target: &[f32; MOTORS], feed: f32) -> Result<(), MotionError> {
+        // Written to keep the frame small (the move is built in place, the
+        // motor steps re-derived from it): beyond 63 bytes of frame every
+        // AVR stack access costs 12 bytes instead of 2.
         let spu = self.config.steps_per_unit();
         let motors = self.config.kinematics.inverse([target[0], target[1], target[2]]).map_err(MotionError::Unreachable)?;
         let linear = to_steps(motors, [spu[0], spu[1], spu[2]]);
-        let e_exact = (target[E] - self.position[E]) * spu[E] * self.config.flow_factor + self.e_remainder;
+        let e_delta = target[E] - self.position[E];
+        let e_exact = e_delta * spu[E] * self.config.flow_factor + self.e_remainder;
         let e_steps = round_to_i32(e_exact);
-        let mut steps = [0; MOTORS];
+        let mut motion = PlannerMove { speed: feed, ..PlannerMove::default() };
         for motor in 0..LINEAR_AXES {
-            steps[motor] = linear[motor] - self.motor_steps[motor];
+            motion.steps[motor] = linear[motor] - self.motor_steps[motor];
         }
-        steps[E] = e_steps;
-        let mut delta = [0.0; MOTORS];
-        for axis in 0..MOTORS {
-            delta[axis] = target[axis] - self.position[axis];
+        motion.steps[E] = e_steps;
+        // The X, Y, Z deltas, scaled to the unit vector below.
+        for axis in 0..LINEAR_AXES {
+            motion.unit[axis] = target[axis] - self.position[axis];
         }
+        let delta = &mut motion.unit;
         let xyz = sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]);
-        let (millimetres, unit, acceleration) = if xyz > 1.0e-5 {
+        if xyz > 1.0e-5 {
             let per_mm = 1.0 / xyz;
-            let unit = [delta[0] * per_mm, delta[1] * per_mm, delta[2] * per_mm, 0.0];
-            let acceleration = if e_steps != 0 { self.config.print_accel } else { self.config.travel_accel };
-            (xyz, unit, acceleration)
+            for axis in 0..LINEAR_AXES {
+                delta[axis] *= per_mm;
+            }
+            motion.millimetres = xyz;
+            motion.acceleration = if e_steps != 0 { self.config.print_accel } else { self.config.travel_accel };
         } else {
-            (math::abs(delta[E]), [0.0; MOTORS], self.config.retract_accel)
-        };
-        let motion = PlannerMove { steps, millimetres, unit, speed: feed, acceleration, watch: 0, watch_release: false };
+            *delta = [0.0; MOTORS];
+            motion.millimetres = math::abs(e_delta);
+            motion.acceleration = self.config.retract_accel;
+        }
         if self.planner.push(&motion, &self.limits).is_err() {
             // The caller checked for room; never drop a piece silently.
             return Err(MotionError::Busy);
         }
-        self.motor_steps[..LINEAR_AXES].copy_from_slice(&linear);
+        // motor_steps + (linear − motor_steps): the new motor positions.
+        for motor in 0..LINEAR_AXES {
+            self.motor_steps[motor] += motion.steps[motor];
+        }
         self.motor_steps[E] += e_steps;
         self.e_remainder = e_exact - e_steps as f32;
         self.position = *target;
