@@ -126,8 +126,36 @@ impl ArcCutter {
     /// flash). Points and centre by reference: arguments must stay within
     /// 18 bytes (see [`Self::cut`]).
     pub fn new(plane: Plane, start: &Point, target: &Point, centre: &Centre, clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
-        let exact_target = *target;
-        let (start, target) = (plane.to_frame(*start), plane.to_frame(*target));
+        let mut arc = Self::EMPTY;
+        arc.init(plane, start, target, centre, clockwise, tolerance)?;
+        Ok(arc)
+    }
+
+    /// Nothing to cut (a placeholder for [`Self::init`]).
+    pub const EMPTY: Self = Self {
+        centre: [0.0; 2],
+        radius: 0.0,
+        start_angle: 0.0,
+        sweep: 0.0,
+        start: [0.0; 4],
+        target: [0.0; 4],
+        exact_target: [0.0; 4],
+        plane: Plane::Xy,
+        chords: 0,
+        done: 0,
+    };
+
+    /// [`Self::new`] in place: the motion layer builds the cutter where it
+    /// keeps it (as a temporary the AVR needed a frame of over 63 bytes,
+    /// where every stack access costs 12 bytes of code, and a copy). On
+    /// `Err` the cutter is left half set: discard it.
+    pub fn init(&mut self, plane: Plane, start: &Point, target: &Point, centre: &Centre, clockwise: bool, tolerance: f32) -> Result<(), ArcError> {
+        self.exact_target = *target;
+        self.plane = plane;
+        self.done = 0;
+        self.start = plane.to_frame(*start);
+        self.target = plane.to_frame(*target);
+        let (start, target) = (&self.start, &self.target);
         let (centre, radius) = match *centre {
             Centre::Offset(offset) => {
                 let centre = [start[0] + offset[0], start[1] + offset[1]];
@@ -163,15 +191,18 @@ impl ArcCutter {
                 ([start[0] + dx / 2.0 + side * rise * uy, start[1] + dy / 2.0 - side * rise * ux], r)
             }
         };
-        Ok(Self { centre, radius, start_angle: 0.0, sweep: 0.0, start, target, exact_target, plane, chords: 0, done: 0 }.cut(clockwise, tolerance))
+        self.centre = centre;
+        self.radius = radius;
+        self.cut(clockwise, tolerance);
+        Ok(())
     }
 
     /// The sweep and the number of chords of an arc whose centre, radius
     /// and end points are set. (Few arguments on purpose: beyond 18 bytes
     /// of them the AVR back end passes the rest on the stack, which it
     /// miscompiles on the ATmega2560, see `size-check.sh`.)
-    fn cut(mut self, clockwise: bool, tolerance: f32) -> Self {
-        let (start, target, centre, radius) = (self.start, self.target, self.centre, self.radius);
+    fn cut(&mut self, clockwise: bool, tolerance: f32) {
+        let (start, target, centre, radius) = (&self.start, &self.target, &self.centre, self.radius);
         let start_angle = atan2(start[1] - centre[1], start[0] - centre[0]);
         let end_angle = atan2(target[1] - centre[1], target[0] - centre[0]);
         let mut sweep = end_angle - start_angle;
@@ -191,7 +222,6 @@ impl ArcCutter {
         self.start_angle = start_angle;
         self.sweep = sweep;
         self.chords = chords;
-        self
     }
 
     /// Chords in this arc.

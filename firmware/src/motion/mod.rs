@@ -686,10 +686,16 @@ impl<'q> Motion<'q> {
             ArcCentre::Offset([i, j]) => Centre::Offset([milli(i), milli(j)]),
             ArcCentre::Radius(r) => Centre::Radius(milli(r)),
         };
-        let arc = ArcCutter::new(plane, &self.position, &target, &centre, clockwise, tolerance)
-        .map_err(MotionError::Arc)?;
         let feed = milli(feed_um_per_s) * self.config.feed_factor;
-        self.pending = Pending::Arc { arc, cut: LineCut::DONE, feed };
+        // The cutter is built where it is kept, not as a temporary (see
+        // `ArcCutter::init`).
+        self.pending = Pending::Arc { arc: ArcCutter::EMPTY, cut: LineCut::DONE, feed };
+        if let Pending::Arc { arc, .. } = &mut self.pending {
+            if let Err(error) = arc.init(plane, &self.position, &target, &centre, clockwise, tolerance) {
+                self.pending = Pending::Nothing;
+                return Err(MotionError::Arc(error));
+            }
+        }
         self.feed_planner();
         Ok(())
     }
