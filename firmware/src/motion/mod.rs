@@ -391,9 +391,15 @@ impl LineCut {
     /// A line with no pieces left (an arc's, before its first chord).
     const DONE: Self = Self { start: [0.0; MOTORS], delta: [0.0; MOTORS], target: [0.0; MOTORS], pieces: 0, done: 0 };
 
-    /// Points by reference: by value the AVR copied each (16 bytes) first.
-    fn new(start: &[f32; MOTORS], target: &[f32; MOTORS], config: &MotionConfig) -> Self {
-        let mut delta = [0.0; MOTORS];
+    /// Cut the line from `start` to `target`, in place: as a temporary
+    /// (56 bytes) it pushed its callers' AVR frames past 63 bytes, where
+    /// every stack access costs 12 bytes of code. Points by reference: by
+    /// value the AVR copied each first.
+    fn init(&mut self, start: &[f32; MOTORS], target: &[f32; MOTORS], config: &MotionConfig) {
+        self.start = *start;
+        self.target = *target;
+        self.done = 0;
+        let delta = &mut self.delta;
         for axis in 0..MOTORS {
             delta[axis] = target[axis] - start[axis];
         }
@@ -412,8 +418,7 @@ impl LineCut {
             pieces = pieces.max(math::abs(delta[axis]) * config.steps_per_mm[axis].max(spu[axis]) * PER_HEADROOM);
         }
         pieces = pieces.max(math::abs(delta[E]) * spu[E] * config.flow_factor * PER_HEADROOM);
-        let pieces = math::to_u32(pieces.min(1.0e7)).saturating_add(1);
-        Self { start: *start, delta, target: *target, pieces, done: 0 }
+        self.pieces = math::to_u32(pieces.min(1.0e7)).saturating_add(1);
     }
 
     /// The next piece's end into `point`; `false` once the line is done.
@@ -670,7 +675,10 @@ impl<'q> Motion<'q> {
         self.check_accepting()?;
         self.check_target(target)?;
         let feed = milli(feed_um_per_s) * self.config.feed_factor;
-        self.pending = Pending::Line { cut: LineCut::new(&self.position, &target, &self.config), feed };
+        self.pending = Pending::Line { cut: LineCut::DONE, feed };
+        if let Pending::Line { cut, .. } = &mut self.pending {
+            cut.init(&self.position, &target, &self.config);
+        }
         self.feed_planner();
         Ok(())
     }
@@ -814,7 +822,7 @@ impl<'q> Motion<'q> {
                             self.pending = Pending::Nothing;
                             return;
                         };
-                        *cut = LineCut::new(&self.position, &chord_end, &self.config);
+                        cut.init(&self.position, &chord_end, &self.config);
                         // A new cut has at least one piece: this sets `point`.
                         cut.next_into(&mut point);
                     }
