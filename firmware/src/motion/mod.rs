@@ -121,7 +121,7 @@ use homing::{AxisHoming, Homing, HomingConfig, HomingStep};
 use kinematics::Arm;
 #[cfg(feature = "delta")]
 use kinematics::Delta;
-use kinematics::{to_steps, Cartesian, Kinematics, KinematicsError, MachineKinematics, LINEAR_AXES};
+use kinematics::{motor_steps, Cartesian, Kinematics, KinematicsError, MachineKinematics, LINEAR_AXES};
 use math::{round_to_i32, sqrt};
 use planner::{MotorLimits, Planner, PlannerMove, MAX_BLOCK_STEPS};
 use prep::Prep;
@@ -588,7 +588,7 @@ impl<'q> Motion<'q> {
         self.position = position;
         let spu = self.config.steps_per_unit();
         if let Ok(motors) = self.config.kinematics.inverse([position[0], position[1], position[2]]) {
-            let steps = to_steps(motors, [spu[0], spu[1], spu[2]]);
+            let steps = motor_steps(&motors, &spu);
             self.motor_steps[..LINEAR_AXES].copy_from_slice(&steps);
         }
         self.motor_steps[E] = round_to_i32(position[E] * spu[E]);
@@ -845,7 +845,7 @@ impl<'q> Motion<'q> {
         // AVR stack access costs 12 bytes instead of 2.
         let spu = self.config.steps_per_unit();
         let motors = self.config.kinematics.inverse([target[0], target[1], target[2]]).map_err(MotionError::Unreachable)?;
-        let linear = to_steps(motors, [spu[0], spu[1], spu[2]]);
+        let linear = motor_steps(&motors, &spu);
         let e_delta = target[E] - self.position[E];
         let e_exact = e_delta * spu[E] * self.config.flow_factor + self.e_remainder;
         let e_steps = round_to_i32(e_exact);
@@ -965,7 +965,7 @@ impl<'q> Motion<'q> {
             self.error = Some(MotionError::HomingFailed(motors));
             return;
         };
-        let steps = to_steps(home, [spu[0], spu[1], spu[2]]);
+        let steps = motor_steps(&home, &spu);
         for motor in 0..LINEAR_AXES {
             if motors & (1 << motor) != 0 {
                 self.motor_steps[motor] = steps[motor];
