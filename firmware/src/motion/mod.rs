@@ -901,38 +901,24 @@ impl<'q> Motion<'q> {
             return;
         }
         let mut stopped = 0;
-        if let Some((expected_done, steps)) = self.homing_move {
-            let finished = status.blocks_done == expected_done && !status.busy && self.planner.is_empty() && !self.prep.is_active();
+        // By reference: a copy of the move's steps cost frame and flash.
+        if let Some((expected_done, steps)) = &self.homing_move {
+            let finished = status.blocks_done == *expected_done && !status.busy && self.planner.is_empty() && !self.prep.is_active();
             if !finished {
                 return;
             }
-            self.homing_move = None;
             stopped = status.stopped;
             self.homing.set_travel(status.stopped_steps);
             for motor in 0..MOTORS {
                 let sign = if steps[motor] < 0 { -1 } else { 1 };
                 self.motor_steps[motor] += if stopped & (1 << motor) != 0 { sign * status.stopped_steps[motor] as i32 } else { steps[motor] };
             }
+            self.homing_move = None;
         }
         loop {
             match self.homing.next(&self.config.homing, stopped, now_ms) {
                 HomingStep::Move { steps, rate, watch, release } => {
-                    let dominant = steps.iter().map(|s| s.unsigned_abs()).max().unwrap_or(0);
-                    let motion = PlannerMove {
-                        steps,
-                        millimetres: dominant as f32,
-                        unit: [0.0; MOTORS],
-                        speed: rate,
-                        acceleration: self.config.homing.acceleration,
-                        watch,
-                        watch_release: release,
-                    };
-                    if dominant == 0 || self.planner.push(&motion, &self.limits).is_err() {
-                        self.error = Some(MotionError::HomingFailed(self.homing.group()));
-                        self.homing.abort();
-                        return;
-                    }
-                    self.homing_move = Some((status.blocks_done.wrapping_add(1), steps));
+                    self.queue_homing_move(&steps, rate, watch, release, status.blocks_done);
                     return;
                 }
                 HomingStep::Wait => return,
@@ -950,6 +936,26 @@ impl<'q> Motion<'q> {
                 }
             }
         }
+    }
+
+    /// A homing move to the planner (empty: homing waits for it).
+    fn queue_homing_move(&mut self, steps: &[i32; MOTORS], rate: f32, watch: u8, release: bool, blocks_done: u16) {
+        let dominant = steps.iter().map(|s| s.unsigned_abs()).max().unwrap_or(0);
+        let motion = PlannerMove {
+            steps: *steps,
+            millimetres: dominant as f32,
+            unit: [0.0; MOTORS],
+            speed: rate,
+            acceleration: self.config.homing.acceleration,
+            watch,
+            watch_release: release,
+        };
+        if dominant == 0 || self.planner.push(&motion, &self.limits).is_err() {
+            self.error = Some(MotionError::HomingFailed(self.homing.group()));
+            self.homing.abort();
+            return;
+        }
+        self.homing_move = Some((blocks_done.wrapping_add(1), *steps));
     }
 
     #[inline(never)]
