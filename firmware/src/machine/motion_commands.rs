@@ -264,9 +264,10 @@ impl<'q> Machine<'q> {
         if let Some(mode) = self.modal.unsupported {
             return Err(CommandError::UnsupportedMode(mode));
         }
+        // By reference: copies of the configuration's parts cost flash.
         if let (MachineKinematics::Cartesian(_), Some(limits), false) = (
-            self.motion.config.kinematics,
-            self.motion.config.soft_limits,
+            &self.motion.config.kinematics,
+            &self.motion.config.soft_limits,
             self.motion.config.must_home,
         ) {
             let homed = self.motion.homed();

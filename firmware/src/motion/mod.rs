@@ -503,7 +503,8 @@ impl<'q> Motion<'q> {
         // the slot is initialised afterwards.
         let motion = unsafe {
             addr_of_mut!((*p).config).write(config);
-            addr_of_mut!((*p).limits).write(config.motor_limits());
+            // `configure` below computes the real limits.
+            addr_of_mut!((*p).limits).write(MotorLimits { max_rate: [0.0; MOTORS], max_accel: [0.0; MOTORS] });
             Planner::init_in(&mut *addr_of_mut!((*p).planner).cast::<MaybeUninit<Planner>>());
             addr_of_mut!((*p).prep).write(Prep::new());
             addr_of_mut!((*p).feeder).write(feeder);
@@ -735,14 +736,15 @@ impl<'q> Motion<'q> {
 
     fn check_target(&self, target: [f32; MOTORS]) -> Result<(), MotionError> {
         let point = [target[0], target[1], target[2]];
-        if let Some(limits) = self.config.soft_limits {
+        // The limits and the home by reference: copies cost flash.
+        if let Some(limits) = &self.config.soft_limits {
             // Limits bind once an axis knows where it is (Marlin): a machine
             // that must home refuses everything before, see check_accepting.
             let bound = if self.config.must_home { 0b111 } else { self.homed };
             let inside = (0..LINEAR_AXES).all(|axis| {
                 bound & (1 << axis) == 0 || (point[axis] >= limits.min[axis] - 1e-4 && point[axis] <= limits.max[axis] + 1e-4)
             });
-            let at_home = match self.config.home {
+            let at_home = match &self.config.home {
                 HomePosition::Cartesian(home) => (0..LINEAR_AXES).all(|axis| math::abs(point[axis] - home[axis]) < 1e-3),
                 HomePosition::DeltaTop => false,
             };
@@ -961,10 +963,11 @@ impl<'q> Motion<'q> {
     #[inline(never)]
     fn set_home(&mut self, motors: u8) {
         let spu = self.config.steps_per_unit();
-        let home = match (self.config.home, self.config.kinematics) {
+        // By reference: copies of the configuration's parts cost flash.
+        let home = match (&self.config.home, &self.config.kinematics) {
             #[cfg(feature = "delta")]
             (HomePosition::DeltaTop, MachineKinematics::Delta(delta)) => Ok(delta.homed_carriage_heights()),
-            (HomePosition::Cartesian(point), kinematics) => kinematics.inverse(point),
+            (HomePosition::Cartesian(point), kinematics) => kinematics.inverse(*point),
             (HomePosition::DeltaTop, kinematics) => kinematics.inverse([0.0; LINEAR_AXES]),
         };
         let Ok(home) = home else {
