@@ -631,7 +631,12 @@ impl<'q> Motion<'q> {
 
     /// Where the queued motion ends, µm (X, Y, Z, E).
     pub fn position_um(&self) -> [i32; MOTORS] {
-        self.position.map(|mm| round_to_i32(mm * 1000.0))
+        // A plain loop: `array::map` compiled to a larger generic helper.
+        let mut um = [0; MOTORS];
+        for axis in 0..MOTORS {
+            um[axis] = round_to_i32(self.position[axis] * 1000.0);
+        }
+        um
     }
 
     /// Where the queued motion ends, in motor steps.
@@ -672,7 +677,7 @@ impl<'q> Motion<'q> {
     /// `G0`/`G1` to a machine position (µm) at a feed rate (µm/s).
     #[inline(never)]
     pub fn line_to(&mut self, target_um: &[i32; MOTORS], feed_um_per_s: i32) -> Result<(), MotionError> {
-        let target = target_um.map(milli);
+        let target = mm_from_um(target_um);
         self.check_accepting()?;
         self.check_target(target)?;
         let feed = milli(feed_um_per_s) * self.config.feed_factor;
@@ -687,7 +692,7 @@ impl<'q> Motion<'q> {
     /// `G2` (clockwise) / `G3` to a machine position (µm) around a centre.
     #[inline(never)]
     pub fn arc_to(&mut self, plane: Plane, target_um: &[i32; MOTORS], centre: ArcCentre, clockwise: bool, feed_um_per_s: i32) -> Result<(), MotionError> {
-        let target = target_um.map(milli);
+        let target = mm_from_um(target_um);
         self.check_accepting()?;
         self.check_target(target)?;
         let tolerance = self.config.arc_tolerance;
@@ -1007,6 +1012,17 @@ impl<'q> Motion<'q> {
 #[inline(never)]
 fn milli(value: i32) -> f32 {
     value as f32 / 1000.0
+}
+
+/// A target in µm to mm. A plain loop: `array::map` compiled to a
+/// generic helper larger than this.
+#[inline(never)]
+fn mm_from_um(um: &[i32; MOTORS]) -> [f32; MOTORS] {
+    let mut mm = [0.0; MOTORS];
+    for axis in 0..MOTORS {
+        mm[axis] = milli(um[axis]);
+    }
+    mm
 }
 
 /// Hundredths (percent) to a factor.
