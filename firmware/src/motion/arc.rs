@@ -25,7 +25,7 @@
 //! and a negative R asks for the arc longer than half a turn. I/J with the
 //! end point on the start point is a full circle.
 
-use super::math::{atan2, clamp, sin_cos, sqrt, to_u32, PI};
+use super::math::{atan2, clamp, length2, sin_cos, sqrt, to_u32, PI};
 
 /// X, Y, Z, E in mm.
 pub type Point = [f32; 4];
@@ -159,12 +159,12 @@ impl ArcCutter {
         let (centre, radius) = match *centre {
             Centre::Offset(offset) => {
                 let centre = [start[0] + offset[0], start[1] + offset[1]];
-                let radius = sqrt(offset[0] * offset[0] + offset[1] * offset[1]);
+                let radius = length2(offset[0], offset[1]);
                 if !(radius > 0.0) {
                     return Err(ArcError::ZeroRadius);
                 }
                 let (ex, ey) = (target[0] - centre[0], target[1] - centre[1]);
-                let mismatch = (sqrt(ex * ex + ey * ey) - radius).abs();
+                let mismatch = (length2(ex, ey) - radius).abs();
                 if mismatch > 0.5 || (mismatch > 0.005 && mismatch > 0.001 * radius) {
                     return Err(ArcError::RadiusMismatch);
                 }
@@ -172,7 +172,7 @@ impl ArcCutter {
             }
             Centre::Radius(radius) => {
                 let (dx, dy) = (target[0] - start[0], target[1] - start[1]);
-                let chord = sqrt(dx * dx + dy * dy);
+                let chord = length2(dx, dy);
                 let r = radius.abs();
                 let half = chord / 2.0;
                 if !(chord > 0.0) || !(r >= half) {

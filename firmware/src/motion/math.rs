@@ -70,6 +70,13 @@ fn sqrt_newton(value: f32) -> f32 {
     root + 0.5 * inverse * (value - root * root)
 }
 
+/// √(x² + y²), out of line (several callers: each inline copy of the
+/// soft-float calls cost flash).
+#[inline(never)]
+pub fn length2(x: f32, y: f32) -> f32 {
+    sqrt(x * x + y * y)
+}
+
 /// Arc tangent in (−π/2, π/2).
 pub fn atan(value: f32) -> f32 {
     if value.is_nan() {
