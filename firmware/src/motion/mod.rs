@@ -847,20 +847,13 @@ impl<'q> Motion<'q> {
     /// One straight piece to the planner (the planner has room).
     #[inline(never)]
     fn queue_piece(&mut self, target: &[f32; MOTORS], feed: f32) -> Result<(), MotionError> {
-        // Written to keep the frame small (the move is built in place, the
-        // motor steps re-derived from it): beyond 63 bytes of frame every
-        // AVR stack access costs 12 bytes instead of 2.
-        let spu = self.config.steps_per_unit();
-        let motors = self.config.kinematics.inverse([target[0], target[1], target[2]]).map_err(MotionError::Unreachable)?;
-        let linear = motor_steps(&motors, &spu);
-        let e_delta = target[E] - self.position[E];
-        let e_exact = e_delta * spu[E] * self.config.flow_factor + self.e_remainder;
-        let e_steps = round_to_i32(e_exact);
+        // Written to keep the AVR frames small (the move built in place,
+        // the steps in a function of their own, the motor steps re-derived
+        // from the move): beyond 63 bytes of frame every stack access costs
+        // 12 bytes of code instead of 2.
         let mut motion = PlannerMove { speed: feed, ..PlannerMove::default() };
-        for motor in 0..LINEAR_AXES {
-            motion.steps[motor] = linear[motor] - self.motor_steps[motor];
-        }
-        motion.steps[E] = e_steps;
+        let e_exact = self.piece_steps(target, &mut motion.steps)?;
+        let e_steps = motion.steps[E];
         // The X, Y, Z deltas, scaled to the unit vector below.
         for axis in 0..LINEAR_AXES {
             motion.unit[axis] = target[axis] - self.position[axis];
@@ -876,7 +869,7 @@ impl<'q> Motion<'q> {
             motion.acceleration = if e_steps != 0 { self.config.print_accel } else { self.config.travel_accel };
         } else {
             *delta = [0.0; MOTORS];
-            motion.millimetres = math::abs(e_delta);
+            motion.millimetres = math::abs(target[E] - self.position[E]);
             motion.acceleration = self.config.retract_accel;
         }
         if self.planner.push(&motion, &self.limits).is_err() {
@@ -891,6 +884,21 @@ impl<'q> Motion<'q> {
         self.e_remainder = e_exact - e_steps as f32;
         self.position = *target;
         Ok(())
+    }
+
+    /// The steps of every motor from the queued position to `target`;
+    /// returns the exact (unrounded) E steps, owed rounding included.
+    #[inline(never)]
+    fn piece_steps(&self, target: &[f32; MOTORS], steps: &mut [i32; MOTORS]) -> Result<f32, MotionError> {
+        let spu = self.config.steps_per_unit();
+        let motors = self.config.kinematics.inverse([target[0], target[1], target[2]]).map_err(MotionError::Unreachable)?;
+        let linear = motor_steps(&motors, &spu);
+        for motor in 0..LINEAR_AXES {
+            steps[motor] = linear[motor] - self.motor_steps[motor];
+        }
+        let e_exact = (target[E] - self.position[E]) * spu[E] * self.config.flow_factor + self.e_remainder;
+        steps[E] = round_to_i32(e_exact);
+        Ok(e_exact)
     }
 
     /// Run the homing state machine as far as it goes without waiting.
