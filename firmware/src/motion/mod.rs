@@ -321,15 +321,14 @@ impl MotionConfig {
         [linear[0], linear[1], linear[2], self.steps_per_mm[E]]
     }
 
-    /// The planner's limits in steps.
-    pub fn motor_limits(&self) -> MotorLimits {
+    /// The planner's limits in steps, written into `limits` (returned,
+    /// the 32 bytes went through a temporary and a copy on the AVR).
+    pub fn motor_limits(&self, limits: &mut MotorLimits) {
         let spu = self.steps_per_unit();
-        let mut limits = MotorLimits { max_rate: [0.0; MOTORS], max_accel: [0.0; MOTORS] };
         for motor in 0..MOTORS {
             limits.max_rate[motor] = (self.max_feed[motor] * spu[motor]).min(self.max_step_rate);
             limits.max_accel[motor] = self.max_accel[motor] * spu[motor];
         }
-        limits
     }
 
     /// What the step interrupt needs ([`StepQueues::split`]).
@@ -453,7 +452,7 @@ enum Pending {
 /// The main loop's motion state.
 pub struct Motion<'q> {
     pub config: MotionConfig,
-    /// `config.motor_limits()`, kept up to date by `configure` (computing
+    /// `config.motor_limits(..)`, kept up to date by `configure` (computing
     /// it costs a dozen float divisions, too many for every planned piece).
     limits: MotorLimits,
     planner: Planner,
@@ -560,7 +559,7 @@ impl<'q> Motion<'q> {
     }
 
     fn configure(&mut self) {
-        self.limits = self.config.motor_limits();
+        self.config.motor_limits(&mut self.limits);
         self.planner.junction_deviation = self.config.junction_deviation;
         let min_ticks = (stepper::TIMER_HZ as f32 / self.config.max_step_rate).max(4.0);
         self.prep.min_interval_q8 = math::to_u32(min_ticks * 256.0);
