@@ -930,9 +930,10 @@ impl<'q> Motion<'q> {
             self.homing_move = None;
         }
         loop {
+            // The steps by reference (`ref`): no copy of them.
             match self.homing.next(&self.config.homing, stopped, now_ms) {
-                HomingStep::Move { steps, rate, watch, release } => {
-                    self.queue_homing_move(&steps, rate, watch, release, status.blocks_done);
+                HomingStep::Move { ref steps, rate, watch, release } => {
+                    self.queue_homing_move(steps, rate, watch, release, status.blocks_done);
                     return;
                 }
                 HomingStep::Wait => return,
