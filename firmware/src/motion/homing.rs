@@ -257,8 +257,13 @@ impl Homing {
         let mut steps = [0_i32; MOTORS];
         let mut rate = f32::MAX;
         let mut watch_bits = 0;
-        for (motor, axis) in config.axes.iter().enumerate() {
-            if self.group & (1 << motor) == 0 {
+        // A running motor bit and zipped arrays: no variable shifts (a loop
+        // each on the AVR) and no bounds checks.
+        let mut bit = 1_u8;
+        for (step, axis) in steps.iter_mut().zip(&config.axes) {
+            let motor_bit = bit;
+            bit <<= 1;
+            if self.group & motor_bit == 0 {
                 continue;
             }
             let (distance, axis_rate) = match stage {
@@ -269,10 +274,11 @@ impl Homing {
             };
             let distance = distance.min(i32::MAX as u32) as i32;
             let positive = axis.towards_max == towards;
-            steps[motor] = if positive { distance } else { -distance };
+            *step = if positive { distance } else { -distance };
             rate = rate.min(axis_rate);
             if watch {
-                watch_bits |= endstop_bit(motor, axis.towards_max);
+                // `endstop_bit`: bit i (min) or 4 + i (max).
+                watch_bits |= if axis.towards_max { motor_bit << 4 } else { motor_bit };
             }
         }
         HomingStep::Move { steps, rate, watch: watch_bits, release: matches!(stage, Stage::Release) }
