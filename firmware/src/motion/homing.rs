@@ -176,7 +176,7 @@ impl Homing {
             return HomingStep::Done;
         }
         let group = self.group;
-        let lead = config.axes[group.trailing_zeros().min(2) as usize];
+        let lead = self.lead(config);
         match self.phase {
             Phase::NextGroup => self.start_next_group(config),
             Phase::AfterApproach => {
@@ -237,7 +237,7 @@ impl Homing {
     }
 
     fn back_off(&mut self, config: &HomingConfig) -> HomingStep {
-        let lead = config.axes[self.group.trailing_zeros().min(2) as usize];
+        let lead = self.lead(config);
         if lead.release {
             self.phase = Phase::AfterRelease;
             self.group_move(config, Stage::Release)
@@ -245,6 +245,13 @@ impl Homing {
             self.phase = Phase::AfterBackoff;
             self.group_move(config, Stage::BackOff)
         }
+    }
+
+    /// The settings of the group's first motor, which lead its pause and
+    /// kind of back-off. Out of line: two callers.
+    #[inline(never)]
+    fn lead<'c>(&self, config: &'c HomingConfig) -> &'c AxisHoming {
+        &config.axes[self.group.trailing_zeros().min(2) as usize]
     }
 
     /// A move of every motor of the group, towards (or away from) its
