@@ -208,9 +208,16 @@ impl Homing {
                     // re-approach that stops within half of it means the
                     // switch never let go (stuck, or shorted wiring; Marlin's
                     // "Bad endstop"), and the home found would be wrong.
-                    let stuck = (0..3).filter(|&m| group & (1 << m) != 0).fold(0, |bits, m| {
-                        if u32::from(self.travel[m]) * 2 < config.axes[m].backoff_steps { bits | 1 << m } else { bits }
-                    });
+                    // (A running bit over zipped arrays: no variable shifts
+                    // or bounds checks on the AVR.)
+                    let mut stuck = 0;
+                    let mut bit = 1;
+                    for (travel, axis) in self.travel.iter().zip(&config.axes) {
+                        if group & bit != 0 && u32::from(*travel) * 2 < axis.backoff_steps {
+                            stuck |= bit;
+                        }
+                        bit <<= 1;
+                    }
                     if stuck != 0 {
                         return self.fail(stuck);
                     }
