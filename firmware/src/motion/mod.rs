@@ -923,9 +923,12 @@ impl<'q> Motion<'q> {
             }
             stopped = status.stopped;
             self.homing.set_travel(status.stopped_steps);
+            // A running motor bit: a variable shift is a loop on the AVR.
+            let mut bit = 1;
             for motor in 0..MOTORS {
                 let sign = if steps[motor] < 0 { -1 } else { 1 };
-                self.motor_steps[motor] += if stopped & (1 << motor) != 0 { sign * status.stopped_steps[motor] as i32 } else { steps[motor] };
+                self.motor_steps[motor] += if stopped & bit != 0 { sign * status.stopped_steps[motor] as i32 } else { steps[motor] };
+                bit <<= 1;
             }
             self.homing_move = None;
         }

@@ -294,7 +294,11 @@ impl Planner {
         // (limit, steps); steps 0: no motor seen yet (a moving motor has ≥ 1).
         let (mut rate, mut rate_steps) = (0.0, 0.0);
         let (mut accel, mut accel_steps) = (0.0, 0.0);
+        // A running motor bit: a variable shift is a loop on the AVR.
+        let mut bit = 1;
         for motor in 0..MOTORS {
+            let motor_bit = bit;
+            bit <<= 1;
             let steps = motion.steps[motor].unsigned_abs().min(MAX_BLOCK_STEPS);
             if steps == 0 {
                 continue;
@@ -302,7 +306,7 @@ impl Planner {
             block.steps[motor] = steps as u16;
             block.events = block.events.max(steps as u16);
             if motion.steps[motor] > 0 {
-                block.direction |= 1 << motor;
+                block.direction |= motor_bit;
             }
             let steps = steps as f32;
             let (motor_rate, motor_accel) = (limits.max_rate[motor], limits.max_accel[motor]);
