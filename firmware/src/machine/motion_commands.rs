@@ -271,14 +271,16 @@ impl<'q> Machine<'q> {
             self.motion.config.must_home,
         ) {
             let homed = self.motion.homed();
-            for (axis, value) in target.iter_mut().enumerate().take(3) {
-                if homed & (1 << axis) != 0 {
-                    let (min, max) = (
-                        to_i32(limits.min[axis] * 1000.0),
-                        to_i32(limits.max[axis] * 1000.0),
-                    );
-                    *value = (*value).clamp(min, max);
+            // Zipped, with a running axis bit: no bounds checks or variable
+            // shifts. `max(min).min(max)` is `clamp` for the configured
+            // min ≤ max, without clamp's panic path.
+            let mut bit = 1;
+            for ((value, min), max) in target.iter_mut().zip(&limits.min).zip(&limits.max) {
+                if homed & bit != 0 {
+                    let (min, max) = (to_i32(min * 1000.0), to_i32(max * 1000.0));
+                    *value = (*value).max(min).min(max);
                 }
+                bit <<= 1;
             }
         }
         if target[E] > self.modal.position[E] && !self.extrusion_allowed() {
