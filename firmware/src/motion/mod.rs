@@ -745,8 +745,12 @@ impl<'q> Motion<'q> {
             // Limits bind once an axis knows where it is (Marlin): a machine
             // that must home refuses everything before, see check_accepting.
             let bound = if self.config.must_home { 0b111 } else { self.homed };
+            // A running axis bit: a variable shift is a loop on the AVR.
+            let mut bit = 1;
             let inside = (0..LINEAR_AXES).all(|axis| {
-                bound & (1 << axis) == 0 || (point[axis] >= limits.min[axis] - 1e-4 && point[axis] <= limits.max[axis] + 1e-4)
+                let free = bound & bit == 0;
+                bit <<= 1;
+                free || (point[axis] >= limits.min[axis] - 1e-4 && point[axis] <= limits.max[axis] + 1e-4)
             });
             let at_home = match &self.config.home {
                 HomePosition::Cartesian(home) => (0..LINEAR_AXES).all(|axis| math::abs(point[axis] - home[axis]) < 1e-3),
