@@ -600,7 +600,8 @@ impl<'q> Motion<'q> {
     pub fn set_extruder_position_um(&mut self, um: i32) {
         let mm = milli(um);
         self.position[E] = mm;
-        self.motor_steps[E] = round_to_i32(mm * self.config.steps_per_unit()[E]);
+        // E is linear: its steps per unit are its steps/mm.
+        self.motor_steps[E] = round_to_i32(mm * self.config.steps_per_mm[E]);
         self.e_remainder = 0.0;
     }
 
