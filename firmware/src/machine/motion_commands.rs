@@ -293,6 +293,8 @@ impl<'q> Machine<'q> {
     }
 
     #[cfg(feature = "printer")]
+    // Out of line: shared by lines and arcs (12 bytes).
+    #[inline(never)]
     fn commit_move(
         &mut self,
         target: &[i32; AXES],
