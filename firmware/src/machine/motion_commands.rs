@@ -184,12 +184,11 @@ impl<'q> Machine<'q> {
             return self.arc_move(command, out);
         }
         let feed = self.modal.read_feed(command)?;
-        let target = self.modal.target(command)?;
+        let mut target = self.modal.target(command)?;
         self.modal.motion_mode = mode;
         if let Some(feed) = feed {
             self.modal.feed_um_per_s = feed;
         }
-        let mut target = target;
         self.prepare_target(&mut target, out)?;
         let result = self.motion.line_to(&target, self.modal.feed_um_per_s);
         self.commit_move(&target, result)
@@ -213,7 +212,7 @@ impl<'q> Machine<'q> {
             _ => self.modal.motion_mode == MotionMode::ClockwiseArc,
         };
         let feed = self.modal.read_feed(command)?;
-        let target = self.modal.target(command)?;
+        let mut target = self.modal.target(command)?;
         let offset = |letter| -> Result<Option<i32>, CommandError> {
             command
                 .value(letter)?
@@ -241,7 +240,6 @@ impl<'q> Machine<'q> {
         if let Some(feed) = feed {
             self.modal.feed_um_per_s = feed;
         }
-        let mut target = target;
         self.prepare_target(&mut target, out)?;
         let result = self
             .motion
