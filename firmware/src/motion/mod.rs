@@ -526,7 +526,8 @@ impl<'q> Motion<'q> {
         motion.configure();
         // Until homed, the machine believes it is at the origin (reachable
         // on all three machine families).
-        motion.set_position_mm([0.0; MOTORS]);
+        // (`position` is the origin already.)
+        motion.derive_motor_steps();
         motion
     }
 
@@ -571,8 +572,7 @@ impl<'q> Motion<'q> {
     pub fn apply_settings(&mut self, settings: &Settings) {
         self.config.apply_settings(settings);
         self.configure();
-        let position = self.position;
-        self.set_position_mm(position);
+        self.derive_motor_steps();
     }
 
     /// New kinematics (`M665`, `M666`) for the moves that follow.
@@ -586,12 +586,20 @@ impl<'q> Motion<'q> {
     /// for tests). Motor steps follow from the inverse kinematics.
     pub fn set_position_mm(&mut self, position: [f32; MOTORS]) {
         self.position = position;
+        self.derive_motor_steps();
+    }
+
+    /// The motor steps of the Cartesian position already in `position`
+    /// (callers that keep the position pass no copy of it).
+    #[inline(never)]
+    fn derive_motor_steps(&mut self) {
+        let position = &self.position;
         let spu = self.config.steps_per_unit();
         if let Ok(motors) = self.config.kinematics.inverse([position[0], position[1], position[2]]) {
             let steps = motor_steps(&motors, &spu);
             self.motor_steps[..LINEAR_AXES].copy_from_slice(&steps);
         }
-        self.motor_steps[E] = round_to_i32(position[E] * spu[E]);
+        self.motor_steps[E] = round_to_i32(self.position[E] * spu[E]);
         self.e_remainder = 0.0;
     }
 
