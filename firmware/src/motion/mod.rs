@@ -591,7 +591,6 @@ impl<'q> Motion<'q> {
 
     /// The motor steps of the Cartesian position already in `position`
     /// (callers that keep the position pass no copy of it).
-    #[inline(never)]
     fn derive_motor_steps(&mut self) {
         let position = &self.position;
         let spu = self.config.steps_per_unit();
