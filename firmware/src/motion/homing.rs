@@ -243,6 +243,9 @@ impl Homing {
         HomingStep::Done
     }
 
+    // Inline in both its callers: out of line, its result went through
+    // memory once more (24 bytes).
+    #[inline(always)]
     fn back_off(&mut self, config: &HomingConfig) -> HomingStep {
         let lead = self.lead(config);
         if lead.release {
