@@ -32,7 +32,7 @@ use crate::gcode::Code;
 #[cfg(feature = "printer")]
 use crate::motion::kinematics::MachineKinematics;
 #[cfg(feature = "printer")]
-use crate::motion::{ArcCentre, E};
+use crate::motion::{math::to_i32, ArcCentre, E};
 use crate::motion::{MotionError, StepFault, StepperRequest, StepperStatus};
 use ufmt::uWrite;
 
@@ -184,14 +184,14 @@ impl<'q> Machine<'q> {
             return self.arc_move(command, out);
         }
         let feed = self.modal.read_feed(command)?;
-        let target = self.modal.target(command)?;
+        let mut target = self.modal.target(command)?;
         self.modal.motion_mode = mode;
         if let Some(feed) = feed {
             self.modal.feed_um_per_s = feed;
         }
-        let target = self.prepare_target(target, out)?;
-        let result = self.motion.line_to(target, self.modal.feed_um_per_s);
-        self.commit_move(target, result)
+        self.prepare_target(&mut target, out)?;
+        let result = self.motion.line_to(&target, self.modal.feed_um_per_s);
+        self.commit_move(&target, result)
     }
 
     #[cfg(feature = "printer")]
@@ -212,7 +212,7 @@ impl<'q> Machine<'q> {
             _ => self.modal.motion_mode == MotionMode::ClockwiseArc,
         };
         let feed = self.modal.read_feed(command)?;
-        let target = self.modal.target(command)?;
+        let mut target = self.modal.target(command)?;
         let offset = |letter| -> Result<Option<i32>, CommandError> {
             command
                 .value(letter)?
@@ -240,41 +240,45 @@ impl<'q> Machine<'q> {
         if let Some(feed) = feed {
             self.modal.feed_um_per_s = feed;
         }
-        let target = self.prepare_target(target, out)?;
+        self.prepare_target(&mut target, out)?;
         let result = self
             .motion
-            .arc_to(plane, target, centre, clockwise, self.modal.feed_um_per_s);
-        self.commit_move(target, result)
+            .arc_to(plane, &target, centre, clockwise, self.modal.feed_um_per_s);
+        self.commit_move(&target, result)
     }
 
     #[cfg(feature = "printer")]
     /// Checks shared by lines and arcs, and the Marlin adjustments of the
-    /// target (soft-limit clamp, cold extrusion).
+    /// target (soft-limit clamp, cold extrusion), in place (by value the
+    /// AVR copied the target in and out).
     fn prepare_target<W: uWrite + ?Sized>(
         &mut self,
-        mut target: [i32; AXES],
+        target: &mut [i32; AXES],
         out: &mut W,
-    ) -> Result<[i32; AXES], CommandError> {
+    ) -> Result<(), CommandError> {
         if self.position_lost {
             return Err(CommandError::PositionLost);
         }
         if let Some(mode) = self.modal.unsupported {
             return Err(CommandError::UnsupportedMode(mode));
         }
+        // By reference: copies of the configuration's parts cost flash.
         if let (MachineKinematics::Cartesian(_), Some(limits), false) = (
-            self.motion.config.kinematics,
-            self.motion.config.soft_limits,
+            &self.motion.config.kinematics,
+            &self.motion.config.soft_limits,
             self.motion.config.must_home,
         ) {
             let homed = self.motion.homed();
-            for (axis, value) in target.iter_mut().enumerate().take(3) {
-                if homed & (1 << axis) != 0 {
-                    let (min, max) = (
-                        (limits.min[axis] * 1000.0) as i32,
-                        (limits.max[axis] * 1000.0) as i32,
-                    );
-                    *value = (*value).clamp(min, max);
+            // Zipped, with a running axis bit: no bounds checks or variable
+            // shifts. `max(min).min(max)` is `clamp` for the configured
+            // min ≤ max, without clamp's panic path.
+            let mut bit = 1;
+            for ((value, min), max) in target.iter_mut().zip(&limits.min).zip(&limits.max) {
+                if homed & bit != 0 {
+                    let (min, max) = (to_i32(min * 1000.0), to_i32(max * 1000.0));
+                    *value = (*value).max(min).min(max);
                 }
+                bit <<= 1;
             }
         }
         if target[E] > self.modal.position[E] && !self.extrusion_allowed() {
@@ -283,18 +287,20 @@ impl<'q> Machine<'q> {
             // position, so the next absolute E does not catch it up.
             self.motion.set_extruder_position_um(target[E]);
         }
-        Ok(target)
+        Ok(())
     }
 
     #[cfg(feature = "printer")]
+    // Out of line: shared by lines and arcs (12 bytes).
+    #[inline(never)]
     fn commit_move(
         &mut self,
-        target: [i32; AXES],
+        target: &[i32; AXES],
         result: Result<(), MotionError>,
     ) -> Result<(), CommandError> {
         match result {
             Ok(()) => {
-                self.modal.position = target;
+                self.modal.position = *target;
                 self.steppers_enabled = true;
                 Ok(())
             }

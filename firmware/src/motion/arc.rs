@@ -25,7 +25,7 @@
 //! and a negative R asks for the arc longer than half a turn. I/J with the
 //! end point on the start point is a full circle.
 
-use super::math::{atan2, sin_cos, sqrt, PI};
+use super::math::{atan2, clamp, length2, sin_cos, sqrt, to_u32, PI};
 
 /// X, Y, Z, E in mm.
 pub type Point = [f32; 4];
@@ -51,7 +51,9 @@ impl Plane {
         }
     }
 
-    /// A point in the plane's frame: (first, second, linear, E).
+    /// A point in the plane's frame: (first, second, linear, E). Inline:
+    /// a call (its point through memory both ways) cost 36 bytes more.
+    #[inline(always)]
     fn to_frame(self, p: Point) -> Point {
         let [a, b, l] = self.axes();
         [p[a], p[b], p[l], p[3]]
@@ -98,56 +100,111 @@ pub struct ArcCutter {
     done: u32,
 }
 
+/// How an arc's centre is given, mm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Centre {
+    /// The centre's offset from the start in the plane's two axes (`I J`
+    /// in G17, `K I` in G18, `J K` in G19).
+    Offset([f32; 2]),
+    /// `R`: negative picks the arc over half a turn.
+    Radius(f32),
+}
+
 impl ArcCutter {
     /// `G2`/`G3` with the centre's offset from the start in the plane's two
     /// axes (`I J` in G17, `K I` in G18, `J K` in G19).
     pub fn with_centre(plane: Plane, start: Point, target: Point, offset: [f32; 2], clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
-        let exact_target = target;
-        let (start, target) = (plane.to_frame(start), plane.to_frame(target));
-        let centre = [start[0] + offset[0], start[1] + offset[1]];
-        let radius = sqrt(offset[0] * offset[0] + offset[1] * offset[1]);
-        if !(radius > 0.0) {
-            return Err(ArcError::ZeroRadius);
-        }
-        let (ex, ey) = (target[0] - centre[0], target[1] - centre[1]);
-        let mismatch = (sqrt(ex * ex + ey * ey) - radius).abs();
-        if mismatch > 0.5 || (mismatch > 0.005 && mismatch > 0.001 * radius) {
-            return Err(ArcError::RadiusMismatch);
-        }
-        Ok(Self { centre, radius, start_angle: 0.0, sweep: 0.0, start, target, exact_target, plane, chords: 0, done: 0 }.cut(clockwise, tolerance))
+        Self::new(plane, &start, &target, &Centre::Offset(offset), clockwise, tolerance)
     }
 
     /// `G2`/`G3` with `R`: the centre is where a circle of radius |R|
     /// passes through both points; R < 0 picks the arc over half a turn.
     pub fn with_radius(plane: Plane, start: Point, target: Point, radius: f32, clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
-        let exact_target = target;
-        let (start, target) = (plane.to_frame(start), plane.to_frame(target));
-        let (dx, dy) = (target[0] - start[0], target[1] - start[1]);
-        let chord = sqrt(dx * dx + dy * dy);
-        let r = radius.abs();
-        let half = chord / 2.0;
-        if !(chord > 0.0) || !(r >= half) {
-            return Err(ArcError::RadiusTooSmall);
-        }
-        // Distance from the chord's midpoint to the centre; for an arc of
-        // at most half a turn the centre lies to the right of the chord when
-        // going clockwise, to the left when counter-clockwise.
-        let rise = sqrt((r * r - half * half).max(0.0));
-        let (ux, uy) = (dx / chord, dy / chord);
-        let mut side = if clockwise { 1.0 } else { -1.0 };
-        if radius < 0.0 {
-            side = -side;
-        }
-        let centre = [start[0] + dx / 2.0 + side * rise * uy, start[1] + dy / 2.0 - side * rise * ux];
-        Ok(Self { centre, radius: r, start_angle: 0.0, sweep: 0.0, start, target, exact_target, plane, chords: 0, done: 0 }.cut(clockwise, tolerance))
+        Self::new(plane, &start, &target, &Centre::Radius(radius), clockwise, tolerance)
+    }
+
+    /// Either form: one constructor, so the AVR has one copy of the frame
+    /// changes and of the cutter's construction (a copy per form cost
+    /// flash). Points and centre by reference: arguments must stay within
+    /// 18 bytes (see [`Self::cut`]).
+    pub fn new(plane: Plane, start: &Point, target: &Point, centre: &Centre, clockwise: bool, tolerance: f32) -> Result<Self, ArcError> {
+        let mut arc = Self::EMPTY;
+        arc.init(plane, start, target, centre, clockwise, tolerance)?;
+        Ok(arc)
+    }
+
+    /// Nothing to cut (a placeholder for [`Self::init`]).
+    pub const EMPTY: Self = Self {
+        centre: [0.0; 2],
+        radius: 0.0,
+        start_angle: 0.0,
+        sweep: 0.0,
+        start: [0.0; 4],
+        target: [0.0; 4],
+        exact_target: [0.0; 4],
+        plane: Plane::Xy,
+        chords: 0,
+        done: 0,
+    };
+
+    /// [`Self::new`] in place: the motion layer builds the cutter where it
+    /// keeps it (as a temporary the AVR needed a frame of over 63 bytes,
+    /// where every stack access costs 12 bytes of code, and a copy). On
+    /// `Err` the cutter is left half set: discard it.
+    pub fn init(&mut self, plane: Plane, start: &Point, target: &Point, centre: &Centre, clockwise: bool, tolerance: f32) -> Result<(), ArcError> {
+        self.exact_target = *target;
+        self.plane = plane;
+        self.done = 0;
+        self.start = plane.to_frame(*start);
+        self.target = plane.to_frame(*target);
+        let (start, target) = (&self.start, &self.target);
+        let (centre, radius) = match *centre {
+            Centre::Offset(offset) => {
+                let centre = [start[0] + offset[0], start[1] + offset[1]];
+                let radius = length2(offset[0], offset[1]);
+                if !(radius > 0.0) {
+                    return Err(ArcError::ZeroRadius);
+                }
+                let (ex, ey) = (target[0] - centre[0], target[1] - centre[1]);
+                let mismatch = (length2(ex, ey) - radius).abs();
+                if mismatch > 0.5 || (mismatch > 0.005 && mismatch > 0.001 * radius) {
+                    return Err(ArcError::RadiusMismatch);
+                }
+                (centre, radius)
+            }
+            Centre::Radius(radius) => {
+                let (dx, dy) = (target[0] - start[0], target[1] - start[1]);
+                let chord = length2(dx, dy);
+                let r = radius.abs();
+                let half = chord / 2.0;
+                if !(chord > 0.0) || !(r >= half) {
+                    return Err(ArcError::RadiusTooSmall);
+                }
+                // Distance from the chord's midpoint to the centre; for an
+                // arc of at most half a turn the centre lies to the right of
+                // the chord when going clockwise, to the left when
+                // counter-clockwise.
+                let rise = sqrt((r * r - half * half).max(0.0));
+                let (ux, uy) = (dx / chord, dy / chord);
+                let mut side = if clockwise { 1.0 } else { -1.0 };
+                if radius < 0.0 {
+                    side = -side;
+                }
+                ([start[0] + dx / 2.0 + side * rise * uy, start[1] + dy / 2.0 - side * rise * ux], r)
+            }
+        };
+        self.centre = centre;
+        self.radius = radius;
+        self.cut(clockwise, tolerance);
+        Ok(())
     }
 
     /// The sweep and the number of chords of an arc whose centre, radius
     /// and end points are set. (Few arguments on purpose: beyond 18 bytes
     /// of them the AVR back end passes the rest on the stack, which it
     /// miscompiles on the ATmega2560, see `size-check.sh`.)
-    fn cut(mut self, clockwise: bool, tolerance: f32) -> Self {
-        let (start, target, centre, radius) = (self.start, self.target, self.centre, self.radius);
+    fn cut(&mut self, clockwise: bool, tolerance: f32) {
+        let (start, target, centre, radius) = (&self.start, &self.target, &self.centre, self.radius);
         let start_angle = atan2(start[1] - centre[1], start[0] - centre[0]);
         let end_angle = atan2(target[1] - centre[1], target[0] - centre[0]);
         let mut sweep = end_angle - start_angle;
@@ -159,15 +216,14 @@ impl ArcCutter {
         } else if sweep <= EPSILON {
             sweep += 2.0 * PI;
         }
-        let tolerance = tolerance.clamp(1.0e-4, radius);
+        let tolerance = clamp(tolerance, 1.0e-4, radius);
         let chord = 2.0 * sqrt(tolerance * (2.0 * radius - tolerance));
         let chords = (sweep.abs() * radius / chord).max(1.0);
         // Round up, saturating far beyond any real arc.
-        let chords = (chords.min(1.0e6) as u32 + 1).min(1_000_000);
+        let chords = (to_u32(chords.min(1.0e6)) + 1).min(1_000_000);
         self.start_angle = start_angle;
         self.sweep = sweep;
         self.chords = chords;
-        self
     }
 
     /// Chords in this arc.

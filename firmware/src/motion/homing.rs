@@ -109,6 +109,19 @@ enum Phase {
     AfterRelease,
 }
 
+/// The kinds of homing move.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Stage {
+    /// Fast, towards the switch, up to the travel, watching it.
+    Approach,
+    /// Fast, away from the switch, not watching (bump homing).
+    BackOff,
+    /// Slow, towards the switch, twice the back-off, watching it.
+    Reapproach,
+    /// Slow, away from the switch until it releases (the arm).
+    Release,
+}
+
 /// The state machine.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Homing {
@@ -163,7 +176,7 @@ impl Homing {
             return HomingStep::Done;
         }
         let group = self.group;
-        let lead = config.axes[group.trailing_zeros().min(2) as usize];
+        let lead = self.lead(config);
         match self.phase {
             Phase::NextGroup => self.start_next_group(config),
             Phase::AfterApproach => {
@@ -184,7 +197,7 @@ impl Homing {
             }
             Phase::AfterBackoff => {
                 self.phase = Phase::AfterReapproach;
-                self.group_move(config, true, |axis| (axis.backoff_steps.saturating_mul(2), axis.slow_rate), true, false)
+                self.group_move(config, Stage::Reapproach)
             }
             Phase::AfterReapproach | Phase::AfterRelease => {
                 if stopped & group != group {
@@ -195,9 +208,16 @@ impl Homing {
                     // re-approach that stops within half of it means the
                     // switch never let go (stuck, or shorted wiring; Marlin's
                     // "Bad endstop"), and the home found would be wrong.
-                    let stuck = (0..3).filter(|&m| group & (1 << m) != 0).fold(0, |bits, m| {
-                        if u32::from(self.travel[m]) * 2 < config.axes[m].backoff_steps { bits | 1 << m } else { bits }
-                    });
+                    // (A running bit over zipped arrays: no variable shifts
+                    // or bounds checks on the AVR.)
+                    let mut stuck = 0;
+                    let mut bit = 1;
+                    for (travel, axis) in self.travel.iter().zip(&config.axes) {
+                        if group & bit != 0 && u32::from(*travel) * 2 < axis.backoff_steps {
+                            stuck |= bit;
+                        }
+                        bit <<= 1;
+                    }
                     if stuck != 0 {
                         return self.fail(stuck);
                     }
@@ -215,7 +235,7 @@ impl Homing {
             if group != 0 {
                 self.group = group;
                 self.phase = Phase::AfterApproach;
-                return self.group_move(config, true, |axis| (axis.max_travel_steps, axis.fast_rate), true, false);
+                return self.group_move(config, Stage::Approach);
             }
         }
         self.active = false;
@@ -223,44 +243,62 @@ impl Homing {
         HomingStep::Done
     }
 
+    // Inline in both its callers: out of line, its result went through
+    // memory once more (24 bytes).
+    #[inline(always)]
     fn back_off(&mut self, config: &HomingConfig) -> HomingStep {
-        let lead = config.axes[self.group.trailing_zeros().min(2) as usize];
+        let lead = self.lead(config);
         if lead.release {
             self.phase = Phase::AfterRelease;
-            self.group_move(config, false, |axis| (axis.backoff_steps, axis.slow_rate), true, true)
+            self.group_move(config, Stage::Release)
         } else {
             self.phase = Phase::AfterBackoff;
-            self.group_move(config, false, |axis| (axis.backoff_steps, axis.fast_rate), false, false)
+            self.group_move(config, Stage::BackOff)
         }
     }
 
+    /// The settings of the group's first motor, which lead its pause and
+    /// kind of back-off. Out of line: two callers.
+    #[inline(never)]
+    fn lead<'c>(&self, config: &'c HomingConfig) -> &'c AxisHoming {
+        &config.axes[self.group.trailing_zeros().min(2) as usize]
+    }
+
     /// A move of every motor of the group, towards (or away from) its
-    /// switch, watching it or not.
-    fn group_move(
-        &self,
-        config: &HomingConfig,
-        towards: bool,
-        distance_and_rate: impl Fn(&AxisHoming) -> (u32, f32),
-        watch: bool,
-        release: bool,
-    ) -> HomingStep {
+    /// switch, watching it or not. One function for the four kinds of move
+    /// (not generic over a closure, which compiled to four copies).
+    #[inline(never)]
+    fn group_move(&self, config: &HomingConfig, stage: Stage) -> HomingStep {
+        let towards = matches!(stage, Stage::Approach | Stage::Reapproach);
+        let watch = !matches!(stage, Stage::BackOff);
         let mut steps = [0_i32; MOTORS];
         let mut rate = f32::MAX;
         let mut watch_bits = 0;
-        for (motor, axis) in config.axes.iter().enumerate() {
-            if self.group & (1 << motor) == 0 {
+        // A running motor bit and zipped arrays: no variable shifts (a loop
+        // each on the AVR) and no bounds checks.
+        let mut bit = 1_u8;
+        for (step, axis) in steps.iter_mut().zip(&config.axes) {
+            let motor_bit = bit;
+            bit <<= 1;
+            if self.group & motor_bit == 0 {
                 continue;
             }
-            let (distance, axis_rate) = distance_and_rate(axis);
+            let (distance, axis_rate) = match stage {
+                Stage::Approach => (axis.max_travel_steps, axis.fast_rate),
+                Stage::BackOff => (axis.backoff_steps, axis.fast_rate),
+                Stage::Reapproach => (axis.backoff_steps.saturating_mul(2), axis.slow_rate),
+                Stage::Release => (axis.backoff_steps, axis.slow_rate),
+            };
             let distance = distance.min(i32::MAX as u32) as i32;
             let positive = axis.towards_max == towards;
-            steps[motor] = if positive { distance } else { -distance };
+            *step = if positive { distance } else { -distance };
             rate = rate.min(axis_rate);
             if watch {
-                watch_bits |= endstop_bit(motor, axis.towards_max);
+                // `endstop_bit`: bit i (min) or 4 + i (max).
+                watch_bits |= if axis.towards_max { motor_bit << 4 } else { motor_bit };
             }
         }
-        HomingStep::Move { steps, rate, watch: watch_bits, release }
+        HomingStep::Move { steps, rate, watch: watch_bits, release: matches!(stage, Stage::Release) }
     }
 
     fn fail(&mut self, motors: u8) -> HomingStep {

@@ -51,6 +51,13 @@ pub trait Kinematics {
 /// Motor coordinates → whole steps, rounded to the nearest step (half away
 /// from zero).
 pub fn to_steps(motors: Vector3, steps_per_unit: Vector3) -> [i32; LINEAR_AXES] {
+    motor_steps(&motors, &[steps_per_unit[0], steps_per_unit[1], steps_per_unit[2], 0.0])
+}
+
+/// [`to_steps`] given the steps per unit of all four motors (the motion
+/// layer's `steps_per_unit`, E last and unused), by reference: passed by
+/// value, the AVR copied both arrays at every call.
+pub fn motor_steps(motors: &Vector3, steps_per_unit: &[f32; 4]) -> [i32; LINEAR_AXES] {
     [
         round_to_i32(motors[0] * steps_per_unit[0]),
         round_to_i32(motors[1] * steps_per_unit[1]),

@@ -39,6 +39,9 @@ const SQRT_3: f32 = 1.732_050_8;
 ///
 /// One guess from the exponent bits, then four Newton steps on 1/√x, which
 /// need only multiplications (a soft-float division costs several of them).
+// Out of line: the zero/negative test inlined at every call cost 284
+// bytes on the AVR.
+#[inline(never)]
 pub fn sqrt(value: f32) -> f32 {
     if !(value > 0.0) {
         return 0.0;
@@ -65,6 +68,13 @@ fn sqrt_newton(value: f32) -> f32 {
     // One Newton step on the root itself, 1/(2√x) taken from `inverse`:
     // removes the rounding bias of the product above.
     root + 0.5 * inverse * (value - root * root)
+}
+
+/// √(x² + y²), out of line (several callers: each inline copy of the
+/// soft-float calls cost flash).
+#[inline(never)]
+pub fn length2(x: f32, y: f32) -> f32 {
+    sqrt(x * x + y * y)
 }
 
 /// Arc tangent in (−π/2, π/2).
@@ -173,16 +183,42 @@ pub fn round_to_i32(value: f32) -> i32 {
     }
     let rounded = if value >= 0.0 { value + 0.5 } else { value - 0.5 };
     // `as` saturates and truncates towards zero.
-    rounded as i32
+    to_i32(rounded)
 }
 
-/// |value| without `std`.
-pub fn abs(value: f32) -> f32 {
-    if value < 0.0 {
-        -value
-    } else {
-        value
+/// `value as u32` (truncating, saturating, NaN → 0). Out of line: inline,
+/// each saturating conversion is four soft-float calls on the AVR.
+#[inline(never)]
+pub fn to_u32(value: f32) -> u32 {
+    value as u32
+}
+
+/// `value as i32` (truncating, saturating, NaN → 0), out of line as
+/// [`to_u32`].
+#[inline(never)]
+pub fn to_i32(value: f32) -> i32 {
+    value as i32
+}
+
+/// `value.clamp(min, max)` without its check that `min <= max`, whose
+/// panic path cost flash: every caller passes bounds in order (the
+/// motion layer's: 0 ≤ events; 0.1 µm < a radius of whole µm).
+#[inline(never)]
+pub fn clamp(value: f32, min: f32, max: f32) -> f32 {
+    let mut value = value;
+    if value < min {
+        value = min;
     }
+    if value > max {
+        value = max;
+    }
+    value
+}
+
+/// |value| without `std`: the sign bit cleared (`f32::abs` of `core`),
+/// no soft-float comparison. (−0.0 gives +0.0, which compares equal.)
+pub fn abs(value: f32) -> f32 {
+    value.abs()
 }
 
 /// Degrees to radians.

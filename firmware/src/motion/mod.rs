@@ -74,14 +74,14 @@
 //! **Executor.**
 //! - `G0`/`G1`: when [`Motion::ready`] is false, keep the command queued
 //!   and try again next pass (Marlin blocks the same way). Else
-//!   `motion.line_to(target_um, feed_um_per_s)` with the *machine*
+//!   `motion.line_to(&target_um, feed_um_per_s)` with the *machine*
 //!   coordinates of the target (X, Y, Z, E in µm, `G92` offsets removed) and
 //!   the modal feed in µm/s. `M220`/`M221` are applied inside from the
 //!   settings given to [`Motion::apply_settings`], as are `M92`, `M201`,
 //!   `M203`, `M204`, `M205 J`; they apply to moves accepted after the
 //!   change (blocks already planned keep their speeds). Errors (`Unreachable`, `OutsideSoftLimits`,
 //!   `NotHomed`) mean nothing moved: answer `Error:` and keep the position.
-//! - `G2`/`G3`: `motion.arc_to(plane, target_um, ArcCentre::Offset([i, j]) or
+//! - `G2`/`G3`: `motion.arc_to(plane, &target_um, ArcCentre::Offset([i, j]) or
 //!   ArcCentre::Radius(r), clockwise, feed_um_per_s)`, all µm.
 //! - `G28 [X][Y][Z]`: `motion.home(mask)` (bit i: motor i; 0 = all), then
 //!   wait (busy keep-alive) until `!motion.is_homing()`; `take_error()` tells
@@ -114,14 +114,14 @@ pub mod stepper;
 #[cfg(test)]
 mod tests;
 
-use arc::{ArcCutter, ArcError};
+use arc::{ArcCutter, ArcError, Centre};
 pub use arc::Plane;
 use homing::{AxisHoming, Homing, HomingConfig, HomingStep};
 #[cfg(feature = "arm")]
 use kinematics::Arm;
 #[cfg(feature = "delta")]
 use kinematics::Delta;
-use kinematics::{to_steps, Cartesian, Kinematics, KinematicsError, MachineKinematics, LINEAR_AXES};
+use kinematics::{motor_steps, Cartesian, Kinematics, KinematicsError, MachineKinematics, LINEAR_AXES};
 use math::{round_to_i32, sqrt};
 use planner::{MotorLimits, Planner, PlannerMove, MAX_BLOCK_STEPS};
 use prep::Prep;
@@ -300,34 +300,35 @@ impl MotionConfig {
             // The arm's joints have no steps/mm: pulses per degree come from
             // the gearbox and the driver.
             if !(is_arm && (motor == 1 || motor == 2)) {
-                self.steps_per_mm[motor] = settings.steps_per_mm_milli[motor] as f32 / 1000.0;
+                self.steps_per_mm[motor] = milli(settings.steps_per_mm_milli[motor]);
             }
-            self.max_feed[motor] = settings.max_feed_um_per_s[motor] as f32 / 1000.0;
-            self.max_accel[motor] = settings.max_accel_um_per_s2[motor] as f32 / 1000.0;
+            self.max_feed[motor] = milli(settings.max_feed_um_per_s[motor]);
+            self.max_accel[motor] = milli(settings.max_accel_um_per_s2[motor]);
         }
-        self.print_accel = settings.print_accel_um_per_s2 as f32 / 1000.0;
-        self.retract_accel = settings.retract_accel_um_per_s2 as f32 / 1000.0;
-        self.travel_accel = settings.travel_accel_um_per_s2 as f32 / 1000.0;
-        self.junction_deviation = settings.junction_deviation_um as f32 / 1000.0;
-        self.feed_factor = settings.feed_percent as f32 / 100.0;
-        self.flow_factor = settings.flow_percent as f32 / 100.0;
+        self.print_accel = milli(settings.print_accel_um_per_s2);
+        self.retract_accel = milli(settings.retract_accel_um_per_s2);
+        self.travel_accel = milli(settings.travel_accel_um_per_s2);
+        self.junction_deviation = milli(settings.junction_deviation_um);
+        self.feed_factor = centi(settings.feed_percent);
+        self.flow_factor = centi(settings.flow_percent);
     }
 
-    /// Steps per motor unit of every motor.
+    /// Steps per motor unit of every motor. Out of line: inlined into its
+    /// half-dozen callers it cost 140 bytes more on the AVR.
+    #[inline(never)]
     pub fn steps_per_unit(&self) -> [f32; MOTORS] {
         let linear = self.kinematics.motor_steps_per_unit([self.steps_per_mm[0], self.steps_per_mm[1], self.steps_per_mm[2]]);
         [linear[0], linear[1], linear[2], self.steps_per_mm[E]]
     }
 
-    /// The planner's limits in steps.
-    pub fn motor_limits(&self) -> MotorLimits {
+    /// The planner's limits in steps, written into `limits` (returned,
+    /// the 32 bytes went through a temporary and a copy on the AVR).
+    pub fn motor_limits(&self, limits: &mut MotorLimits) {
         let spu = self.steps_per_unit();
-        let mut limits = MotorLimits { max_rate: [0.0; MOTORS], max_accel: [0.0; MOTORS] };
         for motor in 0..MOTORS {
             limits.max_rate[motor] = (self.max_feed[motor] * spu[motor]).min(self.max_step_rate);
             limits.max_accel[motor] = self.max_accel[motor] * spu[motor];
         }
-        limits
     }
 
     /// What the step interrupt needs ([`StepQueues::split`]).
@@ -386,8 +387,18 @@ struct LineCut {
 }
 
 impl LineCut {
-    fn new(start: [f32; MOTORS], target: [f32; MOTORS], config: &MotionConfig) -> Self {
-        let mut delta = [0.0; MOTORS];
+    /// A line with no pieces left (an arc's, before its first chord).
+    const DONE: Self = Self { start: [0.0; MOTORS], delta: [0.0; MOTORS], target: [0.0; MOTORS], pieces: 0, done: 0 };
+
+    /// Cut the line from `start` to `target`, in place: as a temporary
+    /// (56 bytes) it pushed its callers' AVR frames past 63 bytes, where
+    /// every stack access costs 12 bytes of code. Points by reference: by
+    /// value the AVR copied each first.
+    fn init(&mut self, start: &[f32; MOTORS], target: &[f32; MOTORS], config: &MotionConfig) {
+        self.start = *start;
+        self.target = *target;
+        self.done = 0;
+        let delta = &mut self.delta;
         for axis in 0..MOTORS {
             delta[axis] = target[axis] - start[axis];
         }
@@ -406,28 +417,26 @@ impl LineCut {
             pieces = pieces.max(math::abs(delta[axis]) * config.steps_per_mm[axis].max(spu[axis]) * PER_HEADROOM);
         }
         pieces = pieces.max(math::abs(delta[E]) * spu[E] * config.flow_factor * PER_HEADROOM);
-        let pieces = (pieces.min(1.0e7) as u32).saturating_add(1);
-        Self { start, delta, target, pieces, done: 0 }
+        self.pieces = math::to_u32(pieces.min(1.0e7)).saturating_add(1);
     }
-}
 
-impl Iterator for LineCut {
-    type Item = [f32; MOTORS];
-
-    fn next(&mut self) -> Option<[f32; MOTORS]> {
+    /// The next piece's end into `point`; `false` once the line is done.
+    /// (Not an `Iterator`: an `Option<[f32; 4]>` went back through a copy
+    /// on the AVR.)
+    fn next_into(&mut self, point: &mut [f32; MOTORS]) -> bool {
         if self.done >= self.pieces {
-            return None;
+            return false;
         }
         self.done += 1;
         if self.done == self.pieces {
-            return Some(self.target);
+            *point = self.target;
+            return true;
         }
         let fraction = self.done as f32 / self.pieces as f32;
-        let mut point = [0.0; MOTORS];
         for axis in 0..MOTORS {
             point[axis] = self.start[axis] + self.delta[axis] * fraction;
         }
-        Some(point)
+        true
     }
 }
 
@@ -436,13 +445,14 @@ impl Iterator for LineCut {
 enum Pending {
     Nothing,
     Line { cut: LineCut, feed: f32 },
-    Arc { arc: ArcCutter, cut: Option<LineCut>, feed: f32 },
+    /// `cut`: the chord being cut (`LineCut::DONE` before the first).
+    Arc { arc: ArcCutter, cut: LineCut, feed: f32 },
 }
 
 /// The main loop's motion state.
 pub struct Motion<'q> {
     pub config: MotionConfig,
-    /// `config.motor_limits()`, kept up to date by `configure` (computing
+    /// `config.motor_limits(..)`, kept up to date by `configure` (computing
     /// it costs a dozen float divisions, too many for every planned piece).
     limits: MotorLimits,
     planner: Planner,
@@ -492,7 +502,8 @@ impl<'q> Motion<'q> {
         // the slot is initialised afterwards.
         let motion = unsafe {
             addr_of_mut!((*p).config).write(config);
-            addr_of_mut!((*p).limits).write(config.motor_limits());
+            // `configure` below computes the real limits.
+            addr_of_mut!((*p).limits).write(MotorLimits { max_rate: [0.0; MOTORS], max_accel: [0.0; MOTORS] });
             Planner::init_in(&mut *addr_of_mut!((*p).planner).cast::<MaybeUninit<Planner>>());
             addr_of_mut!((*p).prep).write(Prep::new());
             addr_of_mut!((*p).feeder).write(feeder);
@@ -515,7 +526,8 @@ impl<'q> Motion<'q> {
         motion.configure();
         // Until homed, the machine believes it is at the origin (reachable
         // on all three machine families).
-        motion.set_position_mm([0.0; MOTORS]);
+        // (`position` is the origin already.)
+        motion.derive_motor_steps();
         motion
     }
 
@@ -548,10 +560,10 @@ impl<'q> Motion<'q> {
     }
 
     fn configure(&mut self) {
-        self.limits = self.config.motor_limits();
+        self.config.motor_limits(&mut self.limits);
         self.planner.junction_deviation = self.config.junction_deviation;
         let min_ticks = (stepper::TIMER_HZ as f32 / self.config.max_step_rate).max(4.0);
-        self.prep.min_interval_q8 = (min_ticks * 256.0) as u32;
+        self.prep.min_interval_q8 = math::to_u32(min_ticks * 256.0);
     }
 
     /// New settings (`M92`, `M201`, `M203`, `M204`, `M205`, `M220`, `M221`).
@@ -560,8 +572,7 @@ impl<'q> Motion<'q> {
     pub fn apply_settings(&mut self, settings: &Settings) {
         self.config.apply_settings(settings);
         self.configure();
-        let position = self.position;
-        self.set_position_mm(position);
+        self.derive_motor_steps();
     }
 
     /// New kinematics (`M665`, `M666`) for the moves that follow.
@@ -575,25 +586,35 @@ impl<'q> Motion<'q> {
     /// for tests). Motor steps follow from the inverse kinematics.
     pub fn set_position_mm(&mut self, position: [f32; MOTORS]) {
         self.position = position;
+        self.derive_motor_steps();
+    }
+
+    /// The motor steps of the Cartesian position already in `position`
+    /// (callers that keep the position pass no copy of it).
+    fn derive_motor_steps(&mut self) {
+        let position = &self.position;
         let spu = self.config.steps_per_unit();
         if let Ok(motors) = self.config.kinematics.inverse([position[0], position[1], position[2]]) {
-            let steps = to_steps(motors, [spu[0], spu[1], spu[2]]);
+            let steps = motor_steps(&motors, &spu);
             self.motor_steps[..LINEAR_AXES].copy_from_slice(&steps);
         }
-        self.motor_steps[E] = round_to_i32(position[E] * spu[E]);
+        self.motor_steps[E] = round_to_i32(self.position[E] * spu[E]);
         self.e_remainder = 0.0;
     }
 
     /// Declare E's position (µm) without moving it: `G92 E`-like, used
     /// when a cold extrusion is dropped from a move.
     pub fn set_extruder_position_um(&mut self, um: i32) {
-        let mm = um as f32 / 1000.0;
+        let mm = milli(um);
         self.position[E] = mm;
-        self.motor_steps[E] = round_to_i32(mm * self.config.steps_per_unit()[E]);
+        // E is linear: its steps per unit are its steps/mm.
+        self.motor_steps[E] = round_to_i32(mm * self.config.steps_per_mm[E]);
         self.e_remainder = 0.0;
     }
 
-    /// Can a new motion command be accepted now?
+    /// Can a new motion command be accepted now? (Out of line: inlined in
+    /// its half-dozen callers it cost 32 bytes.)
+    #[inline(never)]
     pub fn ready(&self) -> bool {
         matches!(self.pending, Pending::Nothing) && !self.homing.is_active() && self.homing_requested.is_none()
     }
@@ -619,7 +640,12 @@ impl<'q> Motion<'q> {
 
     /// Where the queued motion ends, µm (X, Y, Z, E).
     pub fn position_um(&self) -> [i32; MOTORS] {
-        self.position.map(|mm| round_to_i32(mm * 1000.0))
+        // A plain loop: `array::map` compiled to a larger generic helper.
+        let mut um = [0; MOTORS];
+        for axis in 0..MOTORS {
+            um[axis] = round_to_i32(self.position[axis] * 1000.0);
+        }
+        um
     }
 
     /// Where the queued motion ends, in motor steps.
@@ -659,32 +685,40 @@ impl<'q> Motion<'q> {
 
     /// `G0`/`G1` to a machine position (µm) at a feed rate (µm/s).
     #[inline(never)]
-    pub fn line_to(&mut self, target_um: [i32; MOTORS], feed_um_per_s: i32) -> Result<(), MotionError> {
-        let target = target_um.map(|um| um as f32 / 1000.0);
+    pub fn line_to(&mut self, target_um: &[i32; MOTORS], feed_um_per_s: i32) -> Result<(), MotionError> {
+        let target = mm_from_um(target_um);
         self.check_accepting()?;
         self.check_target(target)?;
-        let feed = feed_um_per_s as f32 / 1000.0 * self.config.feed_factor;
-        self.pending = Pending::Line { cut: LineCut::new(self.position, target, &self.config), feed };
+        let feed = milli(feed_um_per_s) * self.config.feed_factor;
+        self.pending = Pending::Line { cut: LineCut::DONE, feed };
+        if let Pending::Line { cut, .. } = &mut self.pending {
+            cut.init(&self.position, &target, &self.config);
+        }
         self.feed_planner();
         Ok(())
     }
 
     /// `G2` (clockwise) / `G3` to a machine position (µm) around a centre.
     #[inline(never)]
-    pub fn arc_to(&mut self, plane: Plane, target_um: [i32; MOTORS], centre: ArcCentre, clockwise: bool, feed_um_per_s: i32) -> Result<(), MotionError> {
-        let target = target_um.map(|um| um as f32 / 1000.0);
+    pub fn arc_to(&mut self, plane: Plane, target_um: &[i32; MOTORS], centre: ArcCentre, clockwise: bool, feed_um_per_s: i32) -> Result<(), MotionError> {
+        let target = mm_from_um(target_um);
         self.check_accepting()?;
         self.check_target(target)?;
         let tolerance = self.config.arc_tolerance;
-        let arc = match centre {
-            ArcCentre::Offset([i, j]) => {
-                ArcCutter::with_centre(plane, self.position, target, [i as f32 / 1000.0, j as f32 / 1000.0], clockwise, tolerance)
+        let centre = match centre {
+            ArcCentre::Offset([i, j]) => Centre::Offset([milli(i), milli(j)]),
+            ArcCentre::Radius(r) => Centre::Radius(milli(r)),
+        };
+        let feed = milli(feed_um_per_s) * self.config.feed_factor;
+        // The cutter is built where it is kept, not as a temporary (see
+        // `ArcCutter::init`).
+        self.pending = Pending::Arc { arc: ArcCutter::EMPTY, cut: LineCut::DONE, feed };
+        if let Pending::Arc { arc, .. } = &mut self.pending {
+            if let Err(error) = arc.init(plane, &self.position, &target, &centre, clockwise, tolerance) {
+                self.pending = Pending::Nothing;
+                return Err(MotionError::Arc(error));
             }
-            ArcCentre::Radius(r) => ArcCutter::with_radius(plane, self.position, target, r as f32 / 1000.0, clockwise, tolerance),
         }
-        .map_err(MotionError::Arc)?;
-        let feed = feed_um_per_s as f32 / 1000.0 * self.config.feed_factor;
-        self.pending = Pending::Arc { arc, cut: None, feed };
         self.feed_planner();
         Ok(())
     }
@@ -716,14 +750,19 @@ impl<'q> Motion<'q> {
 
     fn check_target(&self, target: [f32; MOTORS]) -> Result<(), MotionError> {
         let point = [target[0], target[1], target[2]];
-        if let Some(limits) = self.config.soft_limits {
+        // The limits and the home by reference: copies cost flash.
+        if let Some(limits) = &self.config.soft_limits {
             // Limits bind once an axis knows where it is (Marlin): a machine
             // that must home refuses everything before, see check_accepting.
             let bound = if self.config.must_home { 0b111 } else { self.homed };
+            // A running axis bit: a variable shift is a loop on the AVR.
+            let mut bit = 1;
             let inside = (0..LINEAR_AXES).all(|axis| {
-                bound & (1 << axis) == 0 || (point[axis] >= limits.min[axis] - 1e-4 && point[axis] <= limits.max[axis] + 1e-4)
+                let free = bound & bit == 0;
+                bit <<= 1;
+                free || (point[axis] >= limits.min[axis] - 1e-4 && point[axis] <= limits.max[axis] + 1e-4)
             });
-            let at_home = match self.config.home {
+            let at_home = match &self.config.home {
                 HomePosition::Cartesian(home) => (0..LINEAR_AXES).all(|axis| math::abs(point[axis] - home[axis]) < 1e-3),
                 HomePosition::DeltaTop => false,
             };
@@ -786,36 +825,31 @@ impl<'q> Motion<'q> {
 
     /// Cut pending lines and arcs into the planner while it has room.
     fn feed_planner(&mut self) {
+        let mut point = [0.0; MOTORS];
         while !self.planner.is_full() {
-            let (point, feed) = match &mut self.pending {
+            let feed = match &mut self.pending {
                 Pending::Nothing => return,
-                Pending::Line { cut, feed } => match cut.next() {
-                    Some(point) => (point, *feed),
-                    None => {
+                Pending::Line { cut, feed } => {
+                    if !cut.next_into(&mut point) {
                         self.pending = Pending::Nothing;
                         return;
                     }
-                },
+                    *feed
+                }
                 Pending::Arc { arc, cut, feed } => {
-                    let feed = *feed;
-                    match cut.as_mut().and_then(|c| c.next()) {
-                        Some(point) => (point, feed),
-                        None => match arc.next() {
-                            Some(chord_end) => {
-                                let mut chord = LineCut::new(self.position, chord_end, &self.config);
-                                let point = chord.next().unwrap_or(chord_end);
-                                *cut = Some(chord);
-                                (point, feed)
-                            }
-                            None => {
-                                self.pending = Pending::Nothing;
-                                return;
-                            }
-                        },
+                    if !cut.next_into(&mut point) {
+                        let Some(chord_end) = arc.next() else {
+                            self.pending = Pending::Nothing;
+                            return;
+                        };
+                        cut.init(&self.position, &chord_end, &self.config);
+                        // A new cut has at least one piece: this sets `point`.
+                        cut.next_into(&mut point);
                     }
+                    *feed
                 }
             };
-            if let Err(error) = self.queue_piece(point, feed) {
+            if let Err(error) = self.queue_piece(&point, feed) {
                 self.error = Some(error);
                 self.pending = Pending::Nothing;
                 return;
@@ -825,40 +859,59 @@ impl<'q> Motion<'q> {
 
     /// One straight piece to the planner (the planner has room).
     #[inline(never)]
-    fn queue_piece(&mut self, target: [f32; MOTORS], feed: f32) -> Result<(), MotionError> {
-        let spu = self.config.steps_per_unit();
-        let motors = self.config.kinematics.inverse([target[0], target[1], target[2]]).map_err(MotionError::Unreachable)?;
-        let linear = to_steps(motors, [spu[0], spu[1], spu[2]]);
-        let e_exact = (target[E] - self.position[E]) * spu[E] * self.config.flow_factor + self.e_remainder;
-        let e_steps = round_to_i32(e_exact);
-        let mut steps = [0; MOTORS];
-        for motor in 0..LINEAR_AXES {
-            steps[motor] = linear[motor] - self.motor_steps[motor];
+    fn queue_piece(&mut self, target: &[f32; MOTORS], feed: f32) -> Result<(), MotionError> {
+        // Written to keep the AVR frames small (the move built in place,
+        // the steps in a function of their own, the motor steps re-derived
+        // from the move): beyond 63 bytes of frame every stack access costs
+        // 12 bytes of code instead of 2.
+        let mut motion = PlannerMove { speed: feed, ..PlannerMove::default() };
+        let e_exact = self.piece_steps(target, &mut motion.steps)?;
+        let e_steps = motion.steps[E];
+        // The X, Y, Z deltas, scaled to the unit vector below.
+        for axis in 0..LINEAR_AXES {
+            motion.unit[axis] = target[axis] - self.position[axis];
         }
-        steps[E] = e_steps;
-        let mut delta = [0.0; MOTORS];
-        for axis in 0..MOTORS {
-            delta[axis] = target[axis] - self.position[axis];
-        }
+        let delta = &mut motion.unit;
         let xyz = sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]);
-        let (millimetres, unit, acceleration) = if xyz > 1.0e-5 {
+        if xyz > 1.0e-5 {
             let per_mm = 1.0 / xyz;
-            let unit = [delta[0] * per_mm, delta[1] * per_mm, delta[2] * per_mm, 0.0];
-            let acceleration = if e_steps != 0 { self.config.print_accel } else { self.config.travel_accel };
-            (xyz, unit, acceleration)
+            for axis in 0..LINEAR_AXES {
+                delta[axis] *= per_mm;
+            }
+            motion.millimetres = xyz;
+            motion.acceleration = if e_steps != 0 { self.config.print_accel } else { self.config.travel_accel };
         } else {
-            (math::abs(delta[E]), [0.0; MOTORS], self.config.retract_accel)
-        };
-        let motion = PlannerMove { steps, millimetres, unit, speed: feed, acceleration, watch: 0, watch_release: false };
+            *delta = [0.0; MOTORS];
+            motion.millimetres = math::abs(target[E] - self.position[E]);
+            motion.acceleration = self.config.retract_accel;
+        }
         if self.planner.push(&motion, &self.limits).is_err() {
             // The caller checked for room; never drop a piece silently.
             return Err(MotionError::Busy);
         }
-        self.motor_steps[..LINEAR_AXES].copy_from_slice(&linear);
+        // motor_steps + (linear − motor_steps): the new motor positions.
+        for motor in 0..LINEAR_AXES {
+            self.motor_steps[motor] += motion.steps[motor];
+        }
         self.motor_steps[E] += e_steps;
         self.e_remainder = e_exact - e_steps as f32;
-        self.position = target;
+        self.position = *target;
         Ok(())
+    }
+
+    /// The steps of every motor from the queued position to `target`;
+    /// returns the exact (unrounded) E steps, owed rounding included.
+    #[inline(never)]
+    fn piece_steps(&self, target: &[f32; MOTORS], steps: &mut [i32; MOTORS]) -> Result<f32, MotionError> {
+        let spu = self.config.steps_per_unit();
+        let motors = self.config.kinematics.inverse([target[0], target[1], target[2]]).map_err(MotionError::Unreachable)?;
+        let linear = motor_steps(&motors, &spu);
+        for motor in 0..LINEAR_AXES {
+            steps[motor] = linear[motor] - self.motor_steps[motor];
+        }
+        let e_exact = (target[E] - self.position[E]) * spu[E] * self.config.flow_factor + self.e_remainder;
+        steps[E] = round_to_i32(e_exact);
+        Ok(e_exact)
     }
 
     /// Run the homing state machine as far as it goes without waiting.
@@ -876,38 +929,28 @@ impl<'q> Motion<'q> {
             return;
         }
         let mut stopped = 0;
-        if let Some((expected_done, steps)) = self.homing_move {
-            let finished = status.blocks_done == expected_done && !status.busy && self.planner.is_empty() && !self.prep.is_active();
+        // By reference: a copy of the move's steps cost frame and flash.
+        if let Some((expected_done, steps)) = &self.homing_move {
+            let finished = status.blocks_done == *expected_done && !status.busy && self.planner.is_empty() && !self.prep.is_active();
             if !finished {
                 return;
             }
-            self.homing_move = None;
             stopped = status.stopped;
             self.homing.set_travel(status.stopped_steps);
+            // A running motor bit: a variable shift is a loop on the AVR.
+            let mut bit = 1;
             for motor in 0..MOTORS {
                 let sign = if steps[motor] < 0 { -1 } else { 1 };
-                self.motor_steps[motor] += if stopped & (1 << motor) != 0 { sign * status.stopped_steps[motor] as i32 } else { steps[motor] };
+                self.motor_steps[motor] += if stopped & bit != 0 { sign * status.stopped_steps[motor] as i32 } else { steps[motor] };
+                bit <<= 1;
             }
+            self.homing_move = None;
         }
         loop {
+            // The steps by reference (`ref`): no copy of them.
             match self.homing.next(&self.config.homing, stopped, now_ms) {
-                HomingStep::Move { steps, rate, watch, release } => {
-                    let dominant = steps.iter().map(|s| s.unsigned_abs()).max().unwrap_or(0);
-                    let motion = PlannerMove {
-                        steps,
-                        millimetres: dominant as f32,
-                        unit: [0.0; MOTORS],
-                        speed: rate,
-                        acceleration: self.config.homing.acceleration,
-                        watch,
-                        watch_release: release,
-                    };
-                    if dominant == 0 || self.planner.push(&motion, &self.limits).is_err() {
-                        self.error = Some(MotionError::HomingFailed(self.homing.group()));
-                        self.homing.abort();
-                        return;
-                    }
-                    self.homing_move = Some((status.blocks_done.wrapping_add(1), steps));
+                HomingStep::Move { ref steps, rate, watch, release } => {
+                    self.queue_homing_move(steps, rate, watch, release, status.blocks_done);
                     return;
                 }
                 HomingStep::Wait => return,
@@ -927,20 +970,41 @@ impl<'q> Motion<'q> {
         }
     }
 
+    /// A homing move to the planner (empty: homing waits for it).
+    fn queue_homing_move(&mut self, steps: &[i32; MOTORS], rate: f32, watch: u8, release: bool, blocks_done: u16) {
+        let dominant = steps.iter().map(|s| s.unsigned_abs()).max().unwrap_or(0);
+        let motion = PlannerMove {
+            steps: *steps,
+            millimetres: dominant as f32,
+            unit: [0.0; MOTORS],
+            speed: rate,
+            acceleration: self.config.homing.acceleration,
+            watch,
+            watch_release: release,
+        };
+        if dominant == 0 || self.planner.push(&motion, &self.limits).is_err() {
+            self.error = Some(MotionError::HomingFailed(self.homing.group()));
+            self.homing.abort();
+            return;
+        }
+        self.homing_move = Some((blocks_done.wrapping_add(1), *steps));
+    }
+
     #[inline(never)]
     fn set_home(&mut self, motors: u8) {
         let spu = self.config.steps_per_unit();
-        let home = match (self.config.home, self.config.kinematics) {
+        // By reference: copies of the configuration's parts cost flash.
+        let home = match (&self.config.home, &self.config.kinematics) {
             #[cfg(feature = "delta")]
             (HomePosition::DeltaTop, MachineKinematics::Delta(delta)) => Ok(delta.homed_carriage_heights()),
-            (HomePosition::Cartesian(point), kinematics) => kinematics.inverse(point),
+            (HomePosition::Cartesian(point), kinematics) => kinematics.inverse(*point),
             (HomePosition::DeltaTop, kinematics) => kinematics.inverse([0.0; LINEAR_AXES]),
         };
         let Ok(home) = home else {
             self.error = Some(MotionError::HomingFailed(motors));
             return;
         };
-        let steps = to_steps(home, [spu[0], spu[1], spu[2]]);
+        let steps = motor_steps(&home, &spu);
         for motor in 0..LINEAR_AXES {
             if motors & (1 << motor) != 0 {
                 self.motor_steps[motor] = steps[motor];
@@ -966,6 +1030,30 @@ impl<'q> Motion<'q> {
             self.position[..LINEAR_AXES].copy_from_slice(&point);
         }
     }
+}
+
+/// Thousandths (µm, milli-units) to units as f32. Out of line: a
+/// conversion and a division inline at each of a dozen sites cost flash.
+#[inline(never)]
+fn milli(value: i32) -> f32 {
+    value as f32 / 1000.0
+}
+
+/// A target in µm to mm. A plain loop: `array::map` compiled to a
+/// generic helper larger than this.
+#[inline(never)]
+fn mm_from_um(um: &[i32; MOTORS]) -> [f32; MOTORS] {
+    let mut mm = [0.0; MOTORS];
+    for axis in 0..MOTORS {
+        mm[axis] = milli(um[axis]);
+    }
+    mm
+}
+
+/// Hundredths (percent) to a factor.
+#[inline(never)]
+fn centi(value: i32) -> f32 {
+    value as f32 / 100.0
 }
 
 /// The executor's endstop layout (bit 0 X_MIN, 1 X_MAX, 2 Y_MIN, 3 Y_MAX,

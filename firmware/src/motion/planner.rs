@@ -95,6 +95,10 @@ pub struct PlannerMove {
     pub watch_release: bool,
 }
 
+/// [`Planner::push`] found the ring full.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Full;
+
 /// Per-motor limits in steps: rate (steps/s) and acceleration (steps/s²).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MotorLimits {
@@ -267,22 +271,34 @@ impl Planner {
         })
     }
 
-    /// Add a move. `Err` gives it back when the ring is full; a move without
+    /// Add a move. `Err` when the ring is full (the caller still has the
+    /// move: handing it back was a 40-byte copy on the AVR); a move without
     /// steps is accepted and dropped.
-    pub fn push(&mut self, motion: &PlannerMove, limits: &MotorLimits) -> Result<(), PlannerMove> {
+    pub fn push(&mut self, motion: &PlannerMove, limits: &MotorLimits) -> Result<(), Full> {
         if self.is_full() {
-            return Err(*motion);
+            return Err(Full);
         }
-        let mut block = Block { watch: motion.watch, watch_release: motion.watch_release, ..Block::default() };
+        let was_empty = self.is_empty();
+        let head = self.head as usize;
+        // Built in its slot (free: the ring is not full, and the head is
+        // not published until the end), not as a temporary: the copy was a
+        // memcpy and the temporary pushed the AVR frame past 63 bytes.
+        let block = &mut self.blocks[head];
+        *block = Block { watch: motion.watch, watch_release: motion.watch_release, ..Block::default() };
         // A motor covers steps/L steps per mm of path: the path's speed and
         // acceleration are capped so that each motor stays within its own
         // limits, i.e. by the smallest limit·L/steps. The smallest ratio is
         // found by cross-multiplying (a/b < c/d ⇔ a·d < c·b), so there is
         // one division per limit instead of two per motor (each costs the
         // AVR hundreds of cycles, for every line of a slicer stream).
-        let mut rate_limit: Option<(f32, f32)> = None;
-        let mut accel_limit: Option<(f32, f32)> = None;
+        // (limit, steps); steps 0: no motor seen yet (a moving motor has ≥ 1).
+        let (mut rate, mut rate_steps) = (0.0, 0.0);
+        let (mut accel, mut accel_steps) = (0.0, 0.0);
+        // A running motor bit: a variable shift is a loop on the AVR.
+        let mut bit = 1;
         for motor in 0..MOTORS {
+            let motor_bit = bit;
+            bit <<= 1;
             let steps = motion.steps[motor].unsigned_abs().min(MAX_BLOCK_STEPS);
             if steps == 0 {
                 continue;
@@ -290,40 +306,40 @@ impl Planner {
             block.steps[motor] = steps as u16;
             block.events = block.events.max(steps as u16);
             if motion.steps[motor] > 0 {
-                block.direction |= 1 << motor;
+                block.direction |= motor_bit;
             }
             let steps = steps as f32;
-            let (rate, accel) = (limits.max_rate[motor], limits.max_accel[motor]);
-            if rate_limit.is_none_or(|(r, n)| rate * n < r * steps) {
-                rate_limit = Some((rate, steps));
+            let (motor_rate, motor_accel) = (limits.max_rate[motor], limits.max_accel[motor]);
+            if rate_steps == 0.0 || motor_rate * rate_steps < rate * steps {
+                (rate, rate_steps) = (motor_rate, steps);
             }
-            if accel_limit.is_none_or(|(a, n)| accel * n < a * steps) {
-                accel_limit = Some((accel, steps));
+            if accel_steps == 0.0 || motor_accel * accel_steps < accel * steps {
+                (accel, accel_steps) = (motor_accel, steps);
             }
         }
-        let mut speed = motion.speed;
-        let mut acceleration = motion.acceleration;
-        if let (Some((rate, rate_steps)), Some((accel, accel_steps))) = (rate_limit, accel_limit) {
-            speed = speed.min(rate * motion.millimetres / rate_steps);
-            acceleration = acceleration.min(accel * motion.millimetres / accel_steps);
+        // No motor moves: nothing to plan (both limits are set by the first
+        // moving motor).
+        if block.events == 0 {
+            return Ok(());
         }
-        if block.events == 0 || !(motion.millimetres > 0.0) || !(speed > 0.0) || !(acceleration > 0.0) {
+        let speed = motion.speed.min(rate * motion.millimetres / rate_steps);
+        let acceleration = motion.acceleration.min(accel * motion.millimetres / accel_steps);
+        if !(motion.millimetres > 0.0) || !(speed > 0.0) || !(acceleration > 0.0) {
             return Ok(());
         }
         block.millimetres = motion.millimetres;
         block.acceleration = acceleration;
-        block.nominal_speed_sqr = speed * speed;
-        block.max_entry_speed_sqr = if self.is_empty() {
+        let nominal_speed_sqr = speed * speed;
+        block.nominal_speed_sqr = nominal_speed_sqr;
+        block.entry_speed_sqr = 0.0;
+        let max_entry_speed_sqr = if was_empty {
             0.0
         } else {
-            self.junction_speed_sqr(&motion.unit, acceleration)
-                .min(block.nominal_speed_sqr)
-                .min(self.previous_nominal_speed_sqr)
+            self.junction_speed_sqr(&motion.unit, acceleration).min(nominal_speed_sqr).min(self.previous_nominal_speed_sqr)
         };
-        block.entry_speed_sqr = 0.0;
+        self.blocks[head].max_entry_speed_sqr = max_entry_speed_sqr;
         self.previous_unit = motion.unit;
-        self.previous_nominal_speed_sqr = block.nominal_speed_sqr;
-        self.blocks[self.head as usize] = block;
+        self.previous_nominal_speed_sqr = nominal_speed_sqr;
         self.head = next(self.head);
         self.recalculate();
         Ok(())

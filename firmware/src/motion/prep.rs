@@ -34,7 +34,7 @@
 //! into the planner (`entry_speed_sqr`, `millimetres`), which is what lets
 //! the look-ahead raise the exit speed of a block already under way.
 
-use super::math::sqrt;
+use super::math::{clamp, sqrt, to_i32, to_u32};
 use super::planner::Planner;
 use super::stepper::{Segment, StepBlock, StepFeeder, TIMER_HZ};
 
@@ -126,8 +126,8 @@ impl Profile {
         // to the exit (likewise), decelerate throughout.
         let peak_sqr = ((2.0 * accel * distance + v0_sqr + exit_sqr) * 0.5).max(v0_sqr);
         let peak = sqrt(peak_sqr).max(start_speed);
-        let accel_end = ((peak_sqr - v0_sqr) * half_inv_a).clamp(0.0, distance);
-        let inv_peak = if peak > 0.0 { 1.0 / peak } else { 0.0 };
+        let accel_end = clamp((peak_sqr - v0_sqr) * half_inv_a, 0.0, distance);
+        let inv_peak = inverse(peak);
         Self { start_speed, accel, inv_accel, inv_peak, peak, accel_end, decel_start: accel_end }
     }
 
@@ -182,7 +182,9 @@ impl Profile {
         if target > boundary {
             target = boundary + 0.5;
         }
-        let events = if target >= left as f32 { left } else { target as u16 };
+        // Below `left` here, so within u16 (NaN and negatives give 0, as
+        // `as u16` would).
+        let events = if target >= left as f32 { left } else { to_u32(target) as u16 };
         events.clamp(1, left.max(1))
     }
 }
@@ -217,6 +219,8 @@ impl Prep {
 
     /// Forget the block under way (after a fault or an abandoned homing
     /// move; the interrupt drops what was queued).
+    // Out of line: it has several callers (24 bytes).
+    #[inline(never)]
     pub fn reset(&mut self) {
         self.active = false;
         self.events_left = 0;
@@ -253,9 +257,9 @@ impl Prep {
                 self.mm_per_event = block.millimetres / block.events as f32;
                 self.speed = sqrt(block.entry_speed_sqr) * self.events_per_mm;
                 self.nominal = sqrt(block.nominal_speed_sqr) * self.events_per_mm;
-                self.inv_nominal = if self.nominal > 0.0 { 1.0 / self.nominal } else { 0.0 };
+                self.inv_nominal = inverse(self.nominal);
                 self.accel = block.acceleration * self.events_per_mm;
-                self.inv_accel = if self.accel > 0.0 { 1.0 / self.accel } else { 0.0 };
+                self.inv_accel = inverse(self.accel);
                 self.events_left = block.events;
                 self.active = true;
                 feeder.push_block(step_block);
@@ -279,6 +283,9 @@ impl Prep {
         queued
     }
 
+    // Out of line: inlined into `fill` (and so into `Motion::poll`) the
+    // float code spilled more registers, 172 bytes more on the AVR.
+    #[inline(never)]
     fn next_segment(&mut self, exit_speed_sqr: f32, starts_block: bool) -> Segment {
         let profile = Profile::new(
             self.speed,
@@ -308,7 +315,8 @@ impl Prep {
         let total_q8 = total_q8.max(min * k);
         if events == 1 {
             let interval = total_q8 + 0.5;
-            return (interval as u32, 0, (interval as u32) as f32);
+            let interval = to_u32(interval);
+            return (interval, 0, interval as f32);
         }
         let pairs = k * (k - 1.0) * 0.5;
         // One division: 1/k = ((k − 1)/2) · (1/pairs).
@@ -322,7 +330,18 @@ impl Prep {
             interval = round_f32(total_q8 * inv_k).max(min);
         }
         let actual = k * interval + add * pairs;
-        (interval as u32, add as i32, actual)
+        (to_u32(interval), to_i32(add), actual)
+    }
+}
+
+/// 1/`value`, or 0 for a speed or acceleration that is not positive.
+/// Out of line: three sites.
+#[inline(never)]
+fn inverse(value: f32) -> f32 {
+    if value > 0.0 {
+        1.0 / value
+    } else {
+        0.0
     }
 }
 

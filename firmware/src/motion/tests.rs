@@ -72,8 +72,8 @@ impl Rig {
                 break;
             }
             let result = match command {
-                Command::Line(target, feed) => self.motion.line_to(target.map(um), um(feed)),
-                Command::Arc(target, centre, clockwise, feed) => self.motion.arc_to(crate::motion::Plane::Xy, target.map(um), centre, clockwise, um(feed)),
+                Command::Line(target, feed) => self.motion.line_to(&target.map(um), um(feed)),
+                Command::Arc(target, centre, clockwise, feed) => self.motion.arc_to(crate::motion::Plane::Xy, &target.map(um), centre, clockwise, um(feed)),
                 Command::Home(mask) => self.motion.home(mask),
             };
             self.commands.pop_front();
