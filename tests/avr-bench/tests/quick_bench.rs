@@ -957,7 +957,8 @@ fn the_encoder_build_corrects_a_belt_slip_and_stops_the_job_on_a_jam_or_a_silent
     board.run_for_ms(200.0);
     let x = board.position(X);
     board.glitch_index(0);
-    board.run_for_ms(20.0);
+    // M822 shows what the board copied at most 100 ms ago.
+    board.run_for_ms(150.0);
     let report = replies(&mut board, &["M822"]);
     // (Leaving the 20 mm boundary may add an accepted pulse: its dither.)
     assert!(word(&report[0], "idx:") as u64 >= accepted && report[0].contains(" glitch:1 "), "{report:?}");
