@@ -500,7 +500,7 @@ impl<'q> Machine<'q> {
                     return Ok(Outcome::Done);
                 }
                 Some(code) if !is_known(code) => {
-                    ufmt::uwrite!(out, "echo:Unknown command: \"{}\"\n", Printable(trim(text)))?;
+                    self.unknown_command(text, out)?;
                     return Ok(Outcome::Done);
                 }
                 _ => return Ok(Outcome::Failed(error.into())),
@@ -567,6 +567,11 @@ impl<'q> Machine<'q> {
     /// Run a parsed command. Out of line from `execute` so that the parsed
     /// words stay in `execute`'s frame: on the AVR a frame larger than 64
     /// bytes makes every access to it several instructions longer.
+    ///
+    /// The arms' bodies are small functions of their own, for reading; most
+    /// are `inline(always)`: measured on the AVR, each one called out of
+    /// line cost more (the `Outcome` copied through memory, the arguments
+    /// set up again) than it saved in this function.
     #[inline(never)]
     fn dispatch<W: uWrite + ?Sized>(
         &mut self,
@@ -579,7 +584,7 @@ impl<'q> Machine<'q> {
         // Halted, the machine still answers what only reports or waits
         // (hosts keep polling M105) and echoes unknown codes as unknown;
         // it refuses everything that would act.
-        if self.halted && is_known(command.code) && !matches!(command.code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410)) {
+        if self.halted && refused_while_halted(command.code) {
             return Ok(Outcome::Failed(CommandError::Halted));
         }
         #[cfg(feature = "powder-bed")]
@@ -602,11 +607,9 @@ impl<'q> Machine<'q> {
             Code::G(0 | 1) | Code::Modal => self.linear_move(command, out),
             #[cfg(feature = "printer")]
             Code::G(2 | 3) => self.arc_move(command, out),
-            Code::G(4) => return Ok(self.dwell(command)),
+            Code::G(4) => return Ok(self.dwell_command(command)),
             #[cfg(feature = "printer")]
-            Code::G(28) if self.driver_alarms != 0 => Err(CommandError::DriverAlarm),
-            #[cfg(feature = "printer")]
-            Code::G(28) => return Ok(self.home(command)),
+            Code::G(28) => return Ok(self.home_command(command)),
             // A build without the printers (the extrusion line or the
             // powder bed alone): their motion commands are not here.
             #[cfg(not(feature = "printer"))]
@@ -639,9 +642,7 @@ impl<'q> Machine<'q> {
             }
             Code::M(18 | 84) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: true })),
             Code::M(105) => {
-                // Marlin puts the report on the `ok` line itself.
-                out.write_str("ok ")?;
-                self.write_temperatures(out)?;
+                self.report_temperatures_on_ok(out)?;
                 return Ok(Outcome::Acknowledged);
             }
             Code::M(106) => self.set_fan(command),
@@ -666,15 +667,9 @@ impl<'q> Machine<'q> {
             Code::M(155) => self.set_auto_report(command, now_ms),
             Code::M(400) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false })),
             #[cfg(feature = "printer")]
-            Code::M(120) => {
-                self.motion.set_endstops_always(true);
-                Ok(())
-            }
+            Code::M(120) => self.set_endstops_always(true),
             #[cfg(feature = "printer")]
-            Code::M(121) => {
-                self.motion.set_endstops_always(false);
-                Ok(())
-            }
+            Code::M(121) => self.set_endstops_always(false),
             #[cfg(feature = "delta")]
             Code::M(665) => self.delta_geometry(command, out),
             #[cfg(feature = "delta")]
@@ -691,59 +686,100 @@ impl<'q> Machine<'q> {
                 self.load_settings(storage, out)?;
                 Ok(())
             }
-            Code::M(502) => {
-                self.settings = self.defaults.clone();
-                self.apply_motion_settings();
-                self.apply_heater_settings();
-                out.write_str("echo:Hardcoded Default Settings Loaded\n")?;
-                Ok(())
-            }
+            Code::M(502) => self.restore_defaults(out).map(Ok)?,
             Code::M(503) => self.settings.report(out).map(Ok)?,
-            Code::T(tool) if tool < EXTRUDERS => Ok(()),
-            Code::T(tool) => {
-                ufmt::uwrite!(out, "echo:T{} Invalid extruder\n", tool)?;
-                Ok(())
-            }
+            Code::T(tool) => self.select_tool(tool, out).map(Ok)?,
             // The heaters (not on the powder bed, which has none).
             #[cfg(feature = "heaters")]
-            Code::M(104) => return self.set_temperature(command, HeaterSlot::Hotend, None, now_ms, out),
-            #[cfg(feature = "heaters")]
-            Code::M(140) => return self.set_temperature(command, HeaterSlot::Bed, None, now_ms, out),
-            #[cfg(feature = "heaters")]
-            Code::M(109) => return self.set_temperature(command, HeaterSlot::Hotend, Some(WaitConfig::HOTEND), now_ms, out),
-            #[cfg(feature = "heaters")]
-            Code::M(190) => return self.set_temperature(command, HeaterSlot::Bed, Some(WaitConfig::BED), now_ms, out),
-            #[cfg(feature = "heaters")]
-            Code::M(301) => self.set_pid(command, HeaterSlot::Hotend, out),
-            #[cfg(feature = "heaters")]
-            Code::M(304) => self.set_pid(command, HeaterSlot::Bed, out),
-            #[cfg(feature = "heaters")]
-            Code::M(302) => self.cold_extrusion_command(command, out),
-            #[cfg(feature = "heaters")]
-            Code::M(303) => return self.autotune(command, out),
+            Code::M(104 | 140 | 109 | 190 | 301 | 304 | 302 | 303) => return self.heater_command(command, now_ms, out),
             #[cfg(not(feature = "heaters"))]
             Code::M(104 | 109 | 140 | 190 | 301 | 302 | 303 | 304) => Err(CommandError::NotThisMachine),
             // Grbl's G10 L2 / L20: work offsets. Without L it would be
             // Marlin's firmware retraction, which this build does not have.
-            Code::G(10) if command.has(b'L') => match command.value(b'L').map(|l| l.and_then(|l| l.to_int())) {
-                Ok(Some(2)) => self.modal.set_work_offsets(command, false),
-                Ok(Some(20)) => self.modal.set_work_offsets(command, true),
-                Ok(_) => Err(CommandError::OutOfRange(b'L')),
-                Err(error) => Err(error.into()),
-            },
-            Code::G(10 | 11) => {
-                self.not_yet_available(text, out)?;
-                Ok(())
-            }
-            _ => {
-                ufmt::uwrite!(out, "echo:Unknown command: \"{}\"\n", Printable(trim(text)))?;
-                Ok(())
-            }
+            Code::G(10) if command.has(b'L') => self.modal.work_offsets_command(command),
+            Code::G(10 | 11) => self.not_yet_available(text, out).map(Ok)?,
+            _ => self.unknown_command(text, out).map(Ok)?,
         };
         Ok(match result {
             Ok(()) => Outcome::Done,
             Err(error) => Outcome::Failed(error),
         })
+    }
+
+    /// `M105`: Marlin puts the report on the `ok` line itself.
+    #[inline(always)]
+    fn report_temperatures_on_ok<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        out.write_str("ok ")?;
+        self.write_temperatures(out)
+    }
+
+    /// `G4`, out of line (see `dispatch`).
+    #[inline(always)]
+    fn dwell_command(&mut self, command: &Command) -> Outcome {
+        self.dwell(command)
+    }
+
+    #[cfg(feature = "printer")]
+    /// `G28`, out of line (see `dispatch`); refused while a driver alarms.
+    #[inline(always)]
+    fn home_command(&mut self, command: &Command) -> Outcome {
+        if self.driver_alarms != 0 {
+            return Outcome::Failed(CommandError::DriverAlarm);
+        }
+        self.home(command)
+    }
+
+    #[cfg(feature = "printer")]
+    /// `M120`/`M121`: endstops checked during every move, or while homing only.
+    #[inline(always)]
+    fn set_endstops_always(&mut self, always: bool) -> Result<(), CommandError> {
+        self.motion.set_endstops_always(always);
+        Ok(())
+    }
+
+    /// `M502`: back to the machine's defaults (in force, not stored).
+    #[inline(always)]
+    fn restore_defaults<W: uWrite + ?Sized>(&mut self, out: &mut W) -> Result<(), W::Error> {
+        self.settings = self.defaults.clone();
+        self.apply_motion_settings();
+        self.apply_heater_settings();
+        out.write_str("echo:Hardcoded Default Settings Loaded\n")
+    }
+
+    /// `T<n>`: only `T0` exists.
+    #[inline(always)]
+    fn select_tool<W: uWrite + ?Sized>(&self, tool: u16, out: &mut W) -> Result<(), W::Error> {
+        if tool < EXTRUDERS {
+            return Ok(());
+        }
+        ufmt::uwrite!(out, "echo:T{} Invalid extruder\n", tool)
+    }
+
+    #[cfg(feature = "heaters")]
+    /// The heater commands, one out-of-line function for all of them (see
+    /// `dispatch`).
+    #[inline(always)]
+    fn heater_command<W: uWrite + ?Sized>(&mut self, command: &Command, now_ms: u32, out: &mut W) -> Result<Outcome, W::Error> {
+        let result = match command.code {
+            Code::M(104) => return self.set_temperature(command, HeaterSlot::Hotend, None, now_ms, out),
+            Code::M(140) => return self.set_temperature(command, HeaterSlot::Bed, None, now_ms, out),
+            Code::M(109) => return self.set_temperature(command, HeaterSlot::Hotend, Some(WaitConfig::HOTEND), now_ms, out),
+            Code::M(190) => return self.set_temperature(command, HeaterSlot::Bed, Some(WaitConfig::BED), now_ms, out),
+            Code::M(301) => self.set_pid(command, HeaterSlot::Hotend, out),
+            Code::M(304) => self.set_pid(command, HeaterSlot::Bed, out),
+            Code::M(302) => self.cold_extrusion_command(command, out),
+            _ => return self.autotune(command, out),
+        };
+        Ok(match result {
+            Ok(()) => Outcome::Done,
+            Err(error) => Outcome::Failed(error),
+        })
+    }
+
+    /// A code the executor does not run: echoed, as Marlin does.
+    #[inline(never)]
+    fn unknown_command<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
+        ufmt::uwrite!(out, "echo:Unknown command: \"{}\"\n", Printable(trim(text)))
     }
 
     /// Hand the settings to the motion core (printers only: the extrusion
@@ -753,6 +789,7 @@ impl<'q> Machine<'q> {
         self.motion.apply_settings(&self.settings);
     }
 
+    #[inline(always)]
     fn not_yet_available<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
         ufmt::uwrite!(out, "echo:\"{}\" is not available yet in this build\n", Printable(trim(text)))
     }
@@ -811,6 +848,7 @@ impl<'q> Machine<'q> {
     }
 
     /// `M118 [E1] <text>`: print the text (with `echo:` when `E1`).
+    #[inline(always)]
     fn echo<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
         let mut message = gcode::text_argument(text);
         let mut prefix = false;
@@ -839,18 +877,58 @@ impl<'q> Machine<'q> {
 }
 
 /// Whether the executor runs `code` (the dispatch in `execute`); the rest
-/// are echoed as unknown.
+/// are echoed as unknown. A bitmap in flash (96 bytes) rather than a match
+/// over the ranges, which came to 344 bytes of compares and branches.
+#[inline(never)]
 fn is_known(code: Code) -> bool {
-    match code {
-        Code::G(n) => matches!(n, 0..=4 | 10 | 11 | 17..=21 | 28 | 40 | 49 | 53..=59 | 61 | 64 | 80 | 90..=94),
-        Code::M(n) => matches!(
-            n,
-            2..=5 | 7..=9 | 30 | 17 | 18 | 82..=84 | 92 | 104..=110 | 112 | 114..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221 | 301..=304 | 400 | 410
-                | 500..=503 | 665 | 666
-        ),
-        Code::T(_) | Code::Modal => true,
-        Code::Other => false,
+    let bit = match code {
+        Code::G(n) if n < KNOWN_M_BASE => n,
+        Code::M(n) if n < KNOWN_BITS - KNOWN_M_BASE => KNOWN_M_BASE + n,
+        Code::T(_) | Code::Modal => return true,
+        _ => return false,
+    };
+    KNOWN_MAP.get(usize::from(bit >> 3)).is_some_and(|byte| byte >> (bit & 7) & 1 != 0)
+}
+
+/// The G codes the executor runs, as ranges (first, last).
+const KNOWN_G: [(u16, u16); 11] =
+    [(0, 4), (10, 11), (17, 21), (28, 28), (40, 40), (49, 49), (53, 59), (61, 61), (64, 64), (80, 80), (90, 94)];
+/// The M codes the executor runs, as ranges (first, last).
+const KNOWN_M: [(u16, u16); 20] = [
+    (2, 5), (7, 9), (17, 18), (30, 30), (82, 84), (92, 92), (104, 110), (112, 112), (114, 121), (140, 140), (155, 155),
+    (190, 190), (201, 201), (203, 205), (220, 221), (301, 304), (400, 400), (410, 410), (500, 503), (665, 666),
+];
+/// Bit of `G0` in [`KNOWN_MAP`] is 0, of `M0` this (past the last G code).
+const KNOWN_M_BASE: u16 = 96;
+/// Bits in [`KNOWN_MAP`]: up to the last M code.
+const KNOWN_BITS: u16 = KNOWN_M_BASE + 667;
+
+/// One bit per code: G codes from bit 0, M codes from [`KNOWN_M_BASE`].
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static KNOWN_MAP: crate::progmem::Flash<[u8; KNOWN_BITS.div_ceil(8) as usize]> = crate::progmem::Flash::new(known_map());
+
+const fn known_map() -> [u8; KNOWN_BITS.div_ceil(8) as usize] {
+    let mut map = [0u8; KNOWN_BITS.div_ceil(8) as usize];
+    let mut i = 0;
+    while i < KNOWN_G.len() + KNOWN_M.len() {
+        let ((first, last), base) =
+            if i < KNOWN_G.len() { (KNOWN_G[i], 0) } else { (KNOWN_M[i - KNOWN_G.len()], KNOWN_M_BASE) };
+        // Every range ends below its part's limit (checked at compile time).
+        assert!(last < if base == 0 { KNOWN_M_BASE } else { KNOWN_BITS - KNOWN_M_BASE });
+        let mut n = base + first;
+        while n <= base + last {
+            map[(n >> 3) as usize] |= 1 << (n & 7);
+            n += 1;
+        }
+        i += 1;
     }
+    map
+}
+
+/// Whether a halted machine refuses `code`: every known code but those
+/// that only report or wait (unknown ones are echoed as unknown).
+fn refused_while_halted(code: Code) -> bool {
+    is_known(code) && !matches!(code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410))
 }
 
 /// What executing a command led to.

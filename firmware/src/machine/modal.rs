@@ -204,6 +204,16 @@ impl ModalState {
         Ok(())
     }
 
+    /// `G10 L<n>` (the caller saw `L`): `L2` or `L20`, else out of range.
+    #[inline(always)]
+    pub fn work_offsets_command(&mut self, command: &Command) -> Result<(), CommandError> {
+        match command.value(b'L')?.and_then(|l| l.to_int()) {
+            Some(2) => self.set_work_offsets(command, false),
+            Some(20) => self.set_work_offsets(command, true),
+            _ => Err(CommandError::OutOfRange(b'L')),
+        }
+    }
+
     /// `G10 L2 P<n>` (`l20`: false) sets work system `n`'s zero to the
     /// given machine coordinates; `G10 L20 P<n>` (true) sets it so that
     /// the machine stands at the given coordinates in it. `P0` is the

@@ -432,3 +432,27 @@ fn g53_moves_in_machine_coordinates_for_its_own_line() {
     assert_eq!(converse(&mut machine, 0, "G53 G2 X1 I1\n"), "Error:G53 moves with G0 or G1 only\nok\n");
     assert_eq!(machine.modal().position[..3], [20_000, 0, 11_000]);
 }
+
+#[test]
+fn the_known_codes_bitmap_holds_exactly_the_codes_the_executor_runs() {
+    // The list as a match (what the bitmap replaced on the AVR).
+    fn reference(code: Code) -> bool {
+        match code {
+            Code::G(n) => matches!(n, 0..=4 | 10 | 11 | 17..=21 | 28 | 40 | 49 | 53..=59 | 61 | 64 | 80 | 90..=94),
+            Code::M(n) => matches!(
+                n,
+                2..=5 | 7..=9 | 30 | 17 | 18 | 82..=84 | 92 | 104..=110 | 112 | 114..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221
+                    | 301..=304 | 400 | 410 | 500..=503 | 665 | 666
+            ),
+            Code::T(_) | Code::Modal => true,
+            Code::Other => false,
+        }
+    }
+    for n in (0..=2_000).chain([u16::MAX - 1, u16::MAX]) {
+        for code in [Code::G(n), Code::M(n), Code::T(n)] {
+            assert_eq!(is_known(code), reference(code), "{code:?}");
+        }
+    }
+    assert!(is_known(Code::Modal));
+    assert!(!is_known(Code::Other));
+}
