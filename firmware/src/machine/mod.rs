@@ -255,7 +255,7 @@ impl<'q> Machine<'q> {
     /// The start banner, printed once at boot. `start` is what Printrun and
     /// OctoPrint look for to learn that the firmware (re)started.
     pub fn write_banner<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "start\necho:{} {} ready\n", crate::FIRMWARE_NAME, crate::FIRMWARE_VERSION)
+        crate::flash_concat!("start\necho:", crate::FIRMWARE_NAME, " ", crate::FIRMWARE_VERSION, " ready\n").write_to(out)
     }
 
     // --- what the board reads back -----------------------------------------
@@ -1043,15 +1043,22 @@ fn percent(command: &Command, slot: &mut i32) -> Result<(), CommandError> {
 /// to send (OctoPrint enables auto-reporting and the emergency parser from
 /// these).
 pub fn write_capabilities<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Error> {
-    ufmt::uwrite!(
-        out,
-        "FIRMWARE_NAME:{} {} (Rust) SOURCE_CODE_URL:local PROTOCOL_VERSION:1.0 MACHINE_TYPE:RepRap EXTRUDER_COUNT:{}\n",
+    // One string in flash, the firmware line included.
+    crate::flash_concat!(
+        "FIRMWARE_NAME:",
         crate::FIRMWARE_NAME,
+        " ",
         crate::FIRMWARE_VERSION,
-        EXTRUDERS
-    )?;
-    crate::flash_str!(CAPABILITIES).write_to(out)
+        " (Rust) SOURCE_CODE_URL:local PROTOCOL_VERSION:1.0 MACHINE_TYPE:RepRap EXTRUDER_COUNT:",
+        EXTRUDERS_TEXT,
+        "\n",
+        CAPABILITIES
+    )
+    .write_to(out)
 }
+
+/// [`EXTRUDERS`] as text, for the constant `M115` reply.
+const EXTRUDERS_TEXT: &str = ["0", "1", "2", "3", "4", "5", "6", "7", "8", "9"][EXTRUDERS as usize];
 
 /// The capabilities reported by `M115`, honestly: 1 only when implemented.
 /// One string in flash: on the AVR every `&str` would cost SRAM.
