@@ -814,25 +814,17 @@ impl<'q> Machine<'q> {
     }
 
     fn set_fan(&mut self, command: &Command) -> Result<(), CommandError> {
-        let duty = match command.value(b'S')? {
-            None => 255,
-            Some(value) => match value.to_int() {
-                Some(duty @ 0..=255) => duty as u8,
-                _ => return Err(CommandError::OutOfRange(b'S')),
-            },
-        };
-        self.fan_duty = duty;
+        let mut duty = 255;
+        set_scaled(command, b'S', 0, 0, 255, &mut duty)?;
+        self.fan_duty = duty as u8;
         Ok(())
     }
 
     #[inline(never)]
     fn set_auto_report(&mut self, command: &Command, now_ms: u32) -> Result<(), CommandError> {
-        let seconds = match command.value(b'S')?.map(|v| v.to_int()) {
-            None => 1,
-            Some(Some(s @ 0..=60)) => s as u8,
-            Some(_) => return Err(CommandError::OutOfRange(b'S')),
-        };
-        self.auto_report.set_interval(seconds, now_ms);
+        let mut seconds = 1;
+        set_scaled(command, b'S', 0, 0, 60, &mut seconds)?;
+        self.auto_report.set_interval(seconds as u8, now_ms);
         Ok(())
     }
 
@@ -956,87 +948,61 @@ fn trim(text: &[u8]) -> &[u8] {
     &text[start..end.max(start)]
 }
 
-/// A strictly positive value in milli-units.
-fn positive_milli(letter: u8, value: gcode::Decimal) -> Result<i32, CommandError> {
-    match value.to_scaled(3) {
-        Some(milli) if milli > 0 => Ok(milli),
-        _ => Err(CommandError::OutOfRange(letter)),
+/// If `command` has `letter`, its value in units of 10^-`digits` goes to
+/// `slot`; out of range unless it lies in `min..=max`. One out-of-line
+/// helper for every numeric setting: the same steps inlined in each
+/// command came to several hundred bytes more on the AVR.
+#[inline(never)]
+fn set_scaled(command: &Command, letter: u8, digits: u8, min: i32, max: i32, slot: &mut i32) -> Result<(), CommandError> {
+    if let Some(value) = command.value(letter)? {
+        match value.to_scaled(digits) {
+            Some(scaled) if scaled >= min && scaled <= max => *slot = scaled,
+            _ => return Err(CommandError::OutOfRange(letter)),
+        }
     }
+    Ok(())
 }
 
-fn non_negative_milli(letter: u8, value: gcode::Decimal) -> Result<i32, CommandError> {
-    match value.to_scaled(3) {
-        Some(milli) if milli >= 0 => Ok(milli),
-        _ => Err(CommandError::OutOfRange(letter)),
-    }
-}
-
-/// `M92`/`M201`/`M203`: per-axis positive values; all or nothing.
+/// `M92`/`M201`/`M203`: per-axis positive values (milli-units); all or
+/// nothing.
 fn settings_axes(command: &Command, values: &mut [i32; AXES]) -> Result<(), CommandError> {
     let mut updated = *values;
-    for (axis, &letter) in AXIS_LETTERS.iter().enumerate() {
-        if let Some(value) = command.value(letter)? {
-            updated[axis] = positive_milli(letter, value)?;
-        }
+    for (slot, &letter) in updated.iter_mut().zip(AXIS_LETTERS.iter()) {
+        set_scaled(command, letter, 3, 1, i32::MAX, slot)?;
     }
     *values = updated;
     Ok(())
 }
 
-/// `M204 S|P|R|T`: accelerations in mm/s².
+/// `M204 S|P|R|T`: accelerations in mm/s², strictly positive. A refused
+/// word leaves the settings as they were (`change_settings` applies the
+/// copy only when all are valid).
 fn set_accelerations(command: &Command, settings: &mut Settings) -> Result<(), CommandError> {
-    let read = |letter| command.value(letter)?.map(|v| positive_milli(letter, v)).transpose();
-    let (s, p, r, t) = (read(b'S')?, read(b'P')?, read(b'R')?, read(b'T')?);
     // `S` sets print and travel together (older hosts send it); P and T
-    // given on the same line win.
-    if let Some(s) = s {
-        settings.print_accel_um_per_s2 = s;
-        settings.travel_accel_um_per_s2 = s;
+    // given on the same line win. 0 is "no S": a valid one is positive.
+    let mut both = 0;
+    set_scaled(command, b'S', 3, 1, i32::MAX, &mut both)?;
+    if both != 0 {
+        settings.print_accel_um_per_s2 = both;
+        settings.travel_accel_um_per_s2 = both;
     }
-    if let Some(p) = p {
-        settings.print_accel_um_per_s2 = p;
-    }
-    if let Some(r) = r {
-        settings.retract_accel_um_per_s2 = r;
-    }
-    if let Some(t) = t {
-        settings.travel_accel_um_per_s2 = t;
-    }
-    Ok(())
+    set_scaled(command, b'P', 3, 1, i32::MAX, &mut settings.print_accel_um_per_s2)?;
+    set_scaled(command, b'R', 3, 1, i32::MAX, &mut settings.retract_accel_um_per_s2)?;
+    set_scaled(command, b'T', 3, 1, i32::MAX, &mut settings.travel_accel_um_per_s2)
 }
 
+/// `M205 J S T B`: junction deviation (0.001–0.3 mm), minimum feed rates
+/// (≥ 0), minimum segment time (0–1 s, in µs).
 fn set_advanced(command: &Command, settings: &mut Settings) -> Result<(), CommandError> {
-    if let Some(value) = command.value(b'J')? {
-        match value.to_scaled(3) {
-            Some(um @ 1..=300) => settings.junction_deviation_um = um,
-            _ => return Err(CommandError::OutOfRange(b'J')),
-        }
-    }
-    for (letter, slot) in
-        [(b'S', &mut settings.min_feed_um_per_s), (b'T', &mut settings.min_travel_feed_um_per_s)]
-    {
-        if let Some(value) = command.value(letter)? {
-            *slot = non_negative_milli(letter, value)?;
-        }
-    }
-    if let Some(value) = command.value(b'B')? {
-        match value.to_int() {
-            Some(us @ 0..=1_000_000) => settings.min_segment_time_us = us,
-            _ => return Err(CommandError::OutOfRange(b'B')),
-        }
-    }
-    Ok(())
+    set_scaled(command, b'J', 3, 1, 300, &mut settings.junction_deviation_um)?;
+    set_scaled(command, b'S', 3, 0, i32::MAX, &mut settings.min_feed_um_per_s)?;
+    set_scaled(command, b'T', 3, 0, i32::MAX, &mut settings.min_travel_feed_um_per_s)?;
+    set_scaled(command, b'B', 0, 0, 1_000_000, &mut settings.min_segment_time_us)
 }
 
 /// `M220 S<percent>` / `M221 S<percent>` (10–999, as Marlin clamps).
 fn percent(command: &Command, slot: &mut i32) -> Result<(), CommandError> {
-    if let Some(value) = command.value(b'S')? {
-        match value.to_int() {
-            Some(p @ 10..=999) => *slot = p,
-            _ => return Err(CommandError::OutOfRange(b'S')),
-        }
-    }
-    Ok(())
+    set_scaled(command, b'S', 0, 10, 999, slot)
 }
 
 /// `M115`: the firmware line and the `Cap:` lines hosts read to decide what
