@@ -100,30 +100,25 @@ impl Settings {
         crate::flash_str!("\necho:; Max Acceleration (units/s2):\necho:  M201").write_to(out)?;
         write_axes(out, &self.max_accel_um_per_s2)?;
         crate::flash_str!(
-            "\necho:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\necho:  M204 P"
+            "\necho:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\necho:  M204"
         )
         .write_to(out)?;
-        ufmt::uwrite!(
-            out,
-            "{} R{} T{}\n",
-            milli(self.print_accel_um_per_s2),
-            milli(self.retract_accel_um_per_s2),
-            milli(self.travel_accel_um_per_s2)
-        )?;
+        write_milli_word(out, b'P', self.print_accel_um_per_s2)?;
+        write_milli_word(out, b'R', self.retract_accel_um_per_s2)?;
+        write_milli_word(out, b'T', self.travel_accel_um_per_s2)?;
         crate::flash_str!(
-            "echo:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\necho:  M205 B"
+            "\necho:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\necho:  M205"
         )
         .write_to(out)?;
-        ufmt::uwrite!(
-            out,
-            "{} S{} T{} J{}\n",
-            self.min_segment_time_us,
-            milli(self.min_feed_um_per_s),
-            milli(self.min_travel_feed_um_per_s),
-            Fixed { mantissa: self.junction_deviation_um, digits: 3 }
-        )?;
-        crate::flash_str!("echo:; Feedrate and flow:\necho:  M220 S").write_to(out)?;
-        ufmt::uwrite!(out, "{}\necho:  M221 S{}\n", self.feed_percent, self.flow_percent)?;
+        write_word(out, b'B', self.min_segment_time_us, 0)?;
+        write_milli_word(out, b'S', self.min_feed_um_per_s)?;
+        write_milli_word(out, b'T', self.min_travel_feed_um_per_s)?;
+        write_word(out, b'J', self.junction_deviation_um, 3)?;
+        crate::flash_str!("\necho:; Feedrate and flow:\necho:  M220").write_to(out)?;
+        write_word(out, b'S', self.feed_percent, 0)?;
+        crate::flash_str!("\necho:  M221").write_to(out)?;
+        write_word(out, b'S', self.flow_percent, 0)?;
+        out.write_str("\n")?;
         crate::flash_str!("echo:; Hotend PID:\necho:  ").write_to(out)?;
         let [kp, ki, kd] = self.hotend_pid;
         if let Some(gains) = crate::thermal::Gains::new(kp, ki, kd) {
@@ -138,15 +133,27 @@ impl Settings {
     }
 }
 
-/// A milli-unit value with two decimals, rounded (Marlin prints two).
-fn milli(value: i32) -> Fixed {
+/// ` <letter><value>`: a word of `M503`'s report, `mantissa × 10^-digits`
+/// with every decimal. One out-of-line writer for every word: each
+/// `uwrite!` of a word inlined its own formatter calls.
+#[inline(never)]
+fn write_word<W: uWrite + ?Sized>(out: &mut W, letter: u8, mantissa: i32, digits: u8) -> Result<(), W::Error> {
+    out.write_str(" ")?;
+    out.write_char(char::from(letter))?;
+    ufmt::uwrite!(out, "{}", Fixed { mantissa, digits })
+}
+
+/// ` <letter><value>` of a milli-unit value, with two decimals, rounded
+/// (Marlin prints two).
+#[inline(never)]
+fn write_milli_word<W: uWrite + ?Sized>(out: &mut W, letter: u8, value: i32) -> Result<(), W::Error> {
     let rounded = if value >= 0 { (value + 5) / 10 } else { (value - 5) / 10 };
-    Fixed::hundredths(rounded)
+    write_word(out, letter, rounded, 2)
 }
 
 fn write_axes<W: uWrite + ?Sized>(out: &mut W, values: &[i32; AXES]) -> Result<(), W::Error> {
     for (letter, value) in AXIS_LETTERS.iter().zip(values) {
-        ufmt::uwrite!(out, " {}{}", char::from(*letter), milli(*value))?;
+        write_milli_word(out, *letter, *value)?;
     }
     Ok(())
 }
