@@ -45,6 +45,23 @@ pub struct Settings {
     pub bed_pid: [i32; 3],
 }
 
+/// Numbers of the fields [`Settings::field_mut`] reaches (the per-axis
+/// arrays take four each, X Y Z E).
+pub mod field {
+    pub const STEPS_PER_MM: usize = 0;
+    pub const MAX_FEED: usize = 4;
+    pub const MAX_ACCEL: usize = 8;
+    pub const PRINT_ACCEL: usize = 12;
+    pub const RETRACT_ACCEL: usize = 13;
+    pub const TRAVEL_ACCEL: usize = 14;
+    pub const JUNCTION_DEVIATION: usize = 15;
+    pub const MIN_FEED: usize = 16;
+    pub const MIN_TRAVEL_FEED: usize = 17;
+    pub const MIN_SEGMENT_TIME: usize = 18;
+    pub const FEED_PERCENT: usize = 19;
+    pub const FLOW_PERCENT: usize = 20;
+}
+
 impl Default for Settings {
     fn default() -> Self {
         Self::prusa_i3()
@@ -88,6 +105,28 @@ impl Settings {
             hotend_pid: [222_000, 10_800, 1_140_000],
             bed_pid: [100_000, 230, 3_054_000],
         }
+    }
+
+    /// The `i32` field numbered `index` ([`field`] names them), for the
+    /// table-driven setting commands (`M92`, `M201`, ...); `None` past the
+    /// last.
+    pub fn field_mut(&mut self, index: u8) -> Option<&mut i32> {
+        let index = usize::from(index);
+        Some(match index {
+            field::STEPS_PER_MM..=3 => &mut self.steps_per_mm_milli[index - field::STEPS_PER_MM],
+            field::MAX_FEED..=7 => &mut self.max_feed_um_per_s[index - field::MAX_FEED],
+            field::MAX_ACCEL..=11 => &mut self.max_accel_um_per_s2[index - field::MAX_ACCEL],
+            field::PRINT_ACCEL => &mut self.print_accel_um_per_s2,
+            field::RETRACT_ACCEL => &mut self.retract_accel_um_per_s2,
+            field::TRAVEL_ACCEL => &mut self.travel_accel_um_per_s2,
+            field::JUNCTION_DEVIATION => &mut self.junction_deviation_um,
+            field::MIN_FEED => &mut self.min_feed_um_per_s,
+            field::MIN_TRAVEL_FEED => &mut self.min_travel_feed_um_per_s,
+            field::MIN_SEGMENT_TIME => &mut self.min_segment_time_us,
+            field::FEED_PERCENT => &mut self.feed_percent,
+            field::FLOW_PERCENT => &mut self.flow_percent,
+            _ => return None,
+        })
     }
 
     /// `M503`: the settings as the commands that would set them, in

@@ -36,7 +36,7 @@ use crate::protocol::HostProtocol;
 use crate::reply::Printable;
 #[cfg(feature = "printer")]
 use crate::reply::Fixed;
-use crate::settings::Settings;
+use crate::settings::{self, Settings};
 use crate::storage::{self, LoadError, NonVolatile};
 use crate::thermal::channel::{BED, HOTEND_0};
 use crate::thermal::{AutoReport, Autotune, ColdExtrusionGuard, Gains, HeaterChannel, TemperatureWait};
@@ -44,7 +44,7 @@ use crate::thermal::{AutoReport, Autotune, ColdExtrusionGuard, Gains, HeaterChan
 use crate::thermal::WaitConfig;
 use thermal::HeaterSlot;
 use error::CommandError;
-use modal::{Distance, ModalState, MotionMode, Plane, Units, AXES, AXIS_LETTERS};
+use modal::{Distance, ModalState, MotionMode, Plane, Units, AXIS_LETTERS};
 use ufmt::uWrite;
 
 /// Lines the command queue holds (Marlin's BUFSIZE is 4).
@@ -137,8 +137,6 @@ pub struct Machine<'q> {
     powder: Option<powder_bed::BedState>,
 }
 
-/// How one M-code changes the settings (`M92`, `M201`, …).
-type SettingsChange = fn(&Command, &mut Settings) -> Result<(), CommandError>;
 
 impl<'q> Machine<'q> {
     /// An executor driving `motion` (the board's machine configuration).
@@ -674,13 +672,7 @@ impl<'q> Machine<'q> {
             Code::M(665) => self.delta_geometry(command, out),
             #[cfg(feature = "delta")]
             Code::M(666) => self.delta_trim(command, out),
-            Code::M(92) => self.change_settings(command, |c, s| settings_axes(c, &mut s.steps_per_mm_milli)),
-            Code::M(201) => self.change_settings(command, |c, s| settings_axes(c, &mut s.max_accel_um_per_s2)),
-            Code::M(203) => self.change_settings(command, |c, s| settings_axes(c, &mut s.max_feed_um_per_s)),
-            Code::M(204) => self.change_settings(command, set_accelerations),
-            Code::M(205) => self.change_settings(command, set_advanced),
-            Code::M(220) => self.change_settings(command, |c, s| percent(c, &mut s.feed_percent)),
-            Code::M(221) => self.change_settings(command, |c, s| percent(c, &mut s.flow_percent)),
+            Code::M(number @ (92 | 201 | 203 | 204 | 205 | 220 | 221)) => self.change_settings(number, command),
             Code::M(500) => self.save_settings(storage, out).map(Ok)?,
             Code::M(501) => {
                 self.load_settings(storage, out)?;
@@ -800,15 +792,43 @@ impl<'q> Machine<'q> {
         self.modal.extruder_distance = distance;
     }
 
-    /// Change settings all or nothing, then hand them to motion (they
-    /// apply to the moves accepted from now on). `change` is a plain
-    /// function, not a generic closure: one copy of this code for every
-    /// M-code that changes settings.
+    /// `M92`, `M201`, `M203`, `M204`, `M205`, `M220`, `M221`: change the
+    /// settings all or nothing (a refused word leaves every value as it
+    /// was), then hand them to motion (they apply to the moves accepted
+    /// from now on). Driven by [`SETTING_WORDS`]: one loop for every
+    /// command, where a function per command cost a kilobyte on the AVR.
+    ///
+    /// Two passes, read then store, rather than a changed copy of the
+    /// settings: the copy (108 bytes) made the frame too large for the
+    /// AVR's short stack addressing.
     #[inline(never)]
-    fn change_settings(&mut self, command: &Command, change: SettingsChange) -> Result<(), CommandError> {
-        let mut settings = self.settings.clone();
-        change(command, &mut settings)?;
-        self.settings = settings;
+    fn change_settings(&mut self, number: u16, command: &Command) -> Result<(), CommandError> {
+        // The command's values in table order; i32::MIN (below every
+        // range) for a word not given.
+        let mut values = [i32::MIN; MAX_SETTING_WORDS];
+        let mut given = values.iter_mut();
+        for index in 0..SETTING_WORDS.len() {
+            let Some(word) = SETTING_WORDS.get(index).filter(|word| word.code == number) else { continue };
+            let Some(value) = given.next() else { break };
+            let (min, max) = WORD_RANGES[usize::from(word.range)];
+            set_scaled(command, word.letter, word.digits, min, max, value)?;
+        }
+        let mut given = values.iter();
+        for index in 0..SETTING_WORDS.len() {
+            let Some(word) = SETTING_WORDS.get(index).filter(|word| word.code == number) else { continue };
+            let Some(&value) = given.next() else { break };
+            if value == i32::MIN {
+                continue;
+            }
+            // `M204 S` sets print and travel together (older hosts send
+            // it); its row comes first, so `P` and `T` on the same line win.
+            if word.field == BOTH_ACCELERATIONS {
+                self.settings.print_accel_um_per_s2 = value;
+                self.settings.travel_accel_um_per_s2 = value;
+            } else if let Some(slot) = self.settings.field_mut(word.field) {
+                *slot = value;
+            }
+        }
         self.apply_motion_settings();
         Ok(())
     }
@@ -963,47 +983,74 @@ fn set_scaled(command: &Command, letter: u8, digits: u8, min: i32, max: i32, slo
     Ok(())
 }
 
-/// `M92`/`M201`/`M203`: per-axis positive values (milli-units); all or
-/// nothing.
-fn settings_axes(command: &Command, values: &mut [i32; AXES]) -> Result<(), CommandError> {
-    let mut updated = *values;
-    for (slot, &letter) in updated.iter_mut().zip(AXIS_LETTERS.iter()) {
-        set_scaled(command, letter, 3, 1, i32::MAX, slot)?;
-    }
-    *values = updated;
-    Ok(())
+/// One word of a settings command: `M<code> <letter><value>` sets field
+/// `field` of [`Settings`] (see [`settings::field`]) to the value in units
+/// of 10^-`digits`, which must lie in `WORD_RANGES[range]`.
+#[derive(Clone, Copy)]
+struct SettingWord {
+    code: u16,
+    letter: u8,
+    digits: u8,
+    range: u8,
+    field: u8,
 }
 
-/// `M204 S|P|R|T`: accelerations in mm/s², strictly positive. A refused
-/// word leaves the settings as they were (`change_settings` applies the
-/// copy only when all are valid).
-fn set_accelerations(command: &Command, settings: &mut Settings) -> Result<(), CommandError> {
-    // `S` sets print and travel together (older hosts send it); P and T
-    // given on the same line win. 0 is "no S": a valid one is positive.
-    let mut both = 0;
-    set_scaled(command, b'S', 3, 1, i32::MAX, &mut both)?;
-    if both != 0 {
-        settings.print_accel_um_per_s2 = both;
-        settings.travel_accel_um_per_s2 = both;
-    }
-    set_scaled(command, b'P', 3, 1, i32::MAX, &mut settings.print_accel_um_per_s2)?;
-    set_scaled(command, b'R', 3, 1, i32::MAX, &mut settings.retract_accel_um_per_s2)?;
-    set_scaled(command, b'T', 3, 1, i32::MAX, &mut settings.travel_accel_um_per_s2)
+/// Most words one settings command takes (`M92 X Y Z E`).
+const MAX_SETTING_WORDS: usize = 4;
+
+/// `SettingWord::field` of `M204 S`: print and travel acceleration both.
+const BOTH_ACCELERATIONS: u8 = u8::MAX;
+
+/// The value ranges of [`SETTING_WORDS`], by `range`.
+const WORD_RANGES: [(i32, i32); 5] = [
+    // Strictly positive (steps/mm, feed rates, accelerations).
+    (1, i32::MAX),
+    // Not negative (minimum feed rates).
+    (0, i32::MAX),
+    // Junction deviation, µm: 0.001–0.3 mm.
+    (1, 300),
+    // Minimum segment time, µs: up to 1 s.
+    (0, 1_000_000),
+    // Feed and flow percent, 10–999 as Marlin clamps.
+    (10, 999),
+];
+
+const fn word(code: u16, letter: u8, digits: u8, range: u8, field: usize) -> SettingWord {
+    assert!(field < BOTH_ACCELERATIONS as usize);
+    SettingWord { code, letter, digits, range, field: field as u8 }
 }
 
-/// `M205 J S T B`: junction deviation (0.001–0.3 mm), minimum feed rates
-/// (≥ 0), minimum segment time (0–1 s, in µs).
-fn set_advanced(command: &Command, settings: &mut Settings) -> Result<(), CommandError> {
-    set_scaled(command, b'J', 3, 1, 300, &mut settings.junction_deviation_um)?;
-    set_scaled(command, b'S', 3, 0, i32::MAX, &mut settings.min_feed_um_per_s)?;
-    set_scaled(command, b'T', 3, 0, i32::MAX, &mut settings.min_travel_feed_um_per_s)?;
-    set_scaled(command, b'B', 0, 0, 1_000_000, &mut settings.min_segment_time_us)
-}
-
-/// `M220 S<percent>` / `M221 S<percent>` (10–999, as Marlin clamps).
-fn percent(command: &Command, slot: &mut i32) -> Result<(), CommandError> {
-    set_scaled(command, b'S', 0, 10, 999, slot)
-}
+/// Every word the settings commands take, in the order they are read
+/// (the first refused one is the error reported). Values in milli-units
+/// (`digits` 3) unless counted in whole units.
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static SETTING_WORDS: crate::progmem::Flash<[SettingWord; 22]> = {
+    use settings::field::*;
+    crate::progmem::Flash::new([
+        word(92, b'X', 3, 0, STEPS_PER_MM),
+        word(92, b'Y', 3, 0, STEPS_PER_MM + 1),
+        word(92, b'Z', 3, 0, STEPS_PER_MM + 2),
+        word(92, b'E', 3, 0, STEPS_PER_MM + 3),
+        word(201, b'X', 3, 0, MAX_ACCEL),
+        word(201, b'Y', 3, 0, MAX_ACCEL + 1),
+        word(201, b'Z', 3, 0, MAX_ACCEL + 2),
+        word(201, b'E', 3, 0, MAX_ACCEL + 3),
+        word(203, b'X', 3, 0, MAX_FEED),
+        word(203, b'Y', 3, 0, MAX_FEED + 1),
+        word(203, b'Z', 3, 0, MAX_FEED + 2),
+        word(203, b'E', 3, 0, MAX_FEED + 3),
+        SettingWord { code: 204, letter: b'S', digits: 3, range: 0, field: BOTH_ACCELERATIONS },
+        word(204, b'P', 3, 0, PRINT_ACCEL),
+        word(204, b'R', 3, 0, RETRACT_ACCEL),
+        word(204, b'T', 3, 0, TRAVEL_ACCEL),
+        word(205, b'J', 3, 2, JUNCTION_DEVIATION),
+        word(205, b'S', 3, 1, MIN_FEED),
+        word(205, b'T', 3, 1, MIN_TRAVEL_FEED),
+        word(205, b'B', 0, 3, MIN_SEGMENT_TIME),
+        word(220, b'S', 0, 4, FEED_PERCENT),
+        word(221, b'S', 0, 4, FLOW_PERCENT),
+    ])
+};
 
 /// `M115`: the firmware line and the `Cap:` lines hosts read to decide what
 /// to send (OctoPrint enables auto-reporting and the emergency parser from

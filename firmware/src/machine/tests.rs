@@ -1,6 +1,7 @@
 //! The executor, specified by conversations: lines in, exact replies out.
 
 use super::*;
+use super::modal::AXES;
 use crate::line::LineAssembler;
 use crate::reply::test_support::Text;
 use crate::storage::MemoryStorage;
@@ -191,6 +192,42 @@ fn invalid_settings_are_refused_whole() {
     assert_eq!(converse(&mut machine, 0, "M92 X80 Y-1\n"), "Error:Value out of range for Y\nok\n");
     assert_eq!(machine.settings().steps_per_mm_milli[0], 100_000);
     assert_eq!(converse(&mut machine, 0, "M220 S0\n"), "Error:Value out of range for S\nok\n");
+}
+
+#[test]
+fn every_settings_word_reaches_its_field_and_a_refused_one_changes_nothing() {
+    let mut machine = new_machine();
+    assert_eq!(converse(&mut machine, 0, "M204 S900\n"), "ok\n");
+    let s = machine.settings();
+    assert_eq!((s.print_accel_um_per_s2, s.retract_accel_um_per_s2, s.travel_accel_um_per_s2), (900_000, 1_500_000, 900_000));
+    // P and T on the same line as S win over it.
+    assert_eq!(converse(&mut machine, 0, "M204 T300 S800 P700 R600\n"), "ok\n");
+    let s = machine.settings();
+    assert_eq!((s.print_accel_um_per_s2, s.retract_accel_um_per_s2, s.travel_accel_um_per_s2), (700_000, 600_000, 300_000));
+    assert_eq!(converse(&mut machine, 0, "M205 S1.5 T2 B30000 J0.3\nM221 S90\nM203 E30 X200\nM201 Z50 Y2000\n"), "ok\nok\nok\nok\n");
+    let s = machine.settings().clone();
+    assert_eq!((s.min_feed_um_per_s, s.min_travel_feed_um_per_s, s.min_segment_time_us, s.junction_deviation_um), (1_500, 2_000, 30_000, 300));
+    assert_eq!((s.feed_percent, s.flow_percent), (100, 90));
+    assert_eq!(s.max_feed_um_per_s, [200_000, 300_000, 5_000, 30_000]);
+    assert_eq!(s.max_accel_um_per_s2, [3_000_000, 2_000_000, 50_000, 10_000_000]);
+    // Each refusal names the first bad word, in the command's order, and
+    // leaves every value as it was, the valid words' too.
+    for (line, reply) in [
+        ("M205 S3 J0.301\n", "Error:Value out of range for J\nok\n"),
+        ("M205 J0 S3\n", "Error:Value out of range for J\nok\n"),
+        ("M205 T-1 S3\n", "Error:Value out of range for T\nok\n"),
+        ("M205 S3 B1000001\n", "Error:Value out of range for B\nok\n"),
+        ("M204 P5 S0\n", "Error:Value out of range for S\nok\n"),
+        ("M204 P5 T\n", "Error:Missing value after T\nok\n"),
+        ("M221 S1000\n", "Error:Value out of range for S\nok\n"),
+        ("M203 X1 E0\n", "Error:Value out of range for E\nok\n"),
+    ] {
+        assert_eq!(converse(&mut machine, 0, line), reply, "{line}");
+        assert_eq!(machine.settings(), &s, "{line}");
+    }
+    // Words a command does not take are ignored, as before.
+    assert_eq!(converse(&mut machine, 0, "M220 S120 X5\n"), "ok\n");
+    assert_eq!(machine.settings().feed_percent, 120);
 }
 
 #[test]
