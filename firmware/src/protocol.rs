@@ -152,7 +152,8 @@ fn m110_argument(body: &[u8]) -> Option<Option<i32>> {
     if !may_be_m110(body) {
         return None;
     }
-    let command = crate::gcode::parse(body).ok()?;
+    let mut command = crate::gcode::Command::new(crate::gcode::Code::Other);
+    crate::gcode::parse_into(body, &mut command).ok()?;
     if command.code != crate::gcode::Code::M(110) {
         return None;
     }

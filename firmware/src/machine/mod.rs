@@ -485,8 +485,9 @@ impl<'q> Machine<'q> {
         storage: &mut dyn NonVolatile,
         out: &mut W,
     ) -> Result<Outcome, W::Error> {
-        let command = match gcode::parse(text) {
-            Ok(command) => command,
+        let mut command = Command::new(Code::Other);
+        match gcode::parse_into(text, &mut command) {
+            Ok(()) => {}
             Err(ParseError::Empty) => return Ok(Outcome::Done),
             // Arguments that do not parse are an error only for commands we
             // run: Marlin answers `M115 U3.13.0` (PrusaSlicer's version
