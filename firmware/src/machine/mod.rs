@@ -456,14 +456,31 @@ impl<'q> Machine<'q> {
             }
             let Some(text) = self.queue.pop_front() else { return Ok(()) };
             self.last_busy_ms = now_ms;
-            match self.execute(&text, now_ms, storage, out)? {
-                Outcome::Done => out.write_str("ok\n")?,
-                Outcome::Acknowledged => {}
-                Outcome::Failed(error) => {
-                    error.write(out)?;
-                    out.write_str("ok\n")?;
-                }
-                Outcome::Started(running) => self.running = running,
+            self.run_line(&text, now_ms, storage, out)?;
+        }
+    }
+
+    /// Execute one line and answer it (or start it). Out of line, with the
+    /// `Outcome` in its frame: in `poll`'s, beside the line, it made the
+    /// frame larger and its accesses longer (measured: 68 bytes more).
+    #[inline(never)]
+    fn run_line<W: uWrite + ?Sized>(
+        &mut self,
+        text: &[u8],
+        now_ms: u32,
+        storage: &mut dyn NonVolatile,
+        out: &mut W,
+    ) -> Result<(), W::Error> {
+        match self.execute(text, now_ms, storage, out)? {
+            Outcome::Done => out.write_str("ok\n"),
+            Outcome::Acknowledged => Ok(()),
+            Outcome::Failed(error) => {
+                error.write(out)?;
+                out.write_str("ok\n")
+            }
+            Outcome::Started(running) => {
+                self.running = running;
+                Ok(())
             }
         }
     }
@@ -477,7 +494,8 @@ impl<'q> Machine<'q> {
         Ok(())
     }
 
-    #[inline(never)]
+    /// Inlined into its one caller, `run_line`.
+    #[inline(always)]
     fn execute<W: uWrite + ?Sized>(
         &mut self,
         text: &[u8],
