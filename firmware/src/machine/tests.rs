@@ -493,3 +493,33 @@ fn the_known_codes_bitmap_holds_exactly_the_codes_the_executor_runs() {
     assert!(is_known(Code::Modal));
     assert!(!is_known(Code::Other));
 }
+
+#[test]
+fn m503_reports_every_setting_in_marlins_layout() {
+    let mut machine = new_machine();
+    converse(&mut machine, 0, "M92 X80.125 E415.5\nM205 B1234 J0.007 S0.005 T0.004\nM221 S99\nM204 R1234.5678\n");
+    let report = converse(&mut machine, 0, "M503\n");
+    assert_eq!(report, M503_EXPECTED, "{report}");
+}
+
+/// `M503` after the settings of the test above, exactly.
+const M503_EXPECTED: &str = concat!(
+    "echo:; Steps per unit:\n",
+    "echo:  M92 X80.13 Y100.00 Z400.00 E415.50\n",
+    "echo:; Max feedrates (units/s):\n",
+    "echo:  M203 X300.00 Y300.00 Z5.00 E25.00\n",
+    "echo:; Max Acceleration (units/s2):\n",
+    "echo:  M201 X3000.00 Y3000.00 Z100.00 E10000.00\n",
+    "echo:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\n",
+    "echo:  M204 P1500.00 R1234.57 T1500.00\n",
+    "echo:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\n",
+    "echo:  M205 B1234 S0.01 T0.00 J0.007\n",
+    "echo:; Feedrate and flow:\n",
+    "echo:  M220 S100\n",
+    "echo:  M221 S99\n",
+    "echo:; Hotend PID:\n",
+    "echo:  M301 P22.20 I1.08 D114.00\n",
+    "echo:; Bed PID:\n",
+    "echo:  M304 P10.00 I0.023 D305.40\n",
+    "ok\n",
+);
