@@ -882,13 +882,10 @@ impl<'q> Machine<'q> {
     #[inline(always)]
     fn echo<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
         let mut message = gcode::text_argument(text);
-        let mut prefix = false;
-        if let Some(rest) = message.strip_prefix(b"E1 ").or_else(|| message.strip_prefix(b"e1 ")) {
-            prefix = true;
-            message = rest;
-        }
-        if prefix {
+        // `E1 ` or `e1 ` first: the line is an `echo:`.
+        if let [b'E' | b'e', b'1', b' ', rest @ ..] = message {
             out.write_str("echo:")?;
+            message = rest;
         }
         ufmt::uwrite!(out, "{}\n", Printable(message))
     }
