@@ -234,6 +234,10 @@ fn every_settings_word_reaches_its_field_and_a_refused_one_changes_nothing() {
 fn m118_echoes_text() {
     assert_eq!(reply("M118 hello world\n"), "hello world\nok\n");
     assert_eq!(reply("M118 E1 line 7\n"), "echo:line 7\nok\n");
+    assert_eq!(reply("M118 e1 lower\n"), "echo:lower\nok\n");
+    assert_eq!(reply("M118 E1\n"), "E1\nok\n");
+    assert_eq!(reply("M118 E12 x\n"), "E12 x\nok\n");
+    assert_eq!(reply("M118 E1 \n"), "echo:\nok\n");
 }
 
 #[test]
