@@ -385,13 +385,8 @@ impl<'q> Machine<'q> {
         match storage::load(storage) {
             Ok((settings, stored)) => {
                 self.settings = settings;
-                ufmt::uwrite!(
-                    out,
-                    "echo:V{} stored settings retrieved ({} bytes; crc {})\n",
-                    storage::LAYOUT_VERSION,
-                    stored.bytes,
-                    stored.crc
-                )
+                ufmt::uwrite!(out, "echo:V{} stored settings retrieved (", storage::LAYOUT_VERSION)?;
+                write_stored(&stored, out)
             }
             Err(error) => {
                 match error {
@@ -419,7 +414,10 @@ impl<'q> Machine<'q> {
     #[inline(never)]
     fn save_settings<W: uWrite + ?Sized>(&self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
         match storage::save(storage, &self.settings) {
-            Ok(stored) => ufmt::uwrite!(out, "echo:Settings Stored ({} bytes; crc {})\n", stored.bytes, stored.crc),
+            Ok(stored) => {
+                out.write_str("echo:Settings Stored (")?;
+                write_stored(&stored, out)
+            }
             Err(storage::SaveError::TooSmall) => out.write_str("Error:EEPROM too small for the settings\n"),
             Err(storage::SaveError::WriteFailed) => out.write_str("Error:Settings not stored: the storage did not take the write\n"),
         }
@@ -957,6 +955,13 @@ const fn known_map() -> [u8; KNOWN_BITS.div_ceil(8) as usize] {
 /// that only report or wait (unknown ones are echoed as unknown).
 fn refused_while_halted(code: Code) -> bool {
     is_known(code) && !matches!(code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410))
+}
+
+/// `<bytes> bytes; crc <crc>)`, the end of `M500`'s and `M501`'s report:
+/// one copy of the code for both.
+#[inline(never)]
+fn write_stored<W: uWrite + ?Sized>(stored: &storage::Stored, out: &mut W) -> Result<(), W::Error> {
+    ufmt::uwrite!(out, "{} bytes; crc {})\n", stored.bytes, stored.crc)
 }
 
 /// What executing a command led to.
