@@ -71,6 +71,8 @@ impl Default for Settings {
 impl Settings {
     /// The defaults of a machine: its motion configuration's figures in
     /// milli-units, the rest as on the Prusa i3.
+    /// Out of line: inlined into the machine's construction it cost more.
+    #[inline(never)]
     pub fn for_machine(config: &crate::motion::MotionConfig) -> Self {
         let milli = |value: f32| crate::motion::math::round_to_i32(value * 1000.0);
         Self {
