@@ -770,12 +770,20 @@ impl<'q> Machine<'q> {
     #[inline(always)]
     fn heater_command<W: uWrite + ?Sized>(&mut self, command: &Command, now_ms: u32, out: &mut W) -> Result<Outcome, W::Error> {
         let result = match command.code {
-            Code::M(104) => return self.set_temperature(command, HeaterSlot::Hotend, None, now_ms, out),
-            Code::M(140) => return self.set_temperature(command, HeaterSlot::Bed, None, now_ms, out),
-            Code::M(109) => return self.set_temperature(command, HeaterSlot::Hotend, Some(WaitConfig::HOTEND), now_ms, out),
-            Code::M(190) => return self.set_temperature(command, HeaterSlot::Bed, Some(WaitConfig::BED), now_ms, out),
-            Code::M(301) => self.set_pid(command, HeaterSlot::Hotend, out),
-            Code::M(304) => self.set_pid(command, HeaterSlot::Bed, out),
+            // One call site for the four: each call set up its arguments
+            // (the wait's configuration on the stack) anew.
+            Code::M(code @ (104 | 140 | 109 | 190)) => {
+                let slot = if matches!(code, 104 | 109) { HeaterSlot::Hotend } else { HeaterSlot::Bed };
+                let wait = match code {
+                    109 => Some(WaitConfig::HOTEND),
+                    190 => Some(WaitConfig::BED),
+                    _ => None,
+                };
+                return self.set_temperature(command, slot, wait, now_ms, out);
+            }
+            Code::M(code) if code == 301 || code == 304 => {
+                self.set_pid(command, if code == 301 { HeaterSlot::Hotend } else { HeaterSlot::Bed }, out)
+            }
             Code::M(302) => self.cold_extrusion_command(command, out),
             _ => return self.autotune(command, out),
         };
