@@ -700,7 +700,13 @@ impl<'q> Machine<'q> {
             Code::T(tool) => self.select_tool(tool, out).map(Ok)?,
             // The heaters (not on the powder bed, which has none).
             #[cfg(feature = "heaters")]
-            Code::M(104 | 140 | 109 | 190 | 301 | 304 | 302 | 303) => return self.heater_command(command, now_ms, out),
+            Code::M(104 | 140 | 109 | 190 | 303) => return self.heater_command(command, now_ms, out),
+            #[cfg(feature = "heaters")]
+            Code::M(code @ (301 | 304)) => {
+                self.set_pid(command, if code == 301 { HeaterSlot::Hotend } else { HeaterSlot::Bed }, out)
+            }
+            #[cfg(feature = "heaters")]
+            Code::M(302) => self.cold_extrusion_command(command, out),
             #[cfg(not(feature = "heaters"))]
             Code::M(104 | 109 | 140 | 190 | 301 | 302 | 303 | 304) => Err(CommandError::NotThisMachine),
             // Grbl's G10 L2 / L20: work offsets. Without L it would be
@@ -722,14 +728,14 @@ impl<'q> Machine<'q> {
         self.write_temperatures(out)
     }
 
-    /// `G4`, out of line (see `dispatch`).
+    /// `G4`.
     #[inline(always)]
     fn dwell_command(&mut self, command: &Command) -> Outcome {
         self.dwell(command)
     }
 
     #[cfg(feature = "printer")]
-    /// `G28`, out of line (see `dispatch`); refused while a driver alarms.
+    /// `G28`; refused while a driver alarms.
     #[inline(always)]
     fn home_command(&mut self, command: &Command) -> Outcome {
         if self.driver_alarms != 0 {
@@ -765,11 +771,11 @@ impl<'q> Machine<'q> {
     }
 
     #[cfg(feature = "heaters")]
-    /// The heater commands, one out-of-line function for all of them (see
-    /// `dispatch`).
+    /// The heater commands that may start a wait or a tune (`M104`,
+    /// `M140`, `M109`, `M190`, `M303`).
     #[inline(always)]
     fn heater_command<W: uWrite + ?Sized>(&mut self, command: &Command, now_ms: u32, out: &mut W) -> Result<Outcome, W::Error> {
-        let result = match command.code {
+        match command.code {
             // One call site for the four: each call set up its arguments
             // (the wait's configuration on the stack) anew.
             Code::M(code @ (104 | 140 | 109 | 190)) => {
@@ -779,18 +785,10 @@ impl<'q> Machine<'q> {
                     190 => Some(WaitConfig::BED),
                     _ => None,
                 };
-                return self.set_temperature(command, slot, wait, now_ms, out);
+                self.set_temperature(command, slot, wait, now_ms, out)
             }
-            Code::M(code) if code == 301 || code == 304 => {
-                self.set_pid(command, if code == 301 { HeaterSlot::Hotend } else { HeaterSlot::Bed }, out)
-            }
-            Code::M(302) => self.cold_extrusion_command(command, out),
-            _ => return self.autotune(command, out),
-        };
-        Ok(match result {
-            Ok(()) => Outcome::Done,
-            Err(error) => Outcome::Failed(error),
-        })
+            _ => self.autotune(command, out),
+        }
     }
 
     /// A code the executor does not run: echoed, as Marlin does.
