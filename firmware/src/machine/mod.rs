@@ -902,7 +902,8 @@ impl<'q> Machine<'q> {
         for (bit, name) in ENDSTOP_NAMES.iter().enumerate() {
             let level = self.endstop_levels >> bit & 1;
             let triggered = level == self.endstop_trigger_levels >> bit & 1;
-            ufmt::uwrite!(out, "{}: {}\n", *name, if triggered { "TRIGGERED" } else { "open" })?;
+            out.write_str(name)?;
+            out.write_str(if triggered { ": TRIGGERED\n" } else { ": open\n" })?;
         }
         Ok(())
     }
