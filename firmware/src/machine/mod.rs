@@ -863,7 +863,6 @@ impl<'q> Machine<'q> {
         Ok(())
     }
 
-    #[inline(never)]
     fn set_auto_report(&mut self, command: &Command, now_ms: u32) -> Result<(), CommandError> {
         let mut seconds = 1;
         set_scaled(command, b'S', 0, 0, 60, &mut seconds)?;
