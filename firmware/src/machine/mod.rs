@@ -353,7 +353,8 @@ impl<'q> Machine<'q> {
 
     /// Step 1: a complete line arrived. Refusals are answered now; accepted
     /// lines are queued (the caller checked [`Machine::can_accept_line`]).
-    #[inline(never)]
+    /// Free to inline into the board's one caller (`HostLink::service`),
+    /// as `poll`: measured smaller on the AVR.
     pub fn receive_line<W: uWrite + ?Sized>(&mut self, line: Line<'_>, out: &mut W) -> Result<(), W::Error> {
         let body = match self.protocol.accept(line) {
             Ok(body) => body,
@@ -425,7 +426,6 @@ impl<'q> Machine<'q> {
 
     /// Step 2: run queued commands. `now_ms` is a free-running millisecond
     /// clock (wrapping); `storage` holds the settings for `M500`/`M501`.
-    #[inline(never)]
     pub fn poll<W: uWrite + ?Sized>(
         &mut self,
         now_ms: u32,
