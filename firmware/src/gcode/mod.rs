@@ -61,7 +61,9 @@ pub enum ParseError {
 }
 
 /// Codes that only set a mode (Grbl's non-motion modal groups, and spindle
-/// and coolant): several may share a line with one command.
+/// and coolant): several may share a line with one command. Out of line:
+/// the parser and the executor share one copy of the range checks.
+#[inline(never)]
 pub fn is_mode_setting(code: Code) -> bool {
     match code {
         Code::G(n) => matches!(n, 17..=21 | 40 | 49 | 53..=59 | 61 | 64 | 80 | 90 | 91 | 93 | 94),
