@@ -325,7 +325,8 @@ impl<'q> Machine<'q> {
         self.hotend.turn_off();
         self.bed.turn_off();
         self.motion.request_stop();
-        out.write_str("Error:Printer halted. kill() called!\n")?;
+        // The refused command's line: one copy of the text, in flash.
+        CommandError::Halted.write(out)?;
         // The command that was running ends here and gets its `ok`; the
         // queued ones stay, to be refused one by one (each its `Error:`
         // and `ok`): a host waiting for `ok` is never left hanging.
