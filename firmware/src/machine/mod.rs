@@ -793,9 +793,9 @@ impl<'q> Machine<'q> {
     }
 
     /// A code the executor does not run: echoed, as Marlin does.
-    #[inline(never)]
+    #[inline(always)]
     fn unknown_command<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "echo:Unknown command: \"{}\"\n", Printable(trim(text)))
+        write_quoted(out, "echo:Unknown command: \"", text, "\"\n")
     }
 
     /// Hand the settings to the motion core (printers only: the extrusion
@@ -807,7 +807,7 @@ impl<'q> Machine<'q> {
 
     #[inline(always)]
     fn not_yet_available<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "echo:\"{}\" is not available yet in this build\n", Printable(trim(text)))
+        write_quoted(out, "echo:\"", text, "\" is not available yet in this build\n")
     }
 
     fn set_distance(&mut self, distance: Distance) {
@@ -968,6 +968,15 @@ fn refused_while_halted(code: Code) -> bool {
 #[inline(never)]
 fn write_stored<W: uWrite + ?Sized>(stored: &storage::Stored, out: &mut W) -> Result<(), W::Error> {
     ufmt::uwrite!(out, "{} bytes; crc {})\n", stored.bytes, stored.crc)
+}
+
+/// `before`, the line's text (trimmed, unprintable bytes masked), `after`:
+/// one copy of the code for every echo of a line.
+#[inline(never)]
+fn write_quoted<W: uWrite + ?Sized>(out: &mut W, before: &str, text: &[u8], after: &str) -> Result<(), W::Error> {
+    out.write_str(before)?;
+    ufmt::uwrite!(out, "{}", Printable(trim(text)))?;
+    out.write_str(after)
 }
 
 /// What executing a command led to.
