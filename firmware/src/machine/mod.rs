@@ -683,9 +683,7 @@ impl<'q> Machine<'q> {
             Code::M(155) => self.set_auto_report(command, now_ms),
             Code::M(400) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false })),
             #[cfg(feature = "printer")]
-            Code::M(120) => self.set_endstops_always(true),
-            #[cfg(feature = "printer")]
-            Code::M(121) => self.set_endstops_always(false),
+            Code::M(code @ (120 | 121)) => self.set_endstops_always(code == 120),
             #[cfg(feature = "delta")]
             Code::M(665) => self.delta_geometry(command, out),
             #[cfg(feature = "delta")]
