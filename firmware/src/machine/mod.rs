@@ -331,7 +331,7 @@ impl<'q> Machine<'q> {
         // queued ones stay, to be refused one by one (each its `Error:`
         // and `ok`): a host waiting for `ok` is never left hanging.
         if !matches!(core::mem::replace(&mut self.running, Running::Idle), Running::Idle) {
-            out.write_str("ok\n")?;
+            write_ok(out)?;
         }
         Ok(())
     }
@@ -445,7 +445,7 @@ impl<'q> Machine<'q> {
                 }
                 self.running = Running::Idle;
                 self.wait_cancelled = false;
-                out.write_str("ok\n")?;
+                write_ok(out)?;
             }
             // A line still being cut into a full planner holds back the
             // next command (as Marlin blocks in its planner), so commands
@@ -471,11 +471,11 @@ impl<'q> Machine<'q> {
         out: &mut W,
     ) -> Result<(), W::Error> {
         match self.execute(text, now_ms, storage, out)? {
-            Outcome::Done => out.write_str("ok\n"),
+            Outcome::Done => write_ok(out),
             Outcome::Acknowledged => Ok(()),
             Outcome::Failed(error) => {
                 error.write(out)?;
-                out.write_str("ok\n")
+                write_ok(out)
             }
             Outcome::Started(running) => {
                 self.running = running;
@@ -975,6 +975,13 @@ fn write_quoted<W: uWrite + ?Sized>(out: &mut W, before: &str, text: &[u8], afte
     out.write_str(before)?;
     ufmt::uwrite!(out, "{}", Printable(trim(text)))?;
     out.write_str(after)
+}
+
+/// `ok`: one call with no text argument to set up, from every place that
+/// acknowledges a line.
+#[inline(never)]
+fn write_ok<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Error> {
+    out.write_str("ok\n")
 }
 
 /// What executing a command led to.
