@@ -14,7 +14,6 @@
 //! error alone tells the user that a line was lost.
 
 use crate::line::Line;
-use crate::reply::Fixed;
 use ufmt::uWrite;
 
 /// Why a received line was refused before any G-code was parsed.
@@ -125,11 +124,7 @@ impl HostProtocol {
         rejection.message().write_to(out)?;
         // The `ok` joined to the last piece: one call fewer.
         if self.numbered {
-            // As `Fixed` with no decimals (the same digits): `write_fixed`
-            // serves every number the executor prints, where ufmt's own
-            // i32 printer would be another 282 bytes on the AVR.
-            let (last, next) = (Fixed { mantissa: self.last_line, digits: 0 }, Fixed { mantissa: self.last_line.wrapping_add(1), digits: 0 });
-            ufmt::uwrite!(out, ", Last Line: {}\nResend: {}\nok\n", last, next)
+            ufmt::uwrite!(out, ", Last Line: {}\nResend: {}\nok\n", self.last_line, self.last_line.wrapping_add(1))
         } else {
             out.write_str("\nok\n")
         }

@@ -876,8 +876,7 @@ impl<'q> Machine<'q> {
         for (letter, um) in AXIS_LETTERS.iter().zip(self.modal.logical_position()) {
             ufmt::uwrite!(out, "{}:{} ", char::from(*letter), micrometres_as_mm(um))?;
         }
-        // Whole steps as `Fixed` with no decimals: see `write_rejection`.
-        let [x, y, z, _] = self.motion.motor_steps().map(|steps| Fixed { mantissa: steps, digits: 0 });
+        let [x, y, z, _] = self.motion.motor_steps();
         ufmt::uwrite!(out, "Count X:{} Y:{} Z:{}\n", x, y, z)
     }
 
