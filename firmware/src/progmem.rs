@@ -163,6 +163,52 @@ pub const fn ascii_bytes<const N: usize>(text: &str) -> [u8; N] {
     array
 }
 
+/// The total length of `parts` (const context, for [`flash_concat!`]).
+#[doc(hidden)]
+pub const fn total_len(parts: &[&str]) -> usize {
+    let mut len = 0;
+    let mut i = 0;
+    while i < parts.len() {
+        len += parts[i].len();
+        i += 1;
+    }
+    len
+}
+
+/// `parts` one after the other in a byte array (const context).
+#[doc(hidden)]
+pub const fn concat_ascii<const N: usize>(parts: &[&str]) -> [u8; N] {
+    let mut array = [0u8; N];
+    let mut at = 0;
+    let mut i = 0;
+    while i < parts.len() {
+        let bytes = parts[i].as_bytes();
+        let mut j = 0;
+        while j < bytes.len() {
+            assert!(bytes[j] < 0x80, "flash strings are ASCII");
+            array[at] = bytes[j];
+            at += 1;
+            j += 1;
+        }
+        i += 1;
+    }
+    assert!(at == N);
+    array
+}
+
+/// Several `&str` constants joined into one string in flash, as a
+/// [`FlashStr`]: a reply built from constants (the firmware's name and
+/// version) is written with one call and costs no RAM.
+#[macro_export]
+macro_rules! flash_concat {
+    ($($part:expr),+ $(,)?) => {{
+        const PARTS: &[&str] = &[$($part),+];
+        #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+        static BYTES: [u8; $crate::progmem::total_len(PARTS)] = $crate::progmem::concat_ascii(PARTS);
+        $crate::progmem::FlashStr::from_static(&BYTES)
+    }};
+}
+
 /// A string literal stored in flash on the AVR (in RAM on other targets),
 /// as a [`FlashStr`]: `out.write_flash(flash_str!("echo:busy"))`.
 #[macro_export]
@@ -186,6 +232,7 @@ mod flash_str_tests {
         crate::flash_str!("Cap:EEPROM:").write_to(&mut out).unwrap();
         crate::flash_str!("0123456789abcdefXYZ").write_to(&mut out).unwrap();
         ufmt::uwrite!(out, "[{}]", crate::flash_str!("mid")).unwrap();
-        assert_eq!(out.0, "Cap:EEPROM:0123456789abcdefXYZ[mid]");
+        crate::flash_concat!("a", "", "bc", crate::FIRMWARE_NAME).write_to(&mut out).unwrap();
+        assert_eq!(out.0, "Cap:EEPROM:0123456789abcdefXYZ[mid]abcFerrostep");
     }
 }

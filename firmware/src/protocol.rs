@@ -83,31 +83,36 @@ impl HostProtocol {
         let star = text.iter().position(|&b| b == b'*');
         let start = text.iter().position(|&b| b != b' ').unwrap_or(text.len());
         let numbered = matches!(text.get(start), Some(b'N' | b'n'));
-        if !numbered {
-            if star.is_some() {
-                return Err(LineRejection::NoLineNumberWithChecksum);
+        // The body and its line number (`None`: an unnumbered line).
+        let (body, number) = if numbered {
+            self.numbered = true;
+            let star = star.ok_or(LineRejection::NoChecksum)?;
+            let expected = parse_checksum(&text[star + 1..]).ok_or(LineRejection::MalformedHeader)?;
+            let actual = text[..star].iter().fold(0u8, |sum, &b| sum ^ b);
+            if actual != expected {
+                return Err(LineRejection::ChecksumMismatch);
             }
-            if let Some(Some(number)) = m110_argument(text) {
-                self.last_line = number;
-            }
-            return Ok(text);
-        }
-        self.numbered = true;
-        let star = star.ok_or(LineRejection::NoChecksum)?;
-        let expected = parse_checksum(&text[star + 1..]).ok_or(LineRejection::MalformedHeader)?;
-        let actual = text[..star].iter().fold(0u8, |sum, &b| sum ^ b);
-        if actual != expected {
-            return Err(LineRejection::ChecksumMismatch);
-        }
-        let (number, used) = parse_line_number(&text[start + 1..star]).ok_or(LineRejection::MalformedHeader)?;
-        let body = &text[start + 1 + used..star];
-        if let Some(argument) = m110_argument(body) {
-            // `N<n> M110 N<m>` numbers from m; `N<n> M110` from n.
-            self.last_line = argument.unwrap_or(number);
-        } else if Some(number) != self.last_line.checked_add(1) {
-            return Err(LineRejection::LineNumberOutOfOrder);
+            let (number, used) = parse_line_number(&text[start + 1..star]).ok_or(LineRejection::MalformedHeader)?;
+            (&text[start + 1 + used..star], Some(number))
+        } else if star.is_some() {
+            return Err(LineRejection::NoLineNumberWithChecksum);
         } else {
-            self.last_line = number;
+            (text, None)
+        };
+        // One call for both kinds of line.
+        match (m110_argument(body), number) {
+            // `N<n> M110 N<m>` and `M110 N<m>` number from m; `N<n> M110`
+            // from n; a bare `M110` keeps the numbering.
+            (Some(argument), _) => {
+                if let Some(next) = argument.or(number) {
+                    self.last_line = next;
+                }
+            }
+            (None, Some(number)) if Some(number) != self.last_line.checked_add(1) => {
+                return Err(LineRejection::LineNumberOutOfOrder);
+            }
+            (None, Some(number)) => self.last_line = number,
+            (None, None) => {}
         }
         Ok(body)
     }
@@ -117,12 +122,12 @@ impl HostProtocol {
     pub fn write_rejection<W: uWrite + ?Sized>(&self, rejection: LineRejection, out: &mut W) -> Result<(), W::Error> {
         out.write_str("Error:")?;
         rejection.message().write_to(out)?;
+        // The `ok` joined to the last piece: one call fewer.
         if self.numbered {
-            ufmt::uwrite!(out, ", Last Line: {}\nResend: {}\n", self.last_line, self.last_line.wrapping_add(1))?;
+            ufmt::uwrite!(out, ", Last Line: {}\nResend: {}\nok\n", self.last_line, self.last_line.wrapping_add(1))
         } else {
-            out.write_str("\n")?;
+            out.write_str("\nok\n")
         }
-        out.write_str("ok\n")
     }
 }
 
@@ -152,7 +157,8 @@ fn m110_argument(body: &[u8]) -> Option<Option<i32>> {
     if !may_be_m110(body) {
         return None;
     }
-    let command = crate::gcode::parse(body).ok()?;
+    let mut command = crate::gcode::Command::new(crate::gcode::Code::Other);
+    crate::gcode::parse_into(body, &mut command).ok()?;
     if command.code != crate::gcode::Code::M(110) {
         return None;
     }

@@ -7,27 +7,38 @@
 
 use ufmt::{uWrite, Formatter};
 
-/// Write `mantissa × 10^(−digits)` with exactly `digits` decimals.
+/// Write `mantissa × 10^(−digits)` with exactly `digits` decimals
+/// (`digits` up to 9, as an `i32` holds).
+///
+/// The characters are made from the last with shift-and-add divisions by
+/// ten, then written in order: smaller on the AVR than printing the whole
+/// part with `ufmt` and the decimals with three 32-bit divisions each.
 pub fn write_fixed<W: uWrite + ?Sized>(f: &mut Formatter<'_, W>, mantissa: i32, digits: u8) -> Result<(), W::Error> {
-    let mut divisor: u32 = 1;
-    for _ in 0..digits {
-        divisor *= 10;
-    }
-    let magnitude = mantissa.unsigned_abs();
-    if mantissa < 0 {
-        f.write_str("-")?;
-    }
-    ufmt::uwrite!(f, "{}", magnitude / divisor)?;
-    if digits > 0 {
-        f.write_str(".")?;
-        let mut fraction = magnitude % divisor;
-        let mut place = divisor / 10;
-        while place > 0 {
-            let digit = (fraction / place) as u8;
-            f.write_char(char::from(b'0' + digit))?;
-            fraction %= place;
-            place /= 10;
+    // Sign, ten digits, a point, and the zeros before the first digit.
+    let mut text = [0u8; 24];
+    let mut len = 0;
+    let mut rest = mantissa.unsigned_abs();
+    let mut made = 0u8;
+    loop {
+        let (quotient, digit) = crate::gcode::number::div_rem_10(rest);
+        rest = quotient;
+        text[len] = b'0' + digit as u8;
+        len += 1;
+        made += 1;
+        if made == digits {
+            text[len] = b'.';
+            len += 1;
         }
+        if (rest == 0 && made > digits) || len + 2 >= text.len() {
+            break;
+        }
+    }
+    if mantissa < 0 {
+        text[len] = b'-';
+        len += 1;
+    }
+    for &byte in text[..len].iter().rev() {
+        f.write_char(char::from(byte))?;
     }
     Ok(())
 }
@@ -104,6 +115,12 @@ mod tests {
         assert_eq!(shown(Fixed::hundredths(0)), "0.00");
         assert_eq!(shown(Fixed { mantissa: 7, digits: 0 }), "7");
         assert_eq!(shown(Fixed { mantissa: i32::MIN, digits: 3 }), "-2147483.648");
+        assert_eq!(shown(Fixed { mantissa: i32::MAX, digits: 0 }), "2147483647");
+        assert_eq!(shown(Fixed { mantissa: i32::MIN, digits: 0 }), "-2147483648");
+        assert_eq!(shown(Fixed { mantissa: 0, digits: 0 }), "0");
+        assert_eq!(shown(Fixed { mantissa: -7, digits: 9 }), "-0.000000007");
+        assert_eq!(shown(Fixed { mantissa: i32::MIN, digits: 9 }), "-2.147483648");
+        assert_eq!(shown(Fixed { mantissa: 100, digits: 2 }), "1.00");
     }
 
     #[test]

@@ -45,6 +45,23 @@ pub struct Settings {
     pub bed_pid: [i32; 3],
 }
 
+/// Numbers of the fields [`Settings::field_mut`] reaches (the per-axis
+/// arrays take four each, X Y Z E).
+pub mod field {
+    pub const STEPS_PER_MM: usize = 0;
+    pub const MAX_FEED: usize = 4;
+    pub const MAX_ACCEL: usize = 8;
+    pub const PRINT_ACCEL: usize = 12;
+    pub const RETRACT_ACCEL: usize = 13;
+    pub const TRAVEL_ACCEL: usize = 14;
+    pub const JUNCTION_DEVIATION: usize = 15;
+    pub const MIN_FEED: usize = 16;
+    pub const MIN_TRAVEL_FEED: usize = 17;
+    pub const MIN_SEGMENT_TIME: usize = 18;
+    pub const FEED_PERCENT: usize = 19;
+    pub const FLOW_PERCENT: usize = 20;
+}
+
 impl Default for Settings {
     fn default() -> Self {
         Self::prusa_i3()
@@ -54,6 +71,8 @@ impl Default for Settings {
 impl Settings {
     /// The defaults of a machine: its motion configuration's figures in
     /// milli-units, the rest as on the Prusa i3.
+    /// Out of line: inlined into the machine's construction it cost more.
+    #[inline(never)]
     pub fn for_machine(config: &crate::motion::MotionConfig) -> Self {
         let milli = |value: f32| crate::motion::math::round_to_i32(value * 1000.0);
         Self {
@@ -90,6 +109,28 @@ impl Settings {
         }
     }
 
+    /// The `i32` field numbered `index` ([`field`] names them), for the
+    /// table-driven setting commands (`M92`, `M201`, ...); `None` past the
+    /// last.
+    pub fn field_mut(&mut self, index: u8) -> Option<&mut i32> {
+        let index = usize::from(index);
+        Some(match index {
+            field::STEPS_PER_MM..=3 => &mut self.steps_per_mm_milli[index - field::STEPS_PER_MM],
+            field::MAX_FEED..=7 => &mut self.max_feed_um_per_s[index - field::MAX_FEED],
+            field::MAX_ACCEL..=11 => &mut self.max_accel_um_per_s2[index - field::MAX_ACCEL],
+            field::PRINT_ACCEL => &mut self.print_accel_um_per_s2,
+            field::RETRACT_ACCEL => &mut self.retract_accel_um_per_s2,
+            field::TRAVEL_ACCEL => &mut self.travel_accel_um_per_s2,
+            field::JUNCTION_DEVIATION => &mut self.junction_deviation_um,
+            field::MIN_FEED => &mut self.min_feed_um_per_s,
+            field::MIN_TRAVEL_FEED => &mut self.min_travel_feed_um_per_s,
+            field::MIN_SEGMENT_TIME => &mut self.min_segment_time_us,
+            field::FEED_PERCENT => &mut self.feed_percent,
+            field::FLOW_PERCENT => &mut self.flow_percent,
+            _ => return None,
+        })
+    }
+
     /// `M503`: the settings as the commands that would set them, in
     /// Marlin's layout.
     pub fn report<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
@@ -100,30 +141,25 @@ impl Settings {
         crate::flash_str!("\necho:; Max Acceleration (units/s2):\necho:  M201").write_to(out)?;
         write_axes(out, &self.max_accel_um_per_s2)?;
         crate::flash_str!(
-            "\necho:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\necho:  M204 P"
+            "\necho:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\necho:  M204"
         )
         .write_to(out)?;
-        ufmt::uwrite!(
-            out,
-            "{} R{} T{}\n",
-            milli(self.print_accel_um_per_s2),
-            milli(self.retract_accel_um_per_s2),
-            milli(self.travel_accel_um_per_s2)
-        )?;
+        write_milli_word(out, b'P', self.print_accel_um_per_s2)?;
+        write_milli_word(out, b'R', self.retract_accel_um_per_s2)?;
+        write_milli_word(out, b'T', self.travel_accel_um_per_s2)?;
         crate::flash_str!(
-            "echo:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\necho:  M205 B"
+            "\necho:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\necho:  M205"
         )
         .write_to(out)?;
-        ufmt::uwrite!(
-            out,
-            "{} S{} T{} J{}\n",
-            self.min_segment_time_us,
-            milli(self.min_feed_um_per_s),
-            milli(self.min_travel_feed_um_per_s),
-            Fixed { mantissa: self.junction_deviation_um, digits: 3 }
-        )?;
-        crate::flash_str!("echo:; Feedrate and flow:\necho:  M220 S").write_to(out)?;
-        ufmt::uwrite!(out, "{}\necho:  M221 S{}\n", self.feed_percent, self.flow_percent)?;
+        write_word(out, b'B', self.min_segment_time_us, 0)?;
+        write_milli_word(out, b'S', self.min_feed_um_per_s)?;
+        write_milli_word(out, b'T', self.min_travel_feed_um_per_s)?;
+        write_word(out, b'J', self.junction_deviation_um, 3)?;
+        crate::flash_str!("\necho:; Feedrate and flow:\necho:  M220").write_to(out)?;
+        write_word(out, b'S', self.feed_percent, 0)?;
+        crate::flash_str!("\necho:  M221").write_to(out)?;
+        write_word(out, b'S', self.flow_percent, 0)?;
+        out.write_str("\n")?;
         crate::flash_str!("echo:; Hotend PID:\necho:  ").write_to(out)?;
         let [kp, ki, kd] = self.hotend_pid;
         if let Some(gains) = crate::thermal::Gains::new(kp, ki, kd) {
@@ -138,15 +174,27 @@ impl Settings {
     }
 }
 
-/// A milli-unit value with two decimals, rounded (Marlin prints two).
-fn milli(value: i32) -> Fixed {
+/// ` <letter><value>`: a word of `M503`'s report, `mantissa × 10^-digits`
+/// with every decimal. One out-of-line writer for every word: each
+/// `uwrite!` of a word inlined its own formatter calls.
+#[inline(never)]
+fn write_word<W: uWrite + ?Sized>(out: &mut W, letter: u8, mantissa: i32, digits: u8) -> Result<(), W::Error> {
+    out.write_str(" ")?;
+    out.write_char(char::from(letter))?;
+    ufmt::uwrite!(out, "{}", Fixed { mantissa, digits })
+}
+
+/// ` <letter><value>` of a milli-unit value, with two decimals, rounded
+/// (Marlin prints two).
+#[inline(never)]
+fn write_milli_word<W: uWrite + ?Sized>(out: &mut W, letter: u8, value: i32) -> Result<(), W::Error> {
     let rounded = if value >= 0 { (value + 5) / 10 } else { (value - 5) / 10 };
-    Fixed::hundredths(rounded)
+    write_word(out, letter, rounded, 2)
 }
 
 fn write_axes<W: uWrite + ?Sized>(out: &mut W, values: &[i32; AXES]) -> Result<(), W::Error> {
     for (letter, value) in AXIS_LETTERS.iter().zip(values) {
-        ufmt::uwrite!(out, " {}{}", char::from(*letter), milli(*value))?;
+        write_milli_word(out, *letter, *value)?;
     }
     Ok(())
 }

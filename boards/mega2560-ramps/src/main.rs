@@ -164,7 +164,8 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
         link.machine.become_powder_bed();
         bed::init(dp);
     }
-    for endstop in pins::ENDSTOPS {
+    // By reference: iterating the array by value pulled in its IntoIter.
+    for &endstop in &pins::ENDSTOPS {
         pins::make_input_pulled_up(dp, endstop);
     }
     #[cfg(feature = "machine-arm")]

@@ -61,7 +61,9 @@ pub enum ParseError {
 }
 
 /// Codes that only set a mode (Grbl's non-motion modal groups, and spindle
-/// and coolant): several may share a line with one command.
+/// and coolant): several may share a line with one command. Out of line:
+/// the parser and the executor share one copy of the range checks.
+#[inline(never)]
 pub fn is_mode_setting(code: Code) -> bool {
     match code {
         Code::G(n) => matches!(n, 17..=21 | 40 | 49 | 53..=59 | 61 | 64 | 80 | 90 | 91 | 93 | 94),
@@ -134,6 +136,19 @@ impl Command {
 
 /// Parse one line (without `N` and `*checksum`) into a command.
 pub fn parse(text: &[u8]) -> Result<Command, ParseError> {
+    let mut command = Command::new(Code::Other);
+    parse_into(text, &mut command).map(|()| command)
+}
+
+/// [`parse`] into `command` (whatever it held is replaced; after an error
+/// it holds part of the line). The executor parses into its own frame:
+/// returning the command by value built it in this function's frame and
+/// copied it out, and on the AVR a frame that large made most accesses
+/// to it several instructions longer.
+#[inline(never)]
+pub fn parse_into(text: &[u8], command: &mut Command) -> Result<(), ParseError> {
+    command.words.clear();
+    command.settings.clear();
     if text.iter().filter(|b| **b != b' ' && **b != b'\t').eq(b"%".iter()) {
         return Err(ParseError::Empty);
     }
@@ -154,16 +169,16 @@ pub fn parse(text: &[u8]) -> Result<Command, ParseError> {
         }
         _ => Code::Modal,
     };
-    let mut command = Command::new(code);
+    command.code = code;
     if matches!(code, Code::M(117) | Code::M(118)) {
-        return Ok(command); // the rest is free text
+        return Ok(()); // the rest is free text
     }
     if code == Code::Modal {
         command.words.push(first).map_err(|_| ParseError::TooManyWords)?;
     }
     while let Some(word) = lexer.next_word()? {
         if let Some(extra) = command_code(word) {
-            take_code(&mut command, extra)?;
+            take_code(command, extra)?;
             continue;
         }
         if command.has(word.letter) {
@@ -171,7 +186,7 @@ pub fn parse(text: &[u8]) -> Result<Command, ParseError> {
         }
         command.words.push(word).map_err(|_| ParseError::TooManyWords)?;
     }
-    Ok(command)
+    Ok(())
 }
 
 /// A `G`/`M` word that names a code (whole, non-negative).

@@ -60,7 +60,9 @@ const POWERS_OF_TEN: [i32; 10] =
 
 /// `n / 10` and `n % 10` with shifts and adds (Hacker's Delight, `divu10`):
 /// about a hundred AVR cycles where a 32-bit division costs thousands.
-#[inline]
+/// Never inlined: its callers (scaling, feed rates, decimal output) share
+/// one copy of its 300 bytes.
+#[inline(never)]
 pub(crate) fn div_rem_10(n: u32) -> (u32, u32) {
     let mut q = (n >> 1) + (n >> 2);
     q += q >> 4;

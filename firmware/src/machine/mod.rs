@@ -38,7 +38,7 @@ use crate::protocol::HostProtocol;
 use crate::reply::Printable;
 #[cfg(feature = "printer")]
 use crate::reply::Fixed;
-use crate::settings::Settings;
+use crate::settings::{self, Settings};
 use crate::storage::{self, LoadError, NonVolatile};
 use crate::thermal::channel::{BED, HOTEND_0};
 use crate::thermal::{AutoReport, Autotune, ColdExtrusionGuard, Gains, HeaterChannel, TemperatureWait};
@@ -46,7 +46,7 @@ use crate::thermal::{AutoReport, Autotune, ColdExtrusionGuard, Gains, HeaterChan
 use crate::thermal::WaitConfig;
 use thermal::HeaterSlot;
 use error::CommandError;
-use modal::{Distance, ModalState, MotionMode, Plane, Units, AXES, AXIS_LETTERS};
+use modal::{Distance, ModalState, MotionMode, Plane, Units, AXIS_LETTERS};
 use ufmt::uWrite;
 
 /// Lines the command queue holds (Marlin's BUFSIZE is 4).
@@ -142,8 +142,6 @@ pub struct Machine<'q> {
     encoders: encoders::EncoderState,
 }
 
-/// How one M-code changes the settings (`M92`, `M201`, …).
-type SettingsChange = fn(&Command, &mut Settings) -> Result<(), CommandError>;
 
 impl<'q> Machine<'q> {
     /// An executor driving `motion` (the board's machine configuration).
@@ -264,7 +262,7 @@ impl<'q> Machine<'q> {
     /// The start banner, printed once at boot. `start` is what Printrun and
     /// OctoPrint look for to learn that the firmware (re)started.
     pub fn write_banner<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "start\necho:{} {} ready\n", crate::FIRMWARE_NAME, crate::FIRMWARE_VERSION)
+        crate::flash_concat!("start\necho:", crate::FIRMWARE_NAME, " ", crate::FIRMWARE_VERSION, " ready\n").write_to(out)
     }
 
     // --- what the board reads back -----------------------------------------
@@ -336,12 +334,13 @@ impl<'q> Machine<'q> {
         self.hotend.turn_off();
         self.bed.turn_off();
         self.motion.request_stop();
-        out.write_str("Error:Printer halted. kill() called!\n")?;
+        // The refused command's line: one copy of the text, in flash.
+        CommandError::Halted.write(out)?;
         // The command that was running ends here and gets its `ok`; the
         // queued ones stay, to be refused one by one (each its `Error:`
         // and `ok`): a host waiting for `ok` is never left hanging.
         if !matches!(core::mem::replace(&mut self.running, Running::Idle), Running::Idle) {
-            out.write_str("ok\n")?;
+            write_ok(out)?;
         }
         Ok(())
     }
@@ -364,7 +363,8 @@ impl<'q> Machine<'q> {
 
     /// Step 1: a complete line arrived. Refusals are answered now; accepted
     /// lines are queued (the caller checked [`Machine::can_accept_line`]).
-    #[inline(never)]
+    /// Free to inline into the board's one caller (`HostLink::service`),
+    /// as `poll`: measured smaller on the AVR.
     pub fn receive_line<W: uWrite + ?Sized>(&mut self, line: Line<'_>, out: &mut W) -> Result<(), W::Error> {
         let body = match self.protocol.accept(line) {
             Ok(body) => body,
@@ -396,13 +396,8 @@ impl<'q> Machine<'q> {
         match storage::load(storage) {
             Ok((settings, stored)) => {
                 self.settings = settings;
-                ufmt::uwrite!(
-                    out,
-                    "echo:V{} stored settings retrieved ({} bytes; crc {})\n",
-                    storage::LAYOUT_VERSION,
-                    stored.bytes,
-                    stored.crc
-                )
+                ufmt::uwrite!(out, "echo:V{} stored settings retrieved (", storage::LAYOUT_VERSION)?;
+                write_stored(&stored, out)
             }
             Err(error) => {
                 match error {
@@ -430,7 +425,10 @@ impl<'q> Machine<'q> {
     #[inline(never)]
     fn save_settings<W: uWrite + ?Sized>(&self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
         match storage::save(storage, &self.settings) {
-            Ok(stored) => ufmt::uwrite!(out, "echo:Settings Stored ({} bytes; crc {})\n", stored.bytes, stored.crc),
+            Ok(stored) => {
+                out.write_str("echo:Settings Stored (")?;
+                write_stored(&stored, out)
+            }
             Err(storage::SaveError::TooSmall) => out.write_str("Error:EEPROM too small for the settings\n"),
             Err(storage::SaveError::WriteFailed) => out.write_str("Error:Settings not stored: the storage did not take the write\n"),
         }
@@ -438,7 +436,6 @@ impl<'q> Machine<'q> {
 
     /// Step 2: run queued commands. `now_ms` is a free-running millisecond
     /// clock (wrapping); `storage` holds the settings for `M500`/`M501`.
-    #[inline(never)]
     pub fn poll<W: uWrite + ?Sized>(
         &mut self,
         now_ms: u32,
@@ -457,7 +454,7 @@ impl<'q> Machine<'q> {
                 }
                 self.running = Running::Idle;
                 self.wait_cancelled = false;
-                out.write_str("ok\n")?;
+                write_ok(out)?;
             }
             // A line still being cut into a full planner holds back the
             // next command (as Marlin blocks in its planner), so commands
@@ -467,14 +464,31 @@ impl<'q> Machine<'q> {
             }
             let Some(text) = self.queue.pop_front() else { return Ok(()) };
             self.last_busy_ms = now_ms;
-            match self.execute(&text, now_ms, storage, out)? {
-                Outcome::Done => out.write_str("ok\n")?,
-                Outcome::Acknowledged => {}
-                Outcome::Failed(error) => {
-                    error.write(out)?;
-                    out.write_str("ok\n")?;
-                }
-                Outcome::Started(running) => self.running = running,
+            self.run_line(&text, now_ms, storage, out)?;
+        }
+    }
+
+    /// Execute one line and answer it (or start it). Out of line, with the
+    /// `Outcome` in its frame: in `poll`'s, beside the line, it made the
+    /// frame larger and its accesses longer (measured: 68 bytes more).
+    #[inline(never)]
+    fn run_line<W: uWrite + ?Sized>(
+        &mut self,
+        text: &[u8],
+        now_ms: u32,
+        storage: &mut dyn NonVolatile,
+        out: &mut W,
+    ) -> Result<(), W::Error> {
+        match self.execute(text, now_ms, storage, out)? {
+            Outcome::Done => write_ok(out),
+            Outcome::Acknowledged => Ok(()),
+            Outcome::Failed(error) => {
+                error.write(out)?;
+                write_ok(out)
+            }
+            Outcome::Started(running) => {
+                self.running = running;
+                Ok(())
             }
         }
     }
@@ -488,7 +502,8 @@ impl<'q> Machine<'q> {
         Ok(())
     }
 
-    #[inline(never)]
+    /// Inlined into its one caller, `run_line`.
+    #[inline(always)]
     fn execute<W: uWrite + ?Sized>(
         &mut self,
         text: &[u8],
@@ -496,8 +511,9 @@ impl<'q> Machine<'q> {
         storage: &mut dyn NonVolatile,
         out: &mut W,
     ) -> Result<Outcome, W::Error> {
-        let command = match gcode::parse(text) {
-            Ok(command) => command,
+        let mut command = Command::new(Code::Other);
+        match gcode::parse_into(text, &mut command) {
+            Ok(()) => {}
             Err(ParseError::Empty) => return Ok(Outcome::Done),
             // Arguments that do not parse are an error only for commands we
             // run: Marlin answers `M115 U3.13.0` (PrusaSlicer's version
@@ -509,7 +525,7 @@ impl<'q> Machine<'q> {
                     return Ok(Outcome::Done);
                 }
                 Some(code) if !is_known(code) => {
-                    ufmt::uwrite!(out, "echo:Unknown command: \"{}\"\n", Printable(trim(text)))?;
+                    self.unknown_command(text, out)?;
                     return Ok(Outcome::Done);
                 }
                 _ => return Ok(Outcome::Failed(error.into())),
@@ -576,6 +592,11 @@ impl<'q> Machine<'q> {
     /// Run a parsed command. Out of line from `execute` so that the parsed
     /// words stay in `execute`'s frame: on the AVR a frame larger than 64
     /// bytes makes every access to it several instructions longer.
+    ///
+    /// The arms' bodies are small functions of their own, for reading; most
+    /// are `inline(always)`: measured on the AVR, each one called out of
+    /// line cost more (the `Outcome` copied through memory, the arguments
+    /// set up again) than it saved in this function.
     #[inline(never)]
     fn dispatch<W: uWrite + ?Sized>(
         &mut self,
@@ -588,7 +609,7 @@ impl<'q> Machine<'q> {
         // Halted, the machine still answers what only reports or waits
         // (hosts keep polling M105) and echoes unknown codes as unknown;
         // it refuses everything that would act.
-        if self.halted && is_known(command.code) && !matches!(command.code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410)) {
+        if self.halted && refused_while_halted(command.code) {
             return Ok(Outcome::Failed(CommandError::Halted));
         }
         #[cfg(feature = "powder-bed")]
@@ -618,11 +639,9 @@ impl<'q> Machine<'q> {
             Code::G(0 | 1) | Code::Modal => self.linear_move(command, out),
             #[cfg(feature = "printer")]
             Code::G(2 | 3) => self.arc_move(command, out),
-            Code::G(4) => return Ok(self.dwell(command)),
+            Code::G(4) => return Ok(self.dwell_command(command)),
             #[cfg(feature = "printer")]
-            Code::G(28) if self.driver_alarms != 0 => Err(CommandError::DriverAlarm),
-            #[cfg(feature = "printer")]
-            Code::G(28) => return Ok(self.home(command)),
+            Code::G(28) => return Ok(self.home_command(command)),
             // A build without the printers (the extrusion line or the
             // powder bed alone): their motion commands are not here.
             #[cfg(not(feature = "printer"))]
@@ -655,9 +674,7 @@ impl<'q> Machine<'q> {
             }
             Code::M(18 | 84) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: true })),
             Code::M(105) => {
-                // Marlin puts the report on the `ok` line itself.
-                out.write_str("ok ")?;
-                self.write_temperatures(out)?;
+                self.report_temperatures_on_ok(out)?;
                 return Ok(Outcome::Acknowledged);
             }
             Code::M(106) => self.set_fan(command),
@@ -682,84 +699,117 @@ impl<'q> Machine<'q> {
             Code::M(155) => self.set_auto_report(command, now_ms),
             Code::M(400) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false })),
             #[cfg(feature = "printer")]
-            Code::M(120) => {
-                self.motion.set_endstops_always(true);
-                Ok(())
-            }
-            #[cfg(feature = "printer")]
-            Code::M(121) => {
-                self.motion.set_endstops_always(false);
-                Ok(())
-            }
+            Code::M(code @ (120 | 121)) => self.set_endstops_always(code == 120),
             #[cfg(feature = "delta")]
             Code::M(665) => self.delta_geometry(command, out),
             #[cfg(feature = "delta")]
             Code::M(666) => self.delta_trim(command, out),
-            Code::M(92) => self.change_settings(command, |c, s| settings_axes(c, &mut s.steps_per_mm_milli)),
-            Code::M(201) => self.change_settings(command, |c, s| settings_axes(c, &mut s.max_accel_um_per_s2)),
-            Code::M(203) => self.change_settings(command, |c, s| settings_axes(c, &mut s.max_feed_um_per_s)),
-            Code::M(204) => self.change_settings(command, set_accelerations),
-            Code::M(205) => self.change_settings(command, set_advanced),
-            Code::M(220) => self.change_settings(command, |c, s| percent(c, &mut s.feed_percent)),
-            Code::M(221) => self.change_settings(command, |c, s| percent(c, &mut s.flow_percent)),
+            Code::M(number @ (92 | 201 | 203 | 204 | 205 | 220 | 221)) => self.change_settings(number, command),
             Code::M(500) => self.save_settings(storage, out).map(Ok)?,
             Code::M(501) => {
                 self.load_settings(storage, out)?;
                 Ok(())
             }
-            Code::M(502) => {
-                self.settings = self.defaults.clone();
-                self.apply_motion_settings();
-                self.apply_heater_settings();
-                out.write_str("echo:Hardcoded Default Settings Loaded\n")?;
-                Ok(())
-            }
+            Code::M(502) => self.restore_defaults(out).map(Ok)?,
             Code::M(503) => self.settings.report(out).map(Ok)?,
-            Code::T(tool) if tool < EXTRUDERS => Ok(()),
-            Code::T(tool) => {
-                ufmt::uwrite!(out, "echo:T{} Invalid extruder\n", tool)?;
-                Ok(())
-            }
+            Code::T(tool) => self.select_tool(tool, out).map(Ok)?,
             // The heaters (not on the powder bed, which has none).
             #[cfg(feature = "heaters")]
-            Code::M(104) => return self.set_temperature(command, HeaterSlot::Hotend, None, now_ms, out),
+            Code::M(104 | 140 | 109 | 190 | 303) => return self.heater_command(command, now_ms, out),
             #[cfg(feature = "heaters")]
-            Code::M(140) => return self.set_temperature(command, HeaterSlot::Bed, None, now_ms, out),
-            #[cfg(feature = "heaters")]
-            Code::M(109) => return self.set_temperature(command, HeaterSlot::Hotend, Some(WaitConfig::HOTEND), now_ms, out),
-            #[cfg(feature = "heaters")]
-            Code::M(190) => return self.set_temperature(command, HeaterSlot::Bed, Some(WaitConfig::BED), now_ms, out),
-            #[cfg(feature = "heaters")]
-            Code::M(301) => self.set_pid(command, HeaterSlot::Hotend, out),
-            #[cfg(feature = "heaters")]
-            Code::M(304) => self.set_pid(command, HeaterSlot::Bed, out),
+            Code::M(code @ (301 | 304)) => {
+                self.set_pid(command, if code == 301 { HeaterSlot::Hotend } else { HeaterSlot::Bed }, out)
+            }
             #[cfg(feature = "heaters")]
             Code::M(302) => self.cold_extrusion_command(command, out),
-            #[cfg(feature = "heaters")]
-            Code::M(303) => return self.autotune(command, out),
             #[cfg(not(feature = "heaters"))]
             Code::M(104 | 109 | 140 | 190 | 301 | 302 | 303 | 304) => Err(CommandError::NotThisMachine),
             // Grbl's G10 L2 / L20: work offsets. Without L it would be
             // Marlin's firmware retraction, which this build does not have.
-            Code::G(10) if command.has(b'L') => match command.value(b'L').map(|l| l.and_then(|l| l.to_int())) {
-                Ok(Some(2)) => self.modal.set_work_offsets(command, false),
-                Ok(Some(20)) => self.modal.set_work_offsets(command, true),
-                Ok(_) => Err(CommandError::OutOfRange(b'L')),
-                Err(error) => Err(error.into()),
-            },
-            Code::G(10 | 11) => {
-                self.not_yet_available(text, out)?;
-                Ok(())
-            }
-            _ => {
-                ufmt::uwrite!(out, "echo:Unknown command: \"{}\"\n", Printable(trim(text)))?;
-                Ok(())
-            }
+            Code::G(10) if command.has(b'L') => self.modal.work_offsets_command(command),
+            Code::G(10 | 11) => self.not_yet_available(text, out).map(Ok)?,
+            _ => self.unknown_command(text, out).map(Ok)?,
         };
         Ok(match result {
             Ok(()) => Outcome::Done,
             Err(error) => Outcome::Failed(error),
         })
+    }
+
+    /// `M105`: Marlin puts the report on the `ok` line itself.
+    #[inline(always)]
+    fn report_temperatures_on_ok<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        out.write_str("ok ")?;
+        self.write_temperatures(out)
+    }
+
+    /// `G4`.
+    #[inline(always)]
+    fn dwell_command(&mut self, command: &Command) -> Outcome {
+        self.dwell(command)
+    }
+
+    #[cfg(feature = "printer")]
+    /// `G28`; refused while a driver alarms.
+    #[inline(always)]
+    fn home_command(&mut self, command: &Command) -> Outcome {
+        if self.driver_alarms != 0 {
+            return Outcome::Failed(CommandError::DriverAlarm);
+        }
+        self.home(command)
+    }
+
+    #[cfg(feature = "printer")]
+    /// `M120`/`M121`: endstops checked during every move, or while homing only.
+    #[inline(always)]
+    fn set_endstops_always(&mut self, always: bool) -> Result<(), CommandError> {
+        self.motion.set_endstops_always(always);
+        Ok(())
+    }
+
+    /// `M502`: back to the machine's defaults (in force, not stored).
+    #[inline(always)]
+    fn restore_defaults<W: uWrite + ?Sized>(&mut self, out: &mut W) -> Result<(), W::Error> {
+        self.settings = self.defaults.clone();
+        self.apply_motion_settings();
+        self.apply_heater_settings();
+        out.write_str("echo:Hardcoded Default Settings Loaded\n")
+    }
+
+    /// `T<n>`: only `T0` exists.
+    #[inline(always)]
+    fn select_tool<W: uWrite + ?Sized>(&self, tool: u16, out: &mut W) -> Result<(), W::Error> {
+        if tool < EXTRUDERS {
+            return Ok(());
+        }
+        ufmt::uwrite!(out, "echo:T{} Invalid extruder\n", tool)
+    }
+
+    #[cfg(feature = "heaters")]
+    /// The heater commands that may start a wait or a tune (`M104`,
+    /// `M140`, `M109`, `M190`, `M303`).
+    #[inline(always)]
+    fn heater_command<W: uWrite + ?Sized>(&mut self, command: &Command, now_ms: u32, out: &mut W) -> Result<Outcome, W::Error> {
+        match command.code {
+            // One call site for the four: each call set up its arguments
+            // (the wait's configuration on the stack) anew.
+            Code::M(code @ (104 | 140 | 109 | 190)) => {
+                let slot = if matches!(code, 104 | 109) { HeaterSlot::Hotend } else { HeaterSlot::Bed };
+                let wait = match code {
+                    109 => Some(WaitConfig::HOTEND),
+                    190 => Some(WaitConfig::BED),
+                    _ => None,
+                };
+                self.set_temperature(command, slot, wait, now_ms, out)
+            }
+            _ => self.autotune(command, out),
+        }
+    }
+
+    /// A code the executor does not run: echoed, as Marlin does.
+    #[inline(always)]
+    fn unknown_command<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
+        write_quoted(out, "echo:Unknown command: \"", text, "\"\n")
     }
 
     /// Hand the settings to the motion core (printers only: the extrusion
@@ -769,8 +819,9 @@ impl<'q> Machine<'q> {
         self.motion.apply_settings(&self.settings);
     }
 
+    #[inline(always)]
     fn not_yet_available<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "echo:\"{}\" is not available yet in this build\n", Printable(trim(text)))
+        write_quoted(out, "echo:\"", text, "\" is not available yet in this build\n")
     }
 
     fn set_distance(&mut self, distance: Distance) {
@@ -779,45 +830,64 @@ impl<'q> Machine<'q> {
         self.modal.extruder_distance = distance;
     }
 
-    /// Change settings all or nothing, then hand them to motion (they
-    /// apply to the moves accepted from now on). `change` is a plain
-    /// function, not a generic closure: one copy of this code for every
-    /// M-code that changes settings.
-    #[inline(never)]
-    fn change_settings(&mut self, command: &Command, change: SettingsChange) -> Result<(), CommandError> {
-        let mut settings = self.settings.clone();
-        change(command, &mut settings)?;
-        self.settings = settings;
+    /// `M92`, `M201`, `M203`, `M204`, `M205`, `M220`, `M221`: change the
+    /// settings all or nothing (a refused word leaves every value as it
+    /// was), then hand them to motion (they apply to the moves accepted
+    /// from now on). Driven by [`SETTING_WORDS`]: one loop for every
+    /// command, where a function per command cost a kilobyte on the AVR.
+    ///
+    /// Two passes, read then store, rather than a changed copy of the
+    /// settings: the copy (108 bytes) made the frame too large for the
+    /// AVR's short stack addressing. Left to inline into `dispatch`, its
+    /// one caller (measured smaller), as are `report_position` and
+    /// `report_endstops`.
+    fn change_settings(&mut self, number: u16, command: &Command) -> Result<(), CommandError> {
+        // The command's values in table order; i32::MIN (below every
+        // range) for a word not given.
+        let mut values = [i32::MIN; MAX_SETTING_WORDS];
+        let mut given = values.iter_mut();
+        for index in 0..SETTING_WORDS.len() {
+            let Some(word) = SETTING_WORDS.get(index).filter(|word| word.code == number) else { continue };
+            let Some(value) = given.next() else { break };
+            let (min, max) = WORD_RANGES[usize::from(word.range)];
+            set_scaled(command, word.letter, word.digits, min, max, value)?;
+        }
+        let mut given = values.iter();
+        for index in 0..SETTING_WORDS.len() {
+            let Some(word) = SETTING_WORDS.get(index).filter(|word| word.code == number) else { continue };
+            let Some(&value) = given.next() else { break };
+            if value == i32::MIN {
+                continue;
+            }
+            // `M204 S` sets print and travel together (older hosts send
+            // it); its row comes first, so `P` and `T` on the same line win.
+            if word.field == BOTH_ACCELERATIONS {
+                self.settings.print_accel_um_per_s2 = value;
+                self.settings.travel_accel_um_per_s2 = value;
+            } else if let Some(slot) = self.settings.field_mut(word.field) {
+                *slot = value;
+            }
+        }
         self.apply_motion_settings();
         Ok(())
     }
 
     fn set_fan(&mut self, command: &Command) -> Result<(), CommandError> {
-        let duty = match command.value(b'S')? {
-            None => 255,
-            Some(value) => match value.to_int() {
-                Some(duty @ 0..=255) => duty as u8,
-                _ => return Err(CommandError::OutOfRange(b'S')),
-            },
-        };
-        self.fan_duty = duty;
+        let mut duty = 255;
+        set_scaled(command, b'S', 0, 0, 255, &mut duty)?;
+        self.fan_duty = duty as u8;
         Ok(())
     }
 
-    #[inline(never)]
     fn set_auto_report(&mut self, command: &Command, now_ms: u32) -> Result<(), CommandError> {
-        let seconds = match command.value(b'S')?.map(|v| v.to_int()) {
-            None => 1,
-            Some(Some(s @ 0..=60)) => s as u8,
-            Some(_) => return Err(CommandError::OutOfRange(b'S')),
-        };
-        self.auto_report.set_interval(seconds, now_ms);
+        let mut seconds = 1;
+        set_scaled(command, b'S', 0, 0, 60, &mut seconds)?;
+        self.auto_report.set_interval(seconds as u8, now_ms);
         Ok(())
     }
 
     #[cfg(feature = "printer")]
     /// `M114`: `X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0`.
-    #[inline(never)]
     fn report_position<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         for (letter, um) in AXIS_LETTERS.iter().zip(self.modal.logical_position()) {
             ufmt::uwrite!(out, "{}:{} ", char::from(*letter), micrometres_as_mm(um))?;
@@ -827,46 +897,108 @@ impl<'q> Machine<'q> {
     }
 
     /// `M118 [E1] <text>`: print the text (with `echo:` when `E1`).
+    #[inline(always)]
     fn echo<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
         let mut message = gcode::text_argument(text);
-        let mut prefix = false;
-        if let Some(rest) = message.strip_prefix(b"E1 ").or_else(|| message.strip_prefix(b"e1 ")) {
-            prefix = true;
-            message = rest;
-        }
-        if prefix {
+        // `E1 ` or `e1 ` first: the line is an `echo:`.
+        if let [b'E' | b'e', b'1', b' ', rest @ ..] = message {
             out.write_str("echo:")?;
+            message = rest;
         }
         ufmt::uwrite!(out, "{}\n", Printable(message))
     }
 
     #[cfg(feature = "printer")]
     /// `M119`: Marlin's endstop report.
-    #[inline(never)]
     fn report_endstops<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         out.write_str("Reporting endstop status\n")?;
         for (bit, name) in ENDSTOP_NAMES.iter().enumerate() {
             let level = self.endstop_levels >> bit & 1;
             let triggered = level == self.endstop_trigger_levels >> bit & 1;
-            ufmt::uwrite!(out, "{}: {}\n", *name, if triggered { "TRIGGERED" } else { "open" })?;
+            out.write_str(name)?;
+            out.write_str(if triggered { ": TRIGGERED\n" } else { ": open\n" })?;
         }
         Ok(())
     }
 }
 
 /// Whether the executor runs `code` (the dispatch in `execute`); the rest
-/// are echoed as unknown.
+/// are echoed as unknown. A bitmap in flash (96 bytes) rather than a match
+/// over the ranges, which came to 344 bytes of compares and branches.
+#[inline(never)]
 fn is_known(code: Code) -> bool {
-    match code {
-        Code::G(n) => matches!(n, 0..=4 | 10 | 11 | 17..=21 | 28 | 40 | 49 | 53..=59 | 61 | 64 | 80 | 90..=94),
-        Code::M(n) => matches!(
-            n,
-            2..=5 | 7..=9 | 30 | 17 | 18 | 82..=84 | 92 | 104..=110 | 112 | 114..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221 | 301..=304 | 400 | 410
-                | 500..=503 | 665 | 666 | 820..=824
-        ),
-        Code::T(_) | Code::Modal => true,
-        Code::Other => false,
+    let bit = match code {
+        Code::G(n) if n < KNOWN_M_BASE => n,
+        Code::M(n) if n < KNOWN_BITS - KNOWN_M_BASE => KNOWN_M_BASE + n,
+        Code::T(_) | Code::Modal => return true,
+        _ => return false,
+    };
+    KNOWN_MAP.get(usize::from(bit >> 3)).is_some_and(|byte| byte >> (bit & 7) & 1 != 0)
+}
+
+/// The G codes the executor runs, as ranges (first, last).
+const KNOWN_G: [(u16, u16); 11] =
+    [(0, 4), (10, 11), (17, 21), (28, 28), (40, 40), (49, 49), (53, 59), (61, 61), (64, 64), (80, 80), (90, 94)];
+/// The M codes the executor runs, as ranges (first, last).
+const KNOWN_M: [(u16, u16); 21] = [
+    (2, 5), (7, 9), (17, 18), (30, 30), (82, 84), (92, 92), (104, 110), (112, 112), (114, 121), (140, 140), (155, 155),
+    (190, 190), (201, 201), (203, 205), (220, 221), (301, 304), (400, 400), (410, 410), (500, 503), (665, 666),
+    (820, 824),
+];
+/// Bit of `G0` in [`KNOWN_MAP`] is 0, of `M0` this (past the last G code).
+const KNOWN_M_BASE: u16 = 96;
+/// Bits in [`KNOWN_MAP`]: up to the last M code.
+const KNOWN_BITS: u16 = KNOWN_M_BASE + 825;
+
+/// One bit per code: G codes from bit 0, M codes from [`KNOWN_M_BASE`].
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static KNOWN_MAP: crate::progmem::Flash<[u8; KNOWN_BITS.div_ceil(8) as usize]> = crate::progmem::Flash::new(known_map());
+
+const fn known_map() -> [u8; KNOWN_BITS.div_ceil(8) as usize] {
+    let mut map = [0u8; KNOWN_BITS.div_ceil(8) as usize];
+    let mut i = 0;
+    while i < KNOWN_G.len() + KNOWN_M.len() {
+        let ((first, last), base) =
+            if i < KNOWN_G.len() { (KNOWN_G[i], 0) } else { (KNOWN_M[i - KNOWN_G.len()], KNOWN_M_BASE) };
+        // Every range ends below its part's limit (checked at compile time).
+        assert!(last < if base == 0 { KNOWN_M_BASE } else { KNOWN_BITS - KNOWN_M_BASE });
+        let mut n = base + first;
+        while n <= base + last {
+            map[(n >> 3) as usize] |= 1 << (n & 7);
+            n += 1;
+        }
+        i += 1;
     }
+    map
+}
+
+/// Whether a halted machine refuses `code`: every known code but those
+/// that only report or wait (unknown ones are echoed as unknown).
+fn refused_while_halted(code: Code) -> bool {
+    is_known(code) && !matches!(code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410))
+}
+
+/// `<bytes> bytes; crc <crc>)`, the end of `M500`'s and `M501`'s report:
+/// one copy of the code for both.
+#[inline(never)]
+fn write_stored<W: uWrite + ?Sized>(stored: &storage::Stored, out: &mut W) -> Result<(), W::Error> {
+    ufmt::uwrite!(out, "{} bytes; crc {})\n", stored.bytes, stored.crc)
+}
+
+/// `before`, the line's text (trimmed, unprintable bytes masked), `after`:
+/// one copy of the code for every echo of a line.
+#[inline(never)]
+fn write_quoted<W: uWrite + ?Sized>(out: &mut W, before: &str, text: &[u8], after: &str) -> Result<(), W::Error> {
+    out.write_str(before)?;
+    ufmt::uwrite!(out, "{}", Printable(trim(text)))?;
+    out.write_str(after)
+}
+
+/// `ok`: one call with no text argument to set up, from every place that
+/// acknowledges a line.
+#[inline(never)]
+fn write_ok<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Error> {
+    out.write_str("ok\n")
 }
 
 /// What executing a command led to.
@@ -894,106 +1026,114 @@ fn trim(text: &[u8]) -> &[u8] {
     &text[start..end.max(start)]
 }
 
-/// A strictly positive value in milli-units.
-fn positive_milli(letter: u8, value: gcode::Decimal) -> Result<i32, CommandError> {
-    match value.to_scaled(3) {
-        Some(milli) if milli > 0 => Ok(milli),
-        _ => Err(CommandError::OutOfRange(letter)),
-    }
-}
-
-fn non_negative_milli(letter: u8, value: gcode::Decimal) -> Result<i32, CommandError> {
-    match value.to_scaled(3) {
-        Some(milli) if milli >= 0 => Ok(milli),
-        _ => Err(CommandError::OutOfRange(letter)),
-    }
-}
-
-/// `M92`/`M201`/`M203`: per-axis positive values; all or nothing.
-fn settings_axes(command: &Command, values: &mut [i32; AXES]) -> Result<(), CommandError> {
-    let mut updated = *values;
-    for (axis, &letter) in AXIS_LETTERS.iter().enumerate() {
-        if let Some(value) = command.value(letter)? {
-            updated[axis] = positive_milli(letter, value)?;
-        }
-    }
-    *values = updated;
-    Ok(())
-}
-
-/// `M204 S|P|R|T`: accelerations in mm/s².
-fn set_accelerations(command: &Command, settings: &mut Settings) -> Result<(), CommandError> {
-    let read = |letter| command.value(letter)?.map(|v| positive_milli(letter, v)).transpose();
-    let (s, p, r, t) = (read(b'S')?, read(b'P')?, read(b'R')?, read(b'T')?);
-    // `S` sets print and travel together (older hosts send it); P and T
-    // given on the same line win.
-    if let Some(s) = s {
-        settings.print_accel_um_per_s2 = s;
-        settings.travel_accel_um_per_s2 = s;
-    }
-    if let Some(p) = p {
-        settings.print_accel_um_per_s2 = p;
-    }
-    if let Some(r) = r {
-        settings.retract_accel_um_per_s2 = r;
-    }
-    if let Some(t) = t {
-        settings.travel_accel_um_per_s2 = t;
-    }
-    Ok(())
-}
-
-fn set_advanced(command: &Command, settings: &mut Settings) -> Result<(), CommandError> {
-    if let Some(value) = command.value(b'J')? {
-        match value.to_scaled(3) {
-            Some(um @ 1..=300) => settings.junction_deviation_um = um,
-            _ => return Err(CommandError::OutOfRange(b'J')),
-        }
-    }
-    for (letter, slot) in
-        [(b'S', &mut settings.min_feed_um_per_s), (b'T', &mut settings.min_travel_feed_um_per_s)]
-    {
-        if let Some(value) = command.value(letter)? {
-            *slot = non_negative_milli(letter, value)?;
-        }
-    }
-    if let Some(value) = command.value(b'B')? {
-        match value.to_int() {
-            Some(us @ 0..=1_000_000) => settings.min_segment_time_us = us,
-            _ => return Err(CommandError::OutOfRange(b'B')),
+/// If `command` has `letter`, its value in units of 10^-`digits` goes to
+/// `slot`; out of range unless it lies in `min..=max`. One out-of-line
+/// helper for every numeric setting: the same steps inlined in each
+/// command came to several hundred bytes more on the AVR.
+#[inline(never)]
+fn set_scaled(command: &Command, letter: u8, digits: u8, min: i32, max: i32, slot: &mut i32) -> Result<(), CommandError> {
+    if let Some(value) = command.value(letter)? {
+        match value.to_scaled(digits) {
+            Some(scaled) if scaled >= min && scaled <= max => *slot = scaled,
+            _ => return Err(CommandError::OutOfRange(letter)),
         }
     }
     Ok(())
 }
 
-/// `M220 S<percent>` / `M221 S<percent>` (10–999, as Marlin clamps).
-fn percent(command: &Command, slot: &mut i32) -> Result<(), CommandError> {
-    if let Some(value) = command.value(b'S')? {
-        match value.to_int() {
-            Some(p @ 10..=999) => *slot = p,
-            _ => return Err(CommandError::OutOfRange(b'S')),
-        }
-    }
-    Ok(())
+/// One word of a settings command: `M<code> <letter><value>` sets field
+/// `field` of [`Settings`] (see [`settings::field`]) to the value in units
+/// of 10^-`digits`, which must lie in `WORD_RANGES[range]`.
+#[derive(Clone, Copy)]
+struct SettingWord {
+    code: u16,
+    letter: u8,
+    digits: u8,
+    range: u8,
+    field: u8,
 }
+
+/// Most words one settings command takes (`M92 X Y Z E`).
+const MAX_SETTING_WORDS: usize = 4;
+
+/// `SettingWord::field` of `M204 S`: print and travel acceleration both.
+const BOTH_ACCELERATIONS: u8 = u8::MAX;
+
+/// The value ranges of [`SETTING_WORDS`], by `range`.
+const WORD_RANGES: [(i32, i32); 5] = [
+    // Strictly positive (steps/mm, feed rates, accelerations).
+    (1, i32::MAX),
+    // Not negative (minimum feed rates).
+    (0, i32::MAX),
+    // Junction deviation, µm: 0.001–0.3 mm.
+    (1, 300),
+    // Minimum segment time, µs: up to 1 s.
+    (0, 1_000_000),
+    // Feed and flow percent, 10–999 as Marlin clamps.
+    (10, 999),
+];
+
+const fn word(code: u16, letter: u8, digits: u8, range: u8, field: usize) -> SettingWord {
+    assert!(field < BOTH_ACCELERATIONS as usize);
+    SettingWord { code, letter, digits, range, field: field as u8 }
+}
+
+/// Every word the settings commands take, in the order they are read
+/// (the first refused one is the error reported). Values in milli-units
+/// (`digits` 3) unless counted in whole units.
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static SETTING_WORDS: crate::progmem::Flash<[SettingWord; 22]> = {
+    use settings::field::*;
+    crate::progmem::Flash::new([
+        word(92, b'X', 3, 0, STEPS_PER_MM),
+        word(92, b'Y', 3, 0, STEPS_PER_MM + 1),
+        word(92, b'Z', 3, 0, STEPS_PER_MM + 2),
+        word(92, b'E', 3, 0, STEPS_PER_MM + 3),
+        word(201, b'X', 3, 0, MAX_ACCEL),
+        word(201, b'Y', 3, 0, MAX_ACCEL + 1),
+        word(201, b'Z', 3, 0, MAX_ACCEL + 2),
+        word(201, b'E', 3, 0, MAX_ACCEL + 3),
+        word(203, b'X', 3, 0, MAX_FEED),
+        word(203, b'Y', 3, 0, MAX_FEED + 1),
+        word(203, b'Z', 3, 0, MAX_FEED + 2),
+        word(203, b'E', 3, 0, MAX_FEED + 3),
+        SettingWord { code: 204, letter: b'S', digits: 3, range: 0, field: BOTH_ACCELERATIONS },
+        word(204, b'P', 3, 0, PRINT_ACCEL),
+        word(204, b'R', 3, 0, RETRACT_ACCEL),
+        word(204, b'T', 3, 0, TRAVEL_ACCEL),
+        word(205, b'J', 3, 2, JUNCTION_DEVIATION),
+        word(205, b'S', 3, 1, MIN_FEED),
+        word(205, b'T', 3, 1, MIN_TRAVEL_FEED),
+        word(205, b'B', 0, 3, MIN_SEGMENT_TIME),
+        word(220, b'S', 0, 4, FEED_PERCENT),
+        word(221, b'S', 0, 4, FLOW_PERCENT),
+    ])
+};
 
 /// `M115`: the firmware line and the `Cap:` lines hosts read to decide what
 /// to send (OctoPrint enables auto-reporting and the emergency parser from
 /// these).
 pub fn write_capabilities<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Error> {
-    ufmt::uwrite!(
-        out,
-        "FIRMWARE_NAME:{} {} (Rust) SOURCE_CODE_URL:local PROTOCOL_VERSION:1.0 MACHINE_TYPE:RepRap EXTRUDER_COUNT:{}\n",
+    // One string in flash, the firmware line included.
+    crate::flash_concat!(
+        "FIRMWARE_NAME:",
         crate::FIRMWARE_NAME,
+        " ",
         crate::FIRMWARE_VERSION,
-        EXTRUDERS
-    )?;
-    crate::flash_str!(CAPABILITIES).write_to(out)?;
+        " (Rust) SOURCE_CODE_URL:local PROTOCOL_VERSION:1.0 MACHINE_TYPE:RepRap EXTRUDER_COUNT:",
+        EXTRUDERS_TEXT,
+        "\n",
+        CAPABILITIES
+    )
+    .write_to(out)?;
     // M820-M824 (machine/encoders.rs).
     #[cfg(feature = "encoders")]
     crate::flash_str!("Cap:CLOSED_LOOP:1\n").write_to(out)?;
     Ok(())
 }
+
+/// [`EXTRUDERS`] as text, for the constant `M115` reply.
+const EXTRUDERS_TEXT: &str = ["0", "1", "2", "3", "4", "5", "6", "7", "8", "9"][EXTRUDERS as usize];
 
 /// The capabilities reported by `M115`, honestly: 1 only when implemented.
 /// One string in flash: on the AVR every `&str` would cost SRAM.

@@ -121,7 +121,9 @@ impl ModalState {
 
     /// The work system's zero on `axis` (0 for E).
     fn work_zero(&self, axis: usize) -> i32 {
-        self.work_offsets[usize::from(self.work) % WORK_SYSTEMS].get(axis).copied().unwrap_or(0)
+        // `work` is always below WORK_SYSTEMS (G54–G59 set it); `get`
+        // rather than `%`, which cost a division on the AVR.
+        self.work_offsets.get(usize::from(self.work)).and_then(|zero| zero.get(axis)).copied().unwrap_or(0)
     }
 
     /// The logical position (what `M114` reports and `G90` targets mean).
@@ -204,19 +206,25 @@ impl ModalState {
         Ok(())
     }
 
+    /// `G10 L<n>` (the caller saw `L`): `L2` or `L20`, else out of range.
+    #[inline(always)]
+    pub fn work_offsets_command(&mut self, command: &Command) -> Result<(), CommandError> {
+        match command.value(b'L')?.and_then(|l| l.to_int()) {
+            Some(2) => self.set_work_offsets(command, false),
+            Some(20) => self.set_work_offsets(command, true),
+            _ => Err(CommandError::OutOfRange(b'L')),
+        }
+    }
+
     /// `G10 L2 P<n>` (`l20`: false) sets work system `n`'s zero to the
     /// given machine coordinates; `G10 L20 P<n>` (true) sets it so that
     /// the machine stands at the given coordinates in it. `P0` is the
     /// system in use, `P1`–`P6` are `G54`–`G59`. Axes not named keep theirs.
     pub fn set_work_offsets(&mut self, command: &Command, l20: bool) -> Result<(), CommandError> {
-        let system = match command.value(b'P')? {
-            None => usize::from(self.work),
-            Some(p) => match p.to_int() {
-                Some(0) => usize::from(self.work),
-                Some(n @ 1..=6) => n as usize - 1,
-                _ => return Err(CommandError::OutOfRange(b'P')),
-            },
-        };
+        // No `P`, or `P0`: the system in use.
+        let mut p = 0;
+        super::set_scaled(command, b'P', 0, 0, WORK_SYSTEMS as i32, &mut p)?;
+        let system = if p == 0 { usize::from(self.work) } else { p as usize - 1 };
         let mut zero = self.work_offsets[system];
         for (axis, &letter) in AXIS_LETTERS[..3].iter().enumerate() {
             let Some(value) = command.value(letter)? else { continue };

@@ -1,6 +1,7 @@
 //! The executor, specified by conversations: lines in, exact replies out.
 
 use super::*;
+use super::modal::AXES;
 use crate::line::LineAssembler;
 use crate::reply::test_support::Text;
 use crate::storage::MemoryStorage;
@@ -194,9 +195,49 @@ fn invalid_settings_are_refused_whole() {
 }
 
 #[test]
+fn every_settings_word_reaches_its_field_and_a_refused_one_changes_nothing() {
+    let mut machine = new_machine();
+    assert_eq!(converse(&mut machine, 0, "M204 S900\n"), "ok\n");
+    let s = machine.settings();
+    assert_eq!((s.print_accel_um_per_s2, s.retract_accel_um_per_s2, s.travel_accel_um_per_s2), (900_000, 1_500_000, 900_000));
+    // P and T on the same line as S win over it.
+    assert_eq!(converse(&mut machine, 0, "M204 T300 S800 P700 R600\n"), "ok\n");
+    let s = machine.settings();
+    assert_eq!((s.print_accel_um_per_s2, s.retract_accel_um_per_s2, s.travel_accel_um_per_s2), (700_000, 600_000, 300_000));
+    assert_eq!(converse(&mut machine, 0, "M205 S1.5 T2 B30000 J0.3\nM221 S90\nM203 E30 X200\nM201 Z50 Y2000\n"), "ok\nok\nok\nok\n");
+    let s = machine.settings().clone();
+    assert_eq!((s.min_feed_um_per_s, s.min_travel_feed_um_per_s, s.min_segment_time_us, s.junction_deviation_um), (1_500, 2_000, 30_000, 300));
+    assert_eq!((s.feed_percent, s.flow_percent), (100, 90));
+    assert_eq!(s.max_feed_um_per_s, [200_000, 300_000, 5_000, 30_000]);
+    assert_eq!(s.max_accel_um_per_s2, [3_000_000, 2_000_000, 50_000, 10_000_000]);
+    // Each refusal names the first bad word, in the command's order, and
+    // leaves every value as it was, the valid words' too.
+    for (line, reply) in [
+        ("M205 S3 J0.301\n", "Error:Value out of range for J\nok\n"),
+        ("M205 J0 S3\n", "Error:Value out of range for J\nok\n"),
+        ("M205 T-1 S3\n", "Error:Value out of range for T\nok\n"),
+        ("M205 S3 B1000001\n", "Error:Value out of range for B\nok\n"),
+        ("M204 P5 S0\n", "Error:Value out of range for S\nok\n"),
+        ("M204 P5 T\n", "Error:Missing value after T\nok\n"),
+        ("M221 S1000\n", "Error:Value out of range for S\nok\n"),
+        ("M203 X1 E0\n", "Error:Value out of range for E\nok\n"),
+    ] {
+        assert_eq!(converse(&mut machine, 0, line), reply, "{line}");
+        assert_eq!(machine.settings(), &s, "{line}");
+    }
+    // Words a command does not take are ignored, as before.
+    assert_eq!(converse(&mut machine, 0, "M220 S120 X5\n"), "ok\n");
+    assert_eq!(machine.settings().feed_percent, 120);
+}
+
+#[test]
 fn m118_echoes_text() {
     assert_eq!(reply("M118 hello world\n"), "hello world\nok\n");
     assert_eq!(reply("M118 E1 line 7\n"), "echo:line 7\nok\n");
+    assert_eq!(reply("M118 e1 lower\n"), "echo:lower\nok\n");
+    assert_eq!(reply("M118 E1\n"), "E1\nok\n");
+    assert_eq!(reply("M118 E12 x\n"), "E12 x\nok\n");
+    assert_eq!(reply("M118 E1 \n"), "echo:\nok\n");
 }
 
 #[test]
@@ -432,3 +473,57 @@ fn g53_moves_in_machine_coordinates_for_its_own_line() {
     assert_eq!(converse(&mut machine, 0, "G53 G2 X1 I1\n"), "Error:G53 moves with G0 or G1 only\nok\n");
     assert_eq!(machine.modal().position[..3], [20_000, 0, 11_000]);
 }
+
+#[test]
+fn the_known_codes_bitmap_holds_exactly_the_codes_the_executor_runs() {
+    // The list as a match (what the bitmap replaced on the AVR).
+    fn reference(code: Code) -> bool {
+        match code {
+            Code::G(n) => matches!(n, 0..=4 | 10 | 11 | 17..=21 | 28 | 40 | 49 | 53..=59 | 61 | 64 | 80 | 90..=94),
+            Code::M(n) => matches!(
+                n,
+                2..=5 | 7..=9 | 30 | 17 | 18 | 82..=84 | 92 | 104..=110 | 112 | 114..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221
+                    | 301..=304 | 400 | 410 | 500..=503 | 665 | 666 | 820..=824
+            ),
+            Code::T(_) | Code::Modal => true,
+            Code::Other => false,
+        }
+    }
+    for n in (0..=2_000).chain([u16::MAX - 1, u16::MAX]) {
+        for code in [Code::G(n), Code::M(n), Code::T(n)] {
+            assert_eq!(is_known(code), reference(code), "{code:?}");
+        }
+    }
+    assert!(is_known(Code::Modal));
+    assert!(!is_known(Code::Other));
+}
+
+#[test]
+fn m503_reports_every_setting_in_marlins_layout() {
+    let mut machine = new_machine();
+    converse(&mut machine, 0, "M92 X80.125 E415.5\nM205 B1234 J0.007 S0.005 T0.004\nM221 S99\nM204 R1234.5678\n");
+    let report = converse(&mut machine, 0, "M503\n");
+    assert_eq!(report, M503_EXPECTED, "{report}");
+}
+
+/// `M503` after the settings of the test above, exactly.
+const M503_EXPECTED: &str = concat!(
+    "echo:; Steps per unit:\n",
+    "echo:  M92 X80.13 Y100.00 Z400.00 E415.50\n",
+    "echo:; Max feedrates (units/s):\n",
+    "echo:  M203 X300.00 Y300.00 Z5.00 E25.00\n",
+    "echo:; Max Acceleration (units/s2):\n",
+    "echo:  M201 X3000.00 Y3000.00 Z100.00 E10000.00\n",
+    "echo:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\n",
+    "echo:  M204 P1500.00 R1234.57 T1500.00\n",
+    "echo:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\n",
+    "echo:  M205 B1234 S0.01 T0.00 J0.007\n",
+    "echo:; Feedrate and flow:\n",
+    "echo:  M220 S100\n",
+    "echo:  M221 S99\n",
+    "echo:; Hotend PID:\n",
+    "echo:  M301 P22.20 I1.08 D114.00\n",
+    "echo:; Bed PID:\n",
+    "echo:  M304 P10.00 I0.023 D305.40\n",
+    "ok\n",
+);
