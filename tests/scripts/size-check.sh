@@ -2,15 +2,17 @@
 # Print the size of the release ELF against the budgets: flash (.text +
 # .data) <= 64 KiB, static RAM (.data + .bss) <= 5 KiB.
 #
-# Fails when static RAM is over budget, or when flash would not fit the
-# ATmega2560 (256 KiB less the 8 KiB bootloader). Flash over the 64 KiB
-# budget is printed as OVER BUDGET without failing: with the planner (f32,
-# soft float) and the thermal control wired, the default machine needs
-# ≈ 71 KB; the miss is a known, open defect (README, "Sizes"), tracked by
-# this figure rather than hidden behind a larger budget.
+#   size-check.sh firmware.elf [--over-budget-known]
+#
+# Fails when static RAM is over budget or when flash is over the 64 KiB
+# budget. A build that is known to be over (an optional feature, or a
+# machine still being shrunk: README, "Sizes") passes --over-budget-known:
+# its overshoot is printed as OVER BUDGET and it fails only past what the
+# chip holds (248 KiB: 256 KiB less the 8 KiB bootloader).
 # Also refuses code known to be miscompiled on avr-none (see below).
 set -euo pipefail
-elf=${1:?usage: size-check.sh firmware.elf}
+elf=${1:?usage: size-check.sh firmware.elf [--over-budget-known]}
+over_known=${2:-}
 flash_budget=$((64 * 1024))
 flash_capacity=$((248 * 1024))
 ram_budget=$((5 * 1024))
@@ -24,7 +26,10 @@ printf 'RAM:   %6d bytes of %6d (%d%%) static (.data + .bss)\n' "$ram" "$ram_bud
 
 status=0
 if [ "$flash" -gt "$flash_capacity" ]; then echo "FAIL: flash over the chip's capacity ($flash_capacity bytes)" >&2; status=1
-elif [ "$flash" -gt "$flash_budget" ]; then echo "OVER BUDGET: flash $((flash - flash_budget)) bytes over the 64 KiB budget (known defect, see README)"; fi
+elif [ "$flash" -gt "$flash_budget" ]; then
+  if [ "$over_known" = "--over-budget-known" ]; then echo "OVER BUDGET: flash $((flash - flash_budget)) bytes over the 64 KiB budget (known, see README \"Sizes\")"
+  else echo "FAIL: flash $((flash - flash_budget)) bytes over the 64 KiB budget" >&2; status=1; fi
+fi
 if [ "$ram" -gt "$ram_budget" ]; then echo "FAIL: static RAM over budget" >&2; status=1; fi
 # compiler-builtins' __mulosi4/__mulodi4 (i32/i64 checked_mul) write a 32/64-
 # bit overflow flag where the AVR ABI reserves a 16-bit int: stack corruption.
