@@ -68,23 +68,76 @@ impl Default for Settings {
     }
 }
 
+/// Number of `i32` fields of [`Settings`] (its only fields).
+const FIELDS: usize = 27;
+const _: () = assert!(core::mem::size_of::<Settings>() == FIELDS * 4);
+
+/// [`Settings::prusa_i3`] in flash, field by field, for
+/// [`Settings::init_for_machine`].
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static PRUSA_I3: crate::progmem::Flash<[i32; FIELDS]> =
+    crate::progmem::Flash::new(prusa_i3_fields());
+
+const fn prusa_i3_fields() -> [i32; FIELDS] {
+    // SAFETY: `Settings` is `repr(C)` with exactly `FIELDS` `i32`s.
+    unsafe { core::mem::transmute::<Settings, [i32; FIELDS]>(Settings::prusa_i3()) }
+}
+
+/// `value` × 1000, rounded, to `slot`: a figure in milli-units. By
+/// reference: each call is two pointers.
+#[inline(never)]
+fn milli(value: &f32, slot: &mut i32) {
+    *slot = crate::motion::math::round_to_i32(*value * 1000.0);
+}
+
 impl Settings {
     /// The defaults of a machine: its motion configuration's figures in
     /// milli-units, the rest as on the Prusa i3.
-    /// Out of line: inlined into the machine's construction it cost more.
-    #[inline(never)]
     pub fn for_machine(config: &crate::motion::MotionConfig) -> Self {
-        let milli = |value: f32| crate::motion::math::round_to_i32(value * 1000.0);
-        Self {
-            steps_per_mm_milli: config.steps_per_mm.map(milli),
-            max_feed_um_per_s: config.max_feed.map(milli),
-            max_accel_um_per_s2: config.max_accel.map(milli),
-            print_accel_um_per_s2: milli(config.print_accel),
-            retract_accel_um_per_s2: milli(config.retract_accel),
-            travel_accel_um_per_s2: milli(config.travel_accel),
-            junction_deviation_um: milli(config.junction_deviation),
-            ..Self::prusa_i3()
+        let mut settings = core::mem::MaybeUninit::uninit();
+        Self::init_for_machine(&mut settings, config);
+        // SAFETY: `init_for_machine` wrote every field.
+        unsafe { settings.assume_init() }
+    }
+
+    /// [`Settings::for_machine`] written in place (the machine builds its
+    /// defaults in their field). The Prusa i3's image is copied out of
+    /// flash and the configured figures written over it: field by field,
+    /// the constants cost four bytes of code per byte.
+    #[inline(never)]
+    pub fn init_for_machine(
+        slot: &mut core::mem::MaybeUninit<Self>,
+        config: &crate::motion::MotionConfig,
+    ) {
+        let values = slot.as_mut_ptr().cast::<i32>();
+        for index in 0..FIELDS {
+            // SAFETY: `Settings` is `repr(C)` and holds `FIELDS` `i32`s
+            // and nothing else (asserted below), so `index` is in it.
+            unsafe { values.add(index).write(PRUSA_I3.get(index).unwrap_or(0)) };
         }
+        // SAFETY: every field was written above.
+        let settings = unsafe { slot.assume_init_mut() };
+        for axis in 0..AXES {
+            milli(
+                &config.steps_per_mm[axis],
+                &mut settings.steps_per_mm_milli[axis],
+            );
+            milli(
+                &config.max_feed[axis],
+                &mut settings.max_feed_um_per_s[axis],
+            );
+            milli(
+                &config.max_accel[axis],
+                &mut settings.max_accel_um_per_s2[axis],
+            );
+        }
+        milli(&config.print_accel, &mut settings.print_accel_um_per_s2);
+        milli(&config.retract_accel, &mut settings.retract_accel_um_per_s2);
+        milli(&config.travel_accel, &mut settings.travel_accel_um_per_s2);
+        milli(
+            &config.junction_deviation,
+            &mut settings.junction_deviation_um,
+        );
     }
 
     /// SPEC §1: the Cartesian Prusa i3 on RAMPS (A4988 at 1/16, GT2 16-tooth
@@ -178,7 +231,12 @@ impl Settings {
 /// with every decimal. One out-of-line writer for every word: each
 /// `uwrite!` of a word inlined its own formatter calls.
 #[inline(never)]
-fn write_word<W: uWrite + ?Sized>(out: &mut W, letter: u8, mantissa: i32, digits: u8) -> Result<(), W::Error> {
+fn write_word<W: uWrite + ?Sized>(
+    out: &mut W,
+    letter: u8,
+    mantissa: i32,
+    digits: u8,
+) -> Result<(), W::Error> {
     out.write_str(" ")?;
     out.write_char(char::from(letter))?;
     ufmt::uwrite!(out, "{}", Fixed { mantissa, digits })
@@ -187,8 +245,16 @@ fn write_word<W: uWrite + ?Sized>(out: &mut W, letter: u8, mantissa: i32, digits
 /// ` <letter><value>` of a milli-unit value, with two decimals, rounded
 /// (Marlin prints two).
 #[inline(never)]
-fn write_milli_word<W: uWrite + ?Sized>(out: &mut W, letter: u8, value: i32) -> Result<(), W::Error> {
-    let rounded = if value >= 0 { (value + 5) / 10 } else { (value - 5) / 10 };
+fn write_milli_word<W: uWrite + ?Sized>(
+    out: &mut W,
+    letter: u8,
+    value: i32,
+) -> Result<(), W::Error> {
+    let rounded = if value >= 0 {
+        (value + 5) / 10
+    } else {
+        (value - 5) / 10
+    };
     write_word(out, letter, rounded, 2)
 }
 

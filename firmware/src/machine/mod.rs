@@ -182,12 +182,16 @@ impl<'q> Machine<'q> {
     /// `p` is valid for writes and its `motion` field is initialised.
     #[inline(never)]
     unsafe fn init_other_fields(p: *mut Self) {
-        // SAFETY: `motion` is initialised (caller), so reading it is sound.
-        let settings = Settings::for_machine(unsafe { &(*p).motion.config });
-        // SAFETY: as above; `apply_settings` touches `motion` only.
+        // SAFETY: `motion` is initialised (caller), so reading it is sound;
+        // the defaults are built in their field (no copy through the stack).
+        unsafe {
+            Settings::init_for_machine(&mut *addr_of_mut!((*p).defaults).cast(), &(*p).motion.config);
+        }
+        // SAFETY: `defaults` is initialised now; `apply_settings` touches
+        // `motion` only.
         #[cfg(feature = "printer")]
         unsafe {
-            (*p).motion.apply_settings(&settings)
+            (*p).motion.apply_settings(&(*p).defaults)
         };
         // SAFETY: each write is to a field of the valid slot `p`; none of
         // these fields has been initialised, so nothing is dropped.
@@ -195,7 +199,7 @@ impl<'q> Machine<'q> {
             addr_of_mut!((*p).protocol).write(HostProtocol::new());
             addr_of_mut!((*p).queue).write(heapless::Deque::new());
             addr_of_mut!((*p).modal).write(ModalState::new());
-            addr_of_mut!((*p).settings).write(settings.clone());
+            addr_of_mut!((*p).settings).write((*p).defaults.clone());
             addr_of_mut!((*p).running).write(Running::Idle);
             addr_of_mut!((*p).wait_cancelled).write(false);
             addr_of_mut!((*p).last_busy_ms).write(0);
@@ -212,7 +216,6 @@ impl<'q> Machine<'q> {
             addr_of_mut!((*p).bed).write(HeaterChannel::new(&BED, Gains::MARLIN_BED));
             addr_of_mut!((*p).cold_extrusion).write(ColdExtrusionGuard::HOTEND);
             addr_of_mut!((*p).position_lost).write(false);
-            addr_of_mut!((*p).defaults).write(settings);
             addr_of_mut!((*p).driver_alarms).write(0);
             #[cfg(feature = "extrusion-line")]
             addr_of_mut!((*p).line).write(None);
