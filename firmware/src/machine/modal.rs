@@ -116,7 +116,7 @@ impl ModalState {
     /// logical = machine + this, per axis: the `G92` shift less the work
     /// system's zero (X, Y, Z; E has no work offset).
     pub fn shift(&self, axis: usize) -> i32 {
-        self.offset[axis].saturating_sub(self.work_zero(axis))
+        sat_sub(self.offset[axis], self.work_zero(axis))
     }
 
     /// The work system's zero on `axis` (0 for E).
@@ -130,7 +130,7 @@ impl ModalState {
     pub fn logical_position(&self) -> Position {
         let mut logical = [0; AXES];
         for (axis, value) in logical.iter_mut().enumerate() {
-            *value = self.position[axis].saturating_add(self.shift(axis));
+            *value = sat_add(self.position[axis], self.shift(axis));
         }
         logical
     }
@@ -175,15 +175,17 @@ impl ModalState {
             let Some(value) = command.value(letter)? else { continue };
             let um = self.length_um(letter, value)?;
             let distance = if letter == b'E' { self.extruder_distance } else { self.distance };
+            // Checked `i32` rather than `i64` (half the code on the AVR): a
+            // sum that overflows `i32` lies beyond MAX_COORDINATE_UM anyway.
             let machine = match distance {
-                _ if self.machine_frame && letter != b'E' => i64::from(um),
-                Distance::Absolute => i64::from(um) - i64::from(self.shift(axis)),
-                Distance::Relative => i64::from(self.position[axis]) + i64::from(um),
+                _ if self.machine_frame && letter != b'E' => Some(um),
+                Distance::Absolute => um.checked_sub(self.shift(axis)),
+                Distance::Relative => self.position[axis].checked_add(um),
             };
-            if machine.unsigned_abs() > MAX_COORDINATE_UM as u64 {
-                return Err(CommandError::OutOfRange(letter));
+            match machine {
+                Some(machine) if machine.unsigned_abs() <= MAX_COORDINATE_UM as u32 => target[axis] = machine,
+                _ => return Err(CommandError::OutOfRange(letter)),
             }
-            target[axis] = machine as i32;
         }
         Ok(target)
     }
@@ -200,7 +202,7 @@ impl ModalState {
                 None => continue,
             };
             // logical = machine + G92 − work zero = value
-            offset[axis] = value.saturating_sub(self.position[axis]).saturating_add(self.work_zero(axis));
+            offset[axis] = sat_add(sat_sub(value, self.position[axis]), self.work_zero(axis));
         }
         self.offset = offset;
         Ok(())
@@ -225,20 +227,38 @@ impl ModalState {
         let mut p = 0;
         super::set_scaled(command, b'P', 0, 0, WORK_SYSTEMS as i32, &mut p)?;
         let system = if p == 0 { usize::from(self.work) } else { p as usize - 1 };
-        let mut zero = self.work_offsets[system];
+        // Always there (`work` is below WORK_SYSTEMS); `get` rather than
+        // an index that would bring its panic path.
+        let Some(&zero) = self.work_offsets.get(system) else { return Ok(()) };
+        let mut zero = zero;
         for (axis, &letter) in AXIS_LETTERS[..3].iter().enumerate() {
             let Some(value) = command.value(letter)? else { continue };
             let um = self.length_um(letter, value)?;
             zero[axis] = if l20 {
                 // logical = machine + G92 − zero = um
-                self.position[axis].saturating_add(self.offset[axis]).saturating_sub(um)
+                sat_sub(sat_add(self.position[axis], self.offset[axis]), um)
             } else {
                 um
             };
         }
-        self.work_offsets[system] = zero;
+        if let Some(slot) = self.work_offsets.get_mut(system) {
+            *slot = zero;
+        }
         Ok(())
     }
+}
+
+/// `a + b`, saturating: one copy of the overflow checks (each inlined one
+/// cost some fifty bytes on the AVR).
+#[inline(never)]
+fn sat_add(a: i32, b: i32) -> i32 {
+    a.saturating_add(b)
+}
+
+/// `a - b`, saturating (see [`sat_add`]).
+#[inline(never)]
+fn sat_sub(a: i32, b: i32) -> i32 {
+    a.saturating_sub(b)
 }
 
 /// Inches to µm without float: `value · 25 400`, from units of 10⁻⁵ in
@@ -332,6 +352,18 @@ mod tests {
         relative.distance = Distance::Relative;
         relative.position = [MAX_COORDINATE_UM, 0, 0, 0];
         assert_eq!(target(&relative, "G1 X1"), Err(CommandError::OutOfRange(b'X')));
+    }
+
+    #[test]
+    fn targets_beyond_i32_after_the_shift_are_refused() {
+        let mut state = ModalState::new();
+        state.offset = [-MAX_COORDINATE_UM, MAX_COORDINATE_UM, 0, 0];
+        assert_eq!(target(&state, "G1 X2000000"), Err(CommandError::OutOfRange(b'X')));
+        assert_eq!(target(&state, "G1 Y-2000000"), Err(CommandError::OutOfRange(b'Y')));
+        assert_eq!(target(&state, "G1 X-2000000 Y2000000"), Ok([0, 0, 0, 0]));
+        state.distance = Distance::Relative;
+        state.position = [-MAX_COORDINATE_UM, 0, 0, 0];
+        assert_eq!(target(&state, "G1 X-2000000"), Err(CommandError::OutOfRange(b'X')));
     }
 
     #[test]
