@@ -91,8 +91,9 @@ enum Running {
 pub type EndstopLevels = u8;
 
 #[cfg(feature = "printer")]
-/// The endstop names `M119` reports, in bit order.
-const ENDSTOP_NAMES: [&str; 6] = ["x_min", "x_max", "y_min", "y_max", "z_min", "z_max"];
+/// The endstops `M119` reports, in bit order: `x_min`, `x_max`, `y_min`,
+/// `y_max`, `z_min`, `z_max`.
+const ENDSTOPS: u8 = 6;
 
 /// Everything the executor remembers between lines.
 pub struct Machine<'q> {
@@ -852,7 +853,7 @@ impl<'q> Machine<'q> {
         for index in 0..SETTING_WORDS.len() {
             let Some(word) = SETTING_WORDS.get(index).filter(|word| word.code == number) else { continue };
             let Some(value) = given.next() else { break };
-            let (min, max) = WORD_RANGES[usize::from(word.range)];
+            let Some((min, max)) = WORD_RANGES.get(usize::from(word.range)) else { continue };
             set_scaled(command, word.letter, word.digits, min, max, value)?;
         }
         let mut given = values.iter();
@@ -915,10 +916,13 @@ impl<'q> Machine<'q> {
     /// `M119`: Marlin's endstop report.
     fn report_endstops<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         out.write_str("Reporting endstop status\n")?;
-        for (bit, name) in ENDSTOP_NAMES.iter().enumerate() {
+        // `x_min`, `x_max`, `y_min`, ...: built from the bit number rather
+        // than a table of six names (which lived in RAM).
+        for bit in 0..ENDSTOPS {
             let level = self.endstop_levels >> bit & 1;
             let triggered = level == self.endstop_trigger_levels >> bit & 1;
-            out.write_str(name)?;
+            out.write_char(char::from(b'x' + (bit >> 1)))?;
+            out.write_str(if bit & 1 == 0 { "_min" } else { "_max" })?;
             out.write_str(if triggered { ": TRIGGERED\n" } else { ": open\n" })?;
         }
         Ok(())
@@ -1063,7 +1067,8 @@ const MAX_SETTING_WORDS: usize = 4;
 const BOTH_ACCELERATIONS: u8 = u8::MAX;
 
 /// The value ranges of [`SETTING_WORDS`], by `range`.
-const WORD_RANGES: [(i32, i32); 5] = [
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static WORD_RANGES: crate::progmem::Flash<[(i32, i32); 5]> = crate::progmem::Flash::new([
     // Strictly positive (steps/mm, feed rates, accelerations).
     (1, i32::MAX),
     // Not negative (minimum feed rates).
@@ -1074,7 +1079,7 @@ const WORD_RANGES: [(i32, i32); 5] = [
     (0, 1_000_000),
     // Feed and flow percent, 10–999 as Marlin clamps.
     (10, 999),
-];
+]);
 
 const fn word(code: u16, letter: u8, digits: u8, range: u8, field: usize) -> SettingWord {
     assert!(field < BOTH_ACCELERATIONS as usize);
