@@ -33,8 +33,6 @@ pub enum NumberError {
 
 /// Largest magnitude that can take one more digit: `i32::MAX / 10`.
 const TIMES_TEN_LIMIT: u32 = i32::MAX as u32 / 10;
-/// The last digit `TIMES_TEN_LIMIT` may still take: `i32::MAX % 10`.
-const TIMES_TEN_LAST_DIGIT: u8 = (i32::MAX % 10) as u8;
 
 /// `value · 10 + digit` when it stays within `i32::MAX`, else `None`.
 ///
@@ -45,13 +43,20 @@ const TIMES_TEN_LAST_DIGIT: u8 = (i32::MAX % 10) as u8;
 /// `__mulosi4`, which stores a 32-bit overflow flag where avr-gcc's ABI
 /// reserves a 16-bit `int` and so corrupts the caller's stack (seen with
 /// nightly 1.97 on simavr and QEMU).
-#[inline(always)]
+///
+/// Out of line: the parser and the scaling share one copy. Up to the
+/// limit, `value · 10 + digit` fits a `u32` (at most `i32::MAX + 9`), so
+/// the last-digit test is the sign bit of the result.
+#[inline(never)]
 fn times_ten_plus(value: u32, digit: u8) -> Option<u32> {
-    if value > TIMES_TEN_LIMIT || (value == TIMES_TEN_LIMIT && digit > TIMES_TEN_LAST_DIGIT) {
+    if value > TIMES_TEN_LIMIT {
+        return None;
+    }
+    let result = value * 10 + u32::from(digit);
+    if result > i32::MAX as u32 {
         None
     } else {
-        // `(v << 3) + (v << 1)`: shifts and adds, no multiply call.
-        Some((value << 3) + (value << 1) + u32::from(digit))
+        Some(result)
     }
 }
 
@@ -232,18 +237,20 @@ impl Decimal {
                 b'0'..=b'9' => {
                     seen_digit = true;
                     let digit = byte - b'0';
-                    if seen_point {
-                        if !fraction_full && fraction_digits < MAX_FRACTION_DIGITS {
-                            match times_ten_plus(magnitude, digit) {
-                                Some(m) => {
-                                    magnitude = m;
+                    // One call site for both parts (`fraction_full` is
+                    // only ever set after the point).
+                    if !fraction_full {
+                        match times_ten_plus(magnitude, digit) {
+                            Some(m) => {
+                                magnitude = m;
+                                if seen_point {
                                     fraction_digits += 1;
+                                    fraction_full = fraction_digits == MAX_FRACTION_DIGITS;
                                 }
-                                None => fraction_full = true,
                             }
+                            None if seen_point => fraction_full = true,
+                            None => return Err(NumberError::OutOfRange),
                         }
-                    } else {
-                        magnitude = times_ten_plus(magnitude, digit).ok_or(NumberError::OutOfRange)?;
                     }
                 }
                 b'.' if !seen_point => seen_point = true,
