@@ -199,7 +199,7 @@ impl<'q> Machine<'q> {
         unsafe {
             addr_of_mut!((*p).protocol).write(HostProtocol::new());
             addr_of_mut!((*p).queue).write(heapless::Deque::new());
-            addr_of_mut!((*p).modal).write(ModalState::new());
+            ModalState::init_in(addr_of_mut!((*p).modal));
             addr_of_mut!((*p).settings).write((*p).defaults.clone());
             addr_of_mut!((*p).running).write(Running::Idle);
             addr_of_mut!((*p).wait_cancelled).write(false);
@@ -982,8 +982,27 @@ const fn known_map() -> [u8; KNOWN_BITS.div_ceil(8) as usize] {
 /// Whether a halted machine refuses `code`: every known code but those
 /// that only report or wait (unknown ones are echoed as unknown).
 fn refused_while_halted(code: Code) -> bool {
-    is_known(code) && !matches!(code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410))
+    let answered = match code {
+        Code::G(4) | Code::M(410 | 503) => true,
+        // M105, M108, M110, M112, M114, M115, M117, M118, M119 as bits of
+        // one mask: the compares one by one cost 100 bytes.
+        Code::M(n @ 105..=119) => HALTED_M105_TO_M119 >> (n - 105) & 1 != 0,
+        _ => false,
+    };
+    is_known(code) && !answered
 }
+
+/// Bit `n - 105`: `Mn` (105 ≤ n ≤ 119) still runs on a halted machine.
+const HALTED_M105_TO_M119: u16 = {
+    let mut mask = 0u16;
+    let codes = [105, 108, 110, 112, 114, 115, 117, 118, 119];
+    let mut i = 0;
+    while i < codes.len() {
+        mask |= 1 << (codes[i] - 105);
+        i += 1;
+    }
+    mask
+};
 
 /// `<bytes> bytes; crc <crc>)`, the end of `M500`'s and `M501`'s report:
 /// one copy of the code for both.
