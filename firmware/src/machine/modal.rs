@@ -162,11 +162,11 @@ impl ModalState {
 
     /// A length word in µm, in the current units.
     pub fn length_um(&self, letter: u8, value: Decimal) -> Result<i32, CommandError> {
-        let um = match self.units {
-            Units::Millimetres => value.to_scaled(3),
-            Units::Inches => inches_to_um(value),
-        }
-        .ok_or(CommandError::OutOfRange(letter))?;
+        // One scaling call for both units: thousandths of a mm are µm,
+        // hundred-thousandths of an inch are converted.
+        let inches = self.units == Units::Inches;
+        let scaled = value.to_scaled(if inches { 5 } else { 3 }).ok_or(CommandError::OutOfRange(letter))?;
+        let um = if inches { inches_to_um(scaled) } else { scaled };
         if um.unsigned_abs() > MAX_COORDINATE_UM as u32 {
             return Err(CommandError::OutOfRange(letter));
         }
@@ -290,12 +290,12 @@ fn sat_sub(a: i32, b: i32) -> i32 {
 /// (0.254 µm each), split so that no product leaves `i32` (64-bit division
 /// costs almost 3 KiB of flash on the AVR). `to_scaled(5)` already bounds
 /// the input to ±21 474 in.
-fn inches_to_um(value: Decimal) -> Option<i32> {
-    let hundred_thousandths = value.to_scaled(5)?;
+fn inches_to_um(hundred_thousandths: i32) -> i32 {
     let whole = hundred_thousandths / 1000 * 254;
     let rest = hundred_thousandths % 1000 * 254;
-    let rounded = if rest >= 0 { (rest + 500) / 1000 } else { (rest - 500) / 1000 };
-    Some(whole + rounded)
+    // Half away from zero, with one division.
+    let half = if rest >= 0 { 500 } else { -500 };
+    whole + (rest + half) / 1000
 }
 
 #[cfg(test)]
