@@ -72,23 +72,46 @@ impl Default for Settings {
 const FIELDS: usize = 27;
 const _: () = assert!(core::mem::size_of::<Settings>() == FIELDS * 4);
 
-/// [`Settings::prusa_i3`] in flash, field by field, for
+/// Fields of [`Settings`] taken from the motion configuration (the
+/// first ones: steps/mm, feeds, accelerations, junction deviation).
+const CONFIGURED: usize = field::JUNCTION_DEVIATION + 1;
+
+/// Where each configured field's figure lies in `MotionConfig`, in bytes.
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static CONFIG_OFFSETS: crate::progmem::Flash<[u16; CONFIGURED]> = crate::progmem::Flash::new({
+    use crate::motion::MotionConfig;
+    use core::mem::offset_of;
+    let mut offsets = [0u16; CONFIGURED];
+    let mut axis = 0;
+    while axis < AXES {
+        offsets[field::STEPS_PER_MM + axis] =
+            (offset_of!(MotionConfig, steps_per_mm) + 4 * axis) as u16;
+        offsets[field::MAX_FEED + axis] = (offset_of!(MotionConfig, max_feed) + 4 * axis) as u16;
+        offsets[field::MAX_ACCEL + axis] = (offset_of!(MotionConfig, max_accel) + 4 * axis) as u16;
+        axis += 1;
+    }
+    offsets[field::PRINT_ACCEL] = offset_of!(MotionConfig, print_accel) as u16;
+    offsets[field::RETRACT_ACCEL] = offset_of!(MotionConfig, retract_accel) as u16;
+    offsets[field::TRAVEL_ACCEL] = offset_of!(MotionConfig, travel_accel) as u16;
+    offsets[field::JUNCTION_DEVIATION] = offset_of!(MotionConfig, junction_deviation) as u16;
+    offsets
+});
+
+/// The other fields of [`Settings::prusa_i3`], in flash, for
 /// [`Settings::init_for_machine`].
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static PRUSA_I3: crate::progmem::Flash<[i32; FIELDS]> =
-    crate::progmem::Flash::new(prusa_i3_fields());
-
-const fn prusa_i3_fields() -> [i32; FIELDS] {
-    // SAFETY: `Settings` is `repr(C)` with exactly `FIELDS` `i32`s.
-    unsafe { core::mem::transmute::<Settings, [i32; FIELDS]>(Settings::prusa_i3()) }
-}
-
-/// `value` × 1000, rounded, to `slot`: a figure in milli-units. By
-/// reference: each call is two pointers.
-#[inline(never)]
-fn milli(value: &f32, slot: &mut i32) {
-    *slot = crate::motion::math::round_to_i32(*value * 1000.0);
-}
+static PRUSA_I3_REST: crate::progmem::Flash<[i32; FIELDS - CONFIGURED]> =
+    crate::progmem::Flash::new({
+        // SAFETY: `Settings` is `repr(C)` with exactly `FIELDS` `i32`s.
+        let all = unsafe { core::mem::transmute::<Settings, [i32; FIELDS]>(Settings::prusa_i3()) };
+        let mut rest = [0; FIELDS - CONFIGURED];
+        let mut i = 0;
+        while i < rest.len() {
+            rest[i] = all[CONFIGURED + i];
+            i += 1;
+        }
+        rest
+    });
 
 impl Settings {
     /// The defaults of a machine: its motion configuration's figures in
@@ -101,43 +124,32 @@ impl Settings {
     }
 
     /// [`Settings::for_machine`] written in place (the machine builds its
-    /// defaults in their field). The Prusa i3's image is copied out of
-    /// flash and the configured figures written over it: field by field,
-    /// the constants cost four bytes of code per byte.
+    /// defaults in their field), in one loop: each configured figure read
+    /// at its offset in the configuration and rounded to milli-units, the
+    /// rest copied out of flash. Field by field, the constants cost four
+    /// bytes of code per byte, and each conversion its own call.
     #[inline(never)]
     pub fn init_for_machine(
         slot: &mut core::mem::MaybeUninit<Self>,
         config: &crate::motion::MotionConfig,
     ) {
         let values = slot.as_mut_ptr().cast::<i32>();
+        let base = (config as *const crate::motion::MotionConfig).cast::<u8>();
         for index in 0..FIELDS {
+            let value = match CONFIG_OFFSETS.get(index) {
+                // SAFETY: the offset is that of an `f32` field of
+                // `MotionConfig` (`offset_of!` above), so it lies inside
+                // `*config` and is aligned.
+                Some(offset) => {
+                    let figure = unsafe { base.add(usize::from(offset)).cast::<f32>().read() };
+                    crate::motion::math::round_to_i32(figure * 1000.0)
+                }
+                None => PRUSA_I3_REST.get(index - CONFIGURED).unwrap_or(0),
+            };
             // SAFETY: `Settings` is `repr(C)` and holds `FIELDS` `i32`s
-            // and nothing else (asserted below), so `index` is in it.
-            unsafe { values.add(index).write(PRUSA_I3.get(index).unwrap_or(0)) };
+            // and nothing else (asserted above), so `index` is in it.
+            unsafe { values.add(index).write(value) };
         }
-        // SAFETY: every field was written above.
-        let settings = unsafe { slot.assume_init_mut() };
-        for axis in 0..AXES {
-            milli(
-                &config.steps_per_mm[axis],
-                &mut settings.steps_per_mm_milli[axis],
-            );
-            milli(
-                &config.max_feed[axis],
-                &mut settings.max_feed_um_per_s[axis],
-            );
-            milli(
-                &config.max_accel[axis],
-                &mut settings.max_accel_um_per_s2[axis],
-            );
-        }
-        milli(&config.print_accel, &mut settings.print_accel_um_per_s2);
-        milli(&config.retract_accel, &mut settings.retract_accel_um_per_s2);
-        milli(&config.travel_accel, &mut settings.travel_accel_um_per_s2);
-        milli(
-            &config.junction_deviation,
-            &mut settings.junction_deviation_um,
-        );
     }
 
     /// SPEC §1: the Cartesian Prusa i3 on RAMPS (A4988 at 1/16, GT2 16-tooth
@@ -317,6 +329,32 @@ mod tests {
         assert_eq!(settings.value(HOTEND_PID), 222_000);
         assert_eq!(settings.value(BED_PID + 2), 3_054_000);
         assert_eq!(settings.value(FIELDS), 0);
+    }
+
+    #[test]
+    fn every_configured_figure_lands_in_its_field() {
+        let mut config = crate::motion::MotionConfig::prusa_i3();
+        config.steps_per_mm = [1.0, 2.0, 3.0, 4.0];
+        config.max_feed = [5.0, 6.0, 7.0, 8.0];
+        config.max_accel = [9.0, 10.0, 11.0, 12.0];
+        config.print_accel = 13.0;
+        config.retract_accel = 14.0;
+        config.travel_accel = 15.0;
+        config.junction_deviation = 0.0165;
+        let settings = Settings::for_machine(&config);
+        assert_eq!(settings.steps_per_mm_milli, [1000, 2000, 3000, 4000]);
+        assert_eq!(settings.max_feed_um_per_s, [5000, 6000, 7000, 8000]);
+        assert_eq!(settings.max_accel_um_per_s2, [9000, 10000, 11000, 12000]);
+        assert_eq!(settings.print_accel_um_per_s2, 13000);
+        assert_eq!(settings.retract_accel_um_per_s2, 14000);
+        assert_eq!(settings.travel_accel_um_per_s2, 15000);
+        assert_eq!(settings.junction_deviation_um, 17);
+        let prusa = Settings::prusa_i3();
+        assert_eq!(settings.min_segment_time_us, prusa.min_segment_time_us);
+        assert_eq!(
+            (settings.hotend_pid, settings.bed_pid),
+            (prusa.hotend_pid, prusa.bed_pid)
+        );
     }
 
     #[test]
