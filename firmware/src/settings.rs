@@ -192,13 +192,9 @@ impl Settings {
     /// Marlin's layout: [`M503_SCRIPT`] read out, then each heater's gains.
     pub fn report<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         let mut at = 0;
-        for (first, code) in [(HOTEND_PID, 301), (BED_PID, 304)] {
+        for (&[kp, ki, kd], code) in [(&self.hotend_pid, 301), (&self.bed_pid, 304)] {
             at = self.write_script(at, out)?;
-            if let Some(gains) = crate::thermal::Gains::new(
-                self.value(first),
-                self.value(first + 1),
-                self.value(first + 2),
-            ) {
+            if let Some(gains) = crate::thermal::Gains::new(kp, ki, kd) {
                 gains.write_as(code, out)?;
             }
         }

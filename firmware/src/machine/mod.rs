@@ -918,9 +918,13 @@ impl<'q> Machine<'q> {
         out.write_str("Reporting endstop status\n")?;
         // `x_min`, `x_max`, `y_min`, ...: built from the bit number rather
         // than a table of six names (which lived in RAM).
+        // Bit set: the level is the triggered one. A running mask rather
+        // than shifts by the bit number (a loop each on the AVR).
+        let triggered_bits = !(self.endstop_levels ^ self.endstop_trigger_levels);
+        let mut mask = 1u8;
         for bit in 0..ENDSTOPS {
-            let level = self.endstop_levels >> bit & 1;
-            let triggered = level == self.endstop_trigger_levels >> bit & 1;
+            let triggered = triggered_bits & mask != 0;
+            mask <<= 1;
             out.write_char(char::from(b'x' + (bit >> 1)))?;
             out.write_str(if bit & 1 == 0 { "_min" } else { "_max" })?;
             out.write_str(if triggered { ": TRIGGERED\n" } else { ": open\n" })?;
