@@ -236,11 +236,12 @@ impl ModalState {
     /// `G10 L<n>` (the caller saw `L`): `L2` or `L20`, else out of range.
     #[inline(always)]
     pub fn work_offsets_command(&mut self, command: &Command) -> Result<(), CommandError> {
-        match command.value(b'L')?.and_then(|l| l.to_int()) {
-            Some(2) => self.set_work_offsets(command, false),
-            Some(20) => self.set_work_offsets(command, true),
-            _ => Err(CommandError::OutOfRange(b'L')),
-        }
+        let l20 = match command.value(b'L')?.and_then(|l| l.to_int()) {
+            Some(2) => false,
+            Some(20) => true,
+            _ => return Err(CommandError::OutOfRange(b'L')),
+        };
+        self.set_work_offsets(command, l20)
     }
 
     /// `G10 L2 P<n>` (`l20`: false) sets work system `n`'s zero to the
