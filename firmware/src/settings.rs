@@ -128,7 +128,6 @@ impl Settings {
     /// at its offset in the configuration and rounded to milli-units, the
     /// rest copied out of flash. Field by field, the constants cost four
     /// bytes of code per byte, and each conversion its own call.
-    #[inline(never)]
     pub fn init_for_machine(
         slot: &mut core::mem::MaybeUninit<Self>,
         config: &crate::motion::MotionConfig,
@@ -213,7 +212,6 @@ impl Settings {
 
     /// [`M503_SCRIPT`] from byte `at` to the next NUL, with every field
     /// marker replaced by its value; returns where the next part starts.
-    #[inline(never)]
     fn write_script<W: uWrite + ?Sized>(
         &self,
         mut at: usize,

@@ -181,7 +181,6 @@ impl<'q> Machine<'q> {
     ///
     /// # Safety
     /// `p` is valid for writes and its `motion` field is initialised.
-    #[inline(never)]
     unsafe fn init_other_fields(p: *mut Self) {
         // SAFETY: `motion` is initialised (caller), so reading it is sound;
         // the defaults are built in their field (no copy through the stack).
