@@ -892,8 +892,8 @@ impl<'q> Machine<'q> {
     #[cfg(feature = "printer")]
     /// `M114`: `X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0`.
     fn report_position<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        for (letter, um) in AXIS_LETTERS.iter().zip(self.modal.logical_position()) {
-            ufmt::uwrite!(out, "{}:{} ", char::from(*letter), micrometres_as_mm(um))?;
+        for (axis, letter) in AXIS_LETTERS.iter().enumerate() {
+            ufmt::uwrite!(out, "{}:{} ", char::from(*letter), micrometres_as_mm(self.modal.logical(axis)))?;
         }
         let [x, y, z, _] = self.motion.motor_steps();
         ufmt::uwrite!(out, "Count X:{} Y:{} Z:{}\n", x, y, z)

@@ -145,6 +145,7 @@ impl ModalState {
     }
 
     /// The work system's zero on `axis` (0 for E).
+    #[inline(always)]
     fn work_zero(&self, axis: usize) -> i32 {
         // `work` is always below WORK_SYSTEMS (G54–G59 set it); `get`
         // rather than `%`, which cost a division on the AVR.
@@ -155,9 +156,14 @@ impl ModalState {
     pub fn logical_position(&self) -> Position {
         let mut logical = [0; AXES];
         for (axis, value) in logical.iter_mut().enumerate() {
-            *value = sat_add(self.position[axis], self.shift(axis));
+            *value = self.logical(axis);
         }
         logical
+    }
+
+    /// The logical position of one axis.
+    pub fn logical(&self, axis: usize) -> i32 {
+        sat_add(self.position[axis], self.shift(axis))
     }
 
     /// A length word in µm, in the current units.
