@@ -34,8 +34,10 @@ pub const MAX_WORDS: usize = 12;
 /// Most mode-setting codes one line may carry besides its command.
 pub const MAX_SETTINGS: usize = 6;
 
-/// Why a line is not valid G-code.
+/// Why a line is not valid G-code. `repr(u8)`: the variant's number is
+/// its first byte, which the error messages index by (`machine::error`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
 pub enum ParseError {
     /// A number that cannot be read (`X1.2.3`, `X-`, `x1e30`).
     BadNumber(u8),
@@ -122,6 +124,15 @@ pub struct Command {
     /// Mode-setting codes that came on the same line, in line order; they
     /// apply before `code` (see the module docs).
     pub settings: heapless::Vec<Code, MAX_SETTINGS>,
+}
+
+impl ParseError {
+    /// The variant's number, in declaration order.
+    pub fn number(self) -> u8 {
+        // SAFETY: a `repr(u8)` enum begins with its `u8` discriminant,
+        // whatever the variant (RFC 2195), so the first byte is initialised.
+        unsafe { *(&self as *const Self).cast::<u8>() }
+    }
 }
 
 impl Command {
