@@ -140,10 +140,12 @@ fn parse_line_number(text: &[u8]) -> Option<(i32, usize)> {
 
 fn parse_checksum(text: &[u8]) -> Option<u8> {
     let digits = text.iter().take_while(|b| b.is_ascii_digit()).count();
-    if digits == 0 || digits > 3 || text[digits..].iter().any(|&b| b != b' ') {
+    // `split_at_checked`: no panic path (`digits` never exceeds the length).
+    let (number, rest) = text.split_at_checked(digits)?;
+    if digits == 0 || digits > 3 || rest.iter().any(|&b| b != b' ') {
         return None;
     }
-    text[..digits].iter().try_fold(0u8, |sum, &b| sum.checked_mul(10)?.checked_add(b - b'0'))
+    number.iter().try_fold(0u8, |sum, &b| sum.checked_mul(10)?.checked_add(b - b'0'))
 }
 
 /// `Some(N argument)` when the body's command is `M110` (the numbering

@@ -6,7 +6,7 @@
 //! print back exactly as typed and need no float: steps/mm × 1000, mm/s ×
 //! 1000 (= µm/s), mm/s² × 1000 (= µm/s²). Units are Marlin's.
 
-use crate::machine::modal::{AXES, AXIS_LETTERS};
+use crate::machine::modal::AXES;
 use crate::reply::Fixed;
 use ufmt::uWrite;
 
@@ -68,22 +68,86 @@ impl Default for Settings {
     }
 }
 
+/// Number of `i32` fields of [`Settings`] (its only fields).
+const FIELDS: usize = 27;
+const _: () = assert!(core::mem::size_of::<Settings>() == FIELDS * 4);
+
+/// Fields of [`Settings`] taken from the motion configuration (the
+/// first ones: steps/mm, feeds, accelerations, junction deviation).
+const CONFIGURED: usize = field::JUNCTION_DEVIATION + 1;
+
+/// Where each configured field's figure lies in `MotionConfig`, in bytes.
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static CONFIG_OFFSETS: crate::progmem::Flash<[u16; CONFIGURED]> = crate::progmem::Flash::new({
+    use crate::motion::MotionConfig;
+    use core::mem::offset_of;
+    let mut offsets = [0u16; CONFIGURED];
+    let mut axis = 0;
+    while axis < AXES {
+        offsets[field::STEPS_PER_MM + axis] =
+            (offset_of!(MotionConfig, steps_per_mm) + 4 * axis) as u16;
+        offsets[field::MAX_FEED + axis] = (offset_of!(MotionConfig, max_feed) + 4 * axis) as u16;
+        offsets[field::MAX_ACCEL + axis] = (offset_of!(MotionConfig, max_accel) + 4 * axis) as u16;
+        axis += 1;
+    }
+    offsets[field::PRINT_ACCEL] = offset_of!(MotionConfig, print_accel) as u16;
+    offsets[field::RETRACT_ACCEL] = offset_of!(MotionConfig, retract_accel) as u16;
+    offsets[field::TRAVEL_ACCEL] = offset_of!(MotionConfig, travel_accel) as u16;
+    offsets[field::JUNCTION_DEVIATION] = offset_of!(MotionConfig, junction_deviation) as u16;
+    offsets
+});
+
+/// The other fields of [`Settings::prusa_i3`], in flash, for
+/// [`Settings::init_for_machine`].
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static PRUSA_I3_REST: crate::progmem::Flash<[i32; FIELDS - CONFIGURED]> =
+    crate::progmem::Flash::new({
+        // SAFETY: `Settings` is `repr(C)` with exactly `FIELDS` `i32`s.
+        let all = unsafe { core::mem::transmute::<Settings, [i32; FIELDS]>(Settings::prusa_i3()) };
+        let mut rest = [0; FIELDS - CONFIGURED];
+        let mut i = 0;
+        while i < rest.len() {
+            rest[i] = all[CONFIGURED + i];
+            i += 1;
+        }
+        rest
+    });
+
 impl Settings {
     /// The defaults of a machine: its motion configuration's figures in
     /// milli-units, the rest as on the Prusa i3.
-    /// Out of line: inlined into the machine's construction it cost more.
-    #[inline(never)]
     pub fn for_machine(config: &crate::motion::MotionConfig) -> Self {
-        let milli = |value: f32| crate::motion::math::round_to_i32(value * 1000.0);
-        Self {
-            steps_per_mm_milli: config.steps_per_mm.map(milli),
-            max_feed_um_per_s: config.max_feed.map(milli),
-            max_accel_um_per_s2: config.max_accel.map(milli),
-            print_accel_um_per_s2: milli(config.print_accel),
-            retract_accel_um_per_s2: milli(config.retract_accel),
-            travel_accel_um_per_s2: milli(config.travel_accel),
-            junction_deviation_um: milli(config.junction_deviation),
-            ..Self::prusa_i3()
+        let mut settings = core::mem::MaybeUninit::uninit();
+        Self::init_for_machine(&mut settings, config);
+        // SAFETY: `init_for_machine` wrote every field.
+        unsafe { settings.assume_init() }
+    }
+
+    /// [`Settings::for_machine`] written in place (the machine builds its
+    /// defaults in their field), in one loop: each configured figure read
+    /// at its offset in the configuration and rounded to milli-units, the
+    /// rest copied out of flash. Field by field, the constants cost four
+    /// bytes of code per byte, and each conversion its own call.
+    pub fn init_for_machine(
+        slot: &mut core::mem::MaybeUninit<Self>,
+        config: &crate::motion::MotionConfig,
+    ) {
+        let values = slot.as_mut_ptr().cast::<i32>();
+        let base = (config as *const crate::motion::MotionConfig).cast::<u8>();
+        for index in 0..FIELDS {
+            let value = match CONFIG_OFFSETS.get(index) {
+                // SAFETY: the offset is that of an `f32` field of
+                // `MotionConfig` (`offset_of!` above), so it lies inside
+                // `*config` and is aligned.
+                Some(offset) => {
+                    let figure = unsafe { base.add(usize::from(offset)).cast::<f32>().read() };
+                    crate::motion::math::round_to_i32(figure * 1000.0)
+                }
+                None => PRUSA_I3_REST.get(index - CONFIGURED).unwrap_or(0),
+            };
+            // SAFETY: `Settings` is `repr(C)` and holds `FIELDS` `i32`s
+            // and nothing else (asserted above), so `index` is in it.
+            unsafe { values.add(index).write(value) };
         }
     }
 
@@ -114,87 +178,182 @@ impl Settings {
     /// last.
     pub fn field_mut(&mut self, index: u8) -> Option<&mut i32> {
         let index = usize::from(index);
-        Some(match index {
-            field::STEPS_PER_MM..=3 => &mut self.steps_per_mm_milli[index - field::STEPS_PER_MM],
-            field::MAX_FEED..=7 => &mut self.max_feed_um_per_s[index - field::MAX_FEED],
-            field::MAX_ACCEL..=11 => &mut self.max_accel_um_per_s2[index - field::MAX_ACCEL],
-            field::PRINT_ACCEL => &mut self.print_accel_um_per_s2,
-            field::RETRACT_ACCEL => &mut self.retract_accel_um_per_s2,
-            field::TRAVEL_ACCEL => &mut self.travel_accel_um_per_s2,
-            field::JUNCTION_DEVIATION => &mut self.junction_deviation_um,
-            field::MIN_FEED => &mut self.min_feed_um_per_s,
-            field::MIN_TRAVEL_FEED => &mut self.min_travel_feed_um_per_s,
-            field::MIN_SEGMENT_TIME => &mut self.min_segment_time_us,
-            field::FEED_PERCENT => &mut self.feed_percent,
-            field::FLOW_PERCENT => &mut self.flow_percent,
-            _ => return None,
-        })
+        if index > field::FLOW_PERCENT {
+            return None;
+        }
+        // SAFETY: `Settings` is `repr(C)` and holds `FIELDS` `i32`s and
+        // nothing else, in the order [`field`] numbers them; `index` is
+        // below `FIELDS`.
+        Some(unsafe { &mut *(self as *mut Self).cast::<i32>().add(index) })
     }
 
     /// `M503`: the settings as the commands that would set them, in
-    /// Marlin's layout.
+    /// Marlin's layout: [`M503_SCRIPT`] read out, then each heater's gains.
     pub fn report<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        crate::flash_str!("echo:; Steps per unit:\necho:  M92").write_to(out)?;
-        write_axes(out, &self.steps_per_mm_milli)?;
-        crate::flash_str!("\necho:; Max feedrates (units/s):\necho:  M203").write_to(out)?;
-        write_axes(out, &self.max_feed_um_per_s)?;
-        crate::flash_str!("\necho:; Max Acceleration (units/s2):\necho:  M201").write_to(out)?;
-        write_axes(out, &self.max_accel_um_per_s2)?;
-        crate::flash_str!(
-            "\necho:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\necho:  M204"
-        )
-        .write_to(out)?;
-        write_milli_word(out, b'P', self.print_accel_um_per_s2)?;
-        write_milli_word(out, b'R', self.retract_accel_um_per_s2)?;
-        write_milli_word(out, b'T', self.travel_accel_um_per_s2)?;
-        crate::flash_str!(
-            "\necho:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\necho:  M205"
-        )
-        .write_to(out)?;
-        write_word(out, b'B', self.min_segment_time_us, 0)?;
-        write_milli_word(out, b'S', self.min_feed_um_per_s)?;
-        write_milli_word(out, b'T', self.min_travel_feed_um_per_s)?;
-        write_word(out, b'J', self.junction_deviation_um, 3)?;
-        crate::flash_str!("\necho:; Feedrate and flow:\necho:  M220").write_to(out)?;
-        write_word(out, b'S', self.feed_percent, 0)?;
-        crate::flash_str!("\necho:  M221").write_to(out)?;
-        write_word(out, b'S', self.flow_percent, 0)?;
-        out.write_str("\n")?;
-        crate::flash_str!("echo:; Hotend PID:\necho:  ").write_to(out)?;
-        let [kp, ki, kd] = self.hotend_pid;
-        if let Some(gains) = crate::thermal::Gains::new(kp, ki, kd) {
-            gains.write_m301(out)?;
-        }
-        crate::flash_str!("\necho:; Bed PID:\necho:  ").write_to(out)?;
-        let [kp, ki, kd] = self.bed_pid;
-        if let Some(gains) = crate::thermal::Gains::new(kp, ki, kd) {
-            gains.write_as(304, out)?;
+        let mut at = 0;
+        for (&[kp, ki, kd], code) in [(&self.hotend_pid, 301), (&self.bed_pid, 304)] {
+            at = self.write_script(at, out)?;
+            if let Some(gains) = crate::thermal::Gains::new(kp, ki, kd) {
+                gains.write_as(code, out)?;
+            }
         }
         out.write_str("\n")
     }
-}
 
-/// ` <letter><value>`: a word of `M503`'s report, `mantissa × 10^-digits`
-/// with every decimal. One out-of-line writer for every word: each
-/// `uwrite!` of a word inlined its own formatter calls.
-#[inline(never)]
-fn write_word<W: uWrite + ?Sized>(out: &mut W, letter: u8, mantissa: i32, digits: u8) -> Result<(), W::Error> {
-    out.write_str(" ")?;
-    out.write_char(char::from(letter))?;
-    ufmt::uwrite!(out, "{}", Fixed { mantissa, digits })
-}
-
-/// ` <letter><value>` of a milli-unit value, with two decimals, rounded
-/// (Marlin prints two).
-#[inline(never)]
-fn write_milli_word<W: uWrite + ?Sized>(out: &mut W, letter: u8, value: i32) -> Result<(), W::Error> {
-    let rounded = if value >= 0 { (value + 5) / 10 } else { (value - 5) / 10 };
-    write_word(out, letter, rounded, 2)
-}
-
-fn write_axes<W: uWrite + ?Sized>(out: &mut W, values: &[i32; AXES]) -> Result<(), W::Error> {
-    for (letter, value) in AXIS_LETTERS.iter().zip(values) {
-        write_milli_word(out, *letter, *value)?;
+    /// The `i32` field numbered `index` (0 past the last).
+    fn value(&self, index: usize) -> i32 {
+        if index >= FIELDS {
+            return 0;
+        }
+        // SAFETY: `Settings` is `repr(C)` and holds `FIELDS` `i32`s and
+        // nothing else, so field `index` lies inside it.
+        unsafe { *(self as *const Self).cast::<i32>().add(index) }
     }
-    Ok(())
+
+    /// [`M503_SCRIPT`] from byte `at` to the next NUL, with every field
+    /// marker replaced by its value; returns where the next part starts.
+    fn write_script<W: uWrite + ?Sized>(
+        &self,
+        mut at: usize,
+        out: &mut W,
+    ) -> Result<usize, W::Error> {
+        while let Some(byte) = M503_SCRIPT.get(at) {
+            at += 1;
+            match byte {
+                0 => break,
+                1..=0x7F => out.write_char(char::from(byte))?,
+                _ => {
+                    let value = self.value(usize::from(byte & FIELD_MASK));
+                    let (mantissa, digits) = match byte & !FIELD_MASK {
+                        // Marlin prints two decimals, rounded.
+                        MILLI => (
+                            if value >= 0 {
+                                (value + 5) / 10
+                            } else {
+                                (value - 5) / 10
+                            },
+                            2,
+                        ),
+                        WHOLE => (value, 0),
+                        _ => (value, 3),
+                    };
+                    ufmt::uwrite!(out, "{}", Fixed { mantissa, digits })?;
+                }
+            }
+        }
+        Ok(at)
+    }
+}
+
+/// In [`M503_SCRIPT`]: a byte with the top bit set stands for field
+/// `byte & FIELD_MASK`, printed as `byte & !FIELD_MASK` says.
+const FIELD_MASK: u8 = 0x1F;
+/// A milli-unit value, shown with two decimals.
+const MILLI: u8 = 0x80;
+/// A whole number.
+const WHOLE: u8 = 0xA0;
+/// First field of the hot end's and of the bed's gains (P, I, D).
+const HOTEND_PID: usize = 21;
+const BED_PID: usize = 24;
+
+/// `M503`'s text with markers for the values (see [`FIELD_MASK`]), in two
+/// parts ended by NUL: up to the hot end's gains, up to the bed's.
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static M503_SCRIPT: crate::progmem::Flash<[u8; M503_TEXT.len()]> =
+    crate::progmem::Flash::new(script_bytes());
+
+const fn script_bytes() -> [u8; M503_TEXT.len()] {
+    let mut bytes = [0; M503_TEXT.len()];
+    let mut i = 0;
+    while i < bytes.len() {
+        bytes[i] = M503_TEXT[i];
+        i += 1;
+    }
+    bytes
+}
+
+const M503_TEXT: &[u8] = b"echo:; Steps per unit:\necho:  M92 X\x80 Y\x81 Z\x82 E\x83\n\
+echo:; Max feedrates (units/s):\necho:  M203 X\x84 Y\x85 Z\x86 E\x87\n\
+echo:; Max Acceleration (units/s2):\necho:  M201 X\x88 Y\x89 Z\x8a E\x8b\n\
+echo:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\necho:  M204 P\x8c R\x8d T\x8e\n\
+echo:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\n\
+echo:  M205 B\xb2 S\x90 T\x91 J\xcf\n\
+echo:; Feedrate and flow:\necho:  M220 S\xb3\necho:  M221 S\xb4\n\
+echo:; Hotend PID:\necho:  \0\
+\necho:; Bed PID:\necho:  \0";
+
+const _: () = {
+    // The markers above name these fields.
+    use field::*;
+    assert!(
+        STEPS_PER_MM == 0
+            && MAX_FEED == 4
+            && MAX_ACCEL == 8
+            && PRINT_ACCEL == 12
+            && JUNCTION_DEVIATION == 15
+    );
+    assert!(MIN_FEED == 16 && MIN_SEGMENT_TIME == 18 && FEED_PERCENT == 19 && FLOW_PERCENT == 20);
+    assert!(HOTEND_PID == FLOW_PERCENT + 1 && BED_PID == HOTEND_PID + 3 && BED_PID + 3 == FIELDS);
+};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn field_numbers_reach_their_fields() {
+        let mut settings = Settings::prusa_i3();
+        for index in 0..=field::FLOW_PERCENT as u8 {
+            *settings.field_mut(index).unwrap() = -1 - i32::from(index);
+        }
+        assert_eq!(settings.field_mut(field::FLOW_PERCENT as u8 + 1), None);
+        assert_eq!(settings.steps_per_mm_milli, [-1, -2, -3, -4]);
+        assert_eq!(settings.max_feed_um_per_s, [-5, -6, -7, -8]);
+        assert_eq!(settings.max_accel_um_per_s2, [-9, -10, -11, -12]);
+        assert_eq!(settings.print_accel_um_per_s2, -13);
+        assert_eq!(settings.retract_accel_um_per_s2, -14);
+        assert_eq!(settings.travel_accel_um_per_s2, -15);
+        assert_eq!(settings.junction_deviation_um, -16);
+        assert_eq!(settings.min_feed_um_per_s, -17);
+        assert_eq!(settings.min_travel_feed_um_per_s, -18);
+        assert_eq!(settings.min_segment_time_us, -19);
+        assert_eq!(settings.feed_percent, -20);
+        assert_eq!(settings.flow_percent, -21);
+        assert_eq!(settings.hotend_pid, Settings::prusa_i3().hotend_pid);
+        assert_eq!(settings.value(HOTEND_PID), 222_000);
+        assert_eq!(settings.value(BED_PID + 2), 3_054_000);
+        assert_eq!(settings.value(FIELDS), 0);
+    }
+
+    #[test]
+    fn every_configured_figure_lands_in_its_field() {
+        let mut config = crate::motion::MotionConfig::prusa_i3();
+        config.steps_per_mm = [1.0, 2.0, 3.0, 4.0];
+        config.max_feed = [5.0, 6.0, 7.0, 8.0];
+        config.max_accel = [9.0, 10.0, 11.0, 12.0];
+        config.print_accel = 13.0;
+        config.retract_accel = 14.0;
+        config.travel_accel = 15.0;
+        config.junction_deviation = 0.0165;
+        let settings = Settings::for_machine(&config);
+        assert_eq!(settings.steps_per_mm_milli, [1000, 2000, 3000, 4000]);
+        assert_eq!(settings.max_feed_um_per_s, [5000, 6000, 7000, 8000]);
+        assert_eq!(settings.max_accel_um_per_s2, [9000, 10000, 11000, 12000]);
+        assert_eq!(settings.print_accel_um_per_s2, 13000);
+        assert_eq!(settings.retract_accel_um_per_s2, 14000);
+        assert_eq!(settings.travel_accel_um_per_s2, 15000);
+        assert_eq!(settings.junction_deviation_um, 17);
+        let prusa = Settings::prusa_i3();
+        assert_eq!(settings.min_segment_time_us, prusa.min_segment_time_us);
+        assert_eq!(
+            (settings.hotend_pid, settings.bed_pid),
+            (prusa.hotend_pid, prusa.bed_pid)
+        );
+    }
+
+    #[test]
+    fn the_flash_image_is_the_prusa_i3() {
+        let config = crate::motion::MotionConfig::prusa_i3();
+        assert_eq!(Settings::for_machine(&config), Settings::prusa_i3());
+    }
 }

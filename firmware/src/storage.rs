@@ -99,9 +99,13 @@ pub fn save(storage: &mut (impl NonVolatile + ?Sized), settings: &Settings) -> R
     encode(settings, sequence, &mut image);
     let base = slot * SLOT_LEN;
     // Payload first, header last: the CRC in the header makes it valid.
-    for index in (HEADER_LEN..SLOT_LEN).chain(0..HEADER_LEN) {
-        if storage.read(base + index) != image[index] {
-            storage.write(base + index, image[index]);
+    // One range, rotated by the header's length (a chain of two ranges
+    // cost more code), and `get` rather than an index with its panic.
+    for step in 0..SLOT_LEN {
+        let index = if step < PAYLOAD_LEN { HEADER_LEN + step } else { step - PAYLOAD_LEN };
+        let Some(&byte) = image.get(index) else { continue };
+        if storage.read(base + index) != byte {
+            storage.write(base + index, byte);
         }
     }
     if !storage.commit() {

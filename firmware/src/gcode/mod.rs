@@ -34,8 +34,10 @@ pub const MAX_WORDS: usize = 12;
 /// Most mode-setting codes one line may carry besides its command.
 pub const MAX_SETTINGS: usize = 6;
 
-/// Why a line is not valid G-code.
+/// Why a line is not valid G-code. `repr(u8)`: the variant's number is
+/// its first byte, which the error messages index by (`machine::error`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
 pub enum ParseError {
     /// A number that cannot be read (`X1.2.3`, `X-`, `x1e30`).
     BadNumber(u8),
@@ -65,12 +67,34 @@ pub enum ParseError {
 /// the parser and the executor share one copy of the range checks.
 #[inline(never)]
 pub fn is_mode_setting(code: Code) -> bool {
-    match code {
-        Code::G(n) => matches!(n, 17..=21 | 40 | 49 | 53..=59 | 61 | 64 | 80 | 90 | 91 | 93 | 94),
-        Code::M(n) => matches!(n, 3..=5 | 7..=9),
-        _ => false,
-    }
+    // One bit per code, G0–G95 then M0–M15, in flash: the range compares
+    // came to 124 bytes.
+    let bit = match code {
+        Code::G(n) if n < 96 => n,
+        Code::M(n) if n < 16 => 96 + n,
+        _ => return false,
+    };
+    MODE_SETTING_MAP.get(usize::from(bit >> 3)).is_some_and(|byte| byte >> (bit & 7) & 1 != 0)
 }
+
+/// G17–G21, G40, G49, G53–G59, G61, G64, G80, G90, G91, G93, G94; M3–M5,
+/// M7–M9 (see [`is_mode_setting`]).
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static MODE_SETTING_MAP: crate::progmem::Flash<[u8; 14]> = crate::progmem::Flash::new({
+    let g: [(u16, u16); 11] =
+        [(17, 21), (40, 40), (49, 49), (53, 59), (61, 61), (64, 64), (80, 80), (90, 91), (93, 94), (96 + 3, 96 + 5), (96 + 7, 96 + 9)];
+    let mut map = [0u8; 14];
+    let mut i = 0;
+    while i < g.len() {
+        let mut n = g[i].0;
+        while n <= g[i].1 {
+            map[(n >> 3) as usize] |= 1 << (n & 7);
+            n += 1;
+        }
+        i += 1;
+    }
+    map
+});
 
 /// A parameter word; `value` is `None` for a bare flag (`G28 X`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -100,6 +124,15 @@ pub struct Command {
     /// Mode-setting codes that came on the same line, in line order; they
     /// apply before `code` (see the module docs).
     pub settings: heapless::Vec<Code, MAX_SETTINGS>,
+}
+
+impl ParseError {
+    /// The variant's number, in declaration order.
+    pub fn number(self) -> u8 {
+        // SAFETY: a `repr(u8)` enum begins with its `u8` discriminant,
+        // whatever the variant (RFC 2195), so the first byte is initialised.
+        unsafe { *(&self as *const Self).cast::<u8>() }
+    }
 }
 
 impl Command {

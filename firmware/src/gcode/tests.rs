@@ -128,3 +128,15 @@ fn a_percent_line_is_empty_and_too_many_codes_are_an_error() {
     assert_eq!(parse(b" % "), Err(ParseError::Empty));
     assert_eq!(parse(b"G17 G90 G21 G94 G40 G49 G80 G54"), Err(ParseError::TooManyCodes));
 }
+
+#[test]
+fn mode_setting_codes_are_exactly_the_modal_groups() {
+    for n in 0..=1000u16 {
+        let g = matches!(n, 17..=21 | 40 | 49 | 53..=59 | 61 | 64 | 80 | 90 | 91 | 93 | 94);
+        let m = matches!(n, 3..=5 | 7..=9);
+        assert_eq!(is_mode_setting(Code::G(n)), g, "G{n}");
+        assert_eq!(is_mode_setting(Code::M(n)), m, "M{n}");
+        assert!(!is_mode_setting(Code::T(n)));
+    }
+    assert!(!is_mode_setting(Code::Modal) && !is_mode_setting(Code::Other));
+}

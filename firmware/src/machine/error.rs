@@ -89,19 +89,21 @@ fn motion_message(error: MotionError) -> u8 {
 }
 
 fn parse_message(error: ParseError) -> (u8, u16) {
-    match error {
-        ParseError::BadNumber(letter) => (21, letter.into()),
-        ParseError::NumberOutOfRange(letter) => (22, letter.into()),
-        ParseError::WordWithoutValue(letter) => (23, letter.into()),
-        ParseError::UnterminatedComment => (24, 0),
-        ParseError::UnexpectedByte(byte) => (25, byte.into()),
-        ParseError::DuplicateWord(letter) => (26, letter.into()),
-        ParseError::TooManyWords => (27, 0),
-        ParseError::BadCommandNumber => (28, 0),
-        ParseError::Empty => (29, 0),
-        ParseError::TooManyCodes => (30, 0),
-    }
+    // The messages follow the variants' order: the index is arithmetic.
+    let argument = match error {
+        ParseError::BadNumber(byte)
+        | ParseError::NumberOutOfRange(byte)
+        | ParseError::WordWithoutValue(byte)
+        | ParseError::UnexpectedByte(byte)
+        | ParseError::DuplicateWord(byte) => byte,
+        _ => 0,
+    };
+    (FIRST_PARSE_MESSAGE + error.number(), argument.into())
 }
+
+/// Index of [`ParseError::BadNumber`]'s message; the other parse errors'
+/// follow in declaration order.
+const FIRST_PARSE_MESSAGE: u8 = 21;
 
 /// In a message: the argument as a letter.
 const LETTER: &str = "\x01";

@@ -91,8 +91,9 @@ enum Running {
 pub type EndstopLevels = u8;
 
 #[cfg(feature = "printer")]
-/// The endstop names `M119` reports, in bit order.
-const ENDSTOP_NAMES: [&str; 6] = ["x_min", "x_max", "y_min", "y_max", "z_min", "z_max"];
+/// The endstops `M119` reports, in bit order: `x_min`, `x_max`, `y_min`,
+/// `y_max`, `z_min`, `z_max`.
+const ENDSTOPS: u8 = 6;
 
 /// Everything the executor remembers between lines.
 pub struct Machine<'q> {
@@ -180,22 +181,25 @@ impl<'q> Machine<'q> {
     ///
     /// # Safety
     /// `p` is valid for writes and its `motion` field is initialised.
-    #[inline(never)]
     unsafe fn init_other_fields(p: *mut Self) {
-        // SAFETY: `motion` is initialised (caller), so reading it is sound.
-        let settings = Settings::for_machine(unsafe { &(*p).motion.config });
-        // SAFETY: as above; `apply_settings` touches `motion` only.
+        // SAFETY: `motion` is initialised (caller), so reading it is sound;
+        // the defaults are built in their field (no copy through the stack).
+        unsafe {
+            Settings::init_for_machine(&mut *addr_of_mut!((*p).defaults).cast(), &(*p).motion.config);
+        }
+        // SAFETY: `defaults` is initialised now; `apply_settings` touches
+        // `motion` only.
         #[cfg(feature = "printer")]
         unsafe {
-            (*p).motion.apply_settings(&settings)
+            (*p).motion.apply_settings(&(*p).defaults)
         };
         // SAFETY: each write is to a field of the valid slot `p`; none of
         // these fields has been initialised, so nothing is dropped.
         unsafe {
             addr_of_mut!((*p).protocol).write(HostProtocol::new());
             addr_of_mut!((*p).queue).write(heapless::Deque::new());
-            addr_of_mut!((*p).modal).write(ModalState::new());
-            addr_of_mut!((*p).settings).write(settings.clone());
+            ModalState::init_in(addr_of_mut!((*p).modal));
+            addr_of_mut!((*p).settings).write((*p).defaults.clone());
             addr_of_mut!((*p).running).write(Running::Idle);
             addr_of_mut!((*p).wait_cancelled).write(false);
             addr_of_mut!((*p).last_busy_ms).write(0);
@@ -212,7 +216,6 @@ impl<'q> Machine<'q> {
             addr_of_mut!((*p).bed).write(HeaterChannel::new(&BED, Gains::MARLIN_BED));
             addr_of_mut!((*p).cold_extrusion).write(ColdExtrusionGuard::HOTEND);
             addr_of_mut!((*p).position_lost).write(false);
-            addr_of_mut!((*p).defaults).write(settings);
             addr_of_mut!((*p).driver_alarms).write(0);
             #[cfg(feature = "extrusion-line")]
             addr_of_mut!((*p).line).write(None);
@@ -849,7 +852,7 @@ impl<'q> Machine<'q> {
         for index in 0..SETTING_WORDS.len() {
             let Some(word) = SETTING_WORDS.get(index).filter(|word| word.code == number) else { continue };
             let Some(value) = given.next() else { break };
-            let (min, max) = WORD_RANGES[usize::from(word.range)];
+            let Some((min, max)) = WORD_RANGES.get(usize::from(word.range)) else { continue };
             set_scaled(command, word.letter, word.digits, min, max, value)?;
         }
         let mut given = values.iter();
@@ -889,8 +892,8 @@ impl<'q> Machine<'q> {
     #[cfg(feature = "printer")]
     /// `M114`: `X:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0`.
     fn report_position<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        for (letter, um) in AXIS_LETTERS.iter().zip(self.modal.logical_position()) {
-            ufmt::uwrite!(out, "{}:{} ", char::from(*letter), micrometres_as_mm(um))?;
+        for (axis, letter) in AXIS_LETTERS.iter().enumerate() {
+            ufmt::uwrite!(out, "{}:{} ", char::from(*letter), micrometres_as_mm(self.modal.logical(axis)))?;
         }
         let [x, y, z, _] = self.motion.motor_steps();
         ufmt::uwrite!(out, "Count X:{} Y:{} Z:{}\n", x, y, z)
@@ -912,10 +915,17 @@ impl<'q> Machine<'q> {
     /// `M119`: Marlin's endstop report.
     fn report_endstops<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         out.write_str("Reporting endstop status\n")?;
-        for (bit, name) in ENDSTOP_NAMES.iter().enumerate() {
-            let level = self.endstop_levels >> bit & 1;
-            let triggered = level == self.endstop_trigger_levels >> bit & 1;
-            out.write_str(name)?;
+        // `x_min`, `x_max`, `y_min`, ...: built from the bit number rather
+        // than a table of six names (which lived in RAM).
+        // Bit set: the level is the triggered one. A running mask rather
+        // than shifts by the bit number (a loop each on the AVR).
+        let triggered_bits = !(self.endstop_levels ^ self.endstop_trigger_levels);
+        let mut mask = 1u8;
+        for bit in 0..ENDSTOPS {
+            let triggered = triggered_bits & mask != 0;
+            mask <<= 1;
+            out.write_char(char::from(b'x' + (bit >> 1)))?;
+            out.write_str(if bit & 1 == 0 { "_min" } else { "_max" })?;
             out.write_str(if triggered { ": TRIGGERED\n" } else { ": open\n" })?;
         }
         Ok(())
@@ -975,8 +985,27 @@ const fn known_map() -> [u8; KNOWN_BITS.div_ceil(8) as usize] {
 /// Whether a halted machine refuses `code`: every known code but those
 /// that only report or wait (unknown ones are echoed as unknown).
 fn refused_while_halted(code: Code) -> bool {
-    is_known(code) && !matches!(code, Code::G(4) | Code::M(105 | 114 | 115 | 117 | 118 | 119 | 503 | 110 | 112 | 108 | 410))
+    let answered = match code {
+        Code::G(4) | Code::M(410 | 503) => true,
+        // M105, M108, M110, M112, M114, M115, M117, M118, M119 as bits of
+        // one mask: the compares one by one cost 100 bytes.
+        Code::M(n @ 105..=119) => HALTED_M105_TO_M119 >> (n - 105) & 1 != 0,
+        _ => false,
+    };
+    is_known(code) && !answered
 }
+
+/// Bit `n - 105`: `Mn` (105 ≤ n ≤ 119) still runs on a halted machine.
+const HALTED_M105_TO_M119: u16 = {
+    let mut mask = 0u16;
+    let codes = [105, 108, 110, 112, 114, 115, 117, 118, 119];
+    let mut i = 0;
+    while i < codes.len() {
+        mask |= 1 << (codes[i] - 105);
+        i += 1;
+    }
+    mask
+};
 
 /// `<bytes> bytes; crc <crc>)`, the end of `M500`'s and `M501`'s report:
 /// one copy of the code for both.
@@ -1060,7 +1089,8 @@ const MAX_SETTING_WORDS: usize = 4;
 const BOTH_ACCELERATIONS: u8 = u8::MAX;
 
 /// The value ranges of [`SETTING_WORDS`], by `range`.
-const WORD_RANGES: [(i32, i32); 5] = [
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static WORD_RANGES: crate::progmem::Flash<[(i32, i32); 5]> = crate::progmem::Flash::new([
     // Strictly positive (steps/mm, feed rates, accelerations).
     (1, i32::MAX),
     // Not negative (minimum feed rates).
@@ -1071,7 +1101,7 @@ const WORD_RANGES: [(i32, i32); 5] = [
     (0, 1_000_000),
     // Feed and flow percent, 10–999 as Marlin clamps.
     (10, 999),
-];
+]);
 
 const fn word(code: u16, letter: u8, digits: u8, range: u8, field: usize) -> SettingWord {
     assert!(field < BOTH_ACCELERATIONS as usize);

@@ -113,13 +113,39 @@ impl ModalState {
         }
     }
 
+    /// [`ModalState::new`] written in place: the zeros (positions, offsets,
+    /// the work systems) with one fill, then every other field. Built on
+    /// the stack and copied, the 72 bytes of work offsets cost a loop and
+    /// a copy.
+    ///
+    /// # Safety
+    /// `p` is valid for writes of a `ModalState`.
+    pub unsafe fn init_in(p: *mut Self) {
+        use core::ptr::addr_of_mut;
+        // SAFETY: `p` is valid (caller); the fill makes every integer zero,
+        // and each field that is not an integer is written below, before
+        // anything reads the state.
+        unsafe {
+            core::ptr::write_bytes(p, 0, 1);
+            addr_of_mut!((*p).motion_mode).write(MotionMode::Linear);
+            addr_of_mut!((*p).distance).write(Distance::Absolute);
+            addr_of_mut!((*p).extruder_distance).write(Distance::Absolute);
+            addr_of_mut!((*p).units).write(Units::Millimetres);
+            addr_of_mut!((*p).feed_um_per_s).write(25_000);
+            addr_of_mut!((*p).plane).write(Plane::Xy);
+            addr_of_mut!((*p).unsupported).write(None);
+            addr_of_mut!((*p).machine_frame).write(false);
+        }
+    }
+
     /// logical = machine + this, per axis: the `G92` shift less the work
     /// system's zero (X, Y, Z; E has no work offset).
     pub fn shift(&self, axis: usize) -> i32 {
-        self.offset[axis].saturating_sub(self.work_zero(axis))
+        sat_sub(self.offset[axis], self.work_zero(axis))
     }
 
     /// The work system's zero on `axis` (0 for E).
+    #[inline(always)]
     fn work_zero(&self, axis: usize) -> i32 {
         // `work` is always below WORK_SYSTEMS (G54–G59 set it); `get`
         // rather than `%`, which cost a division on the AVR.
@@ -130,18 +156,23 @@ impl ModalState {
     pub fn logical_position(&self) -> Position {
         let mut logical = [0; AXES];
         for (axis, value) in logical.iter_mut().enumerate() {
-            *value = self.position[axis].saturating_add(self.shift(axis));
+            *value = self.logical(axis);
         }
         logical
     }
 
+    /// The logical position of one axis.
+    pub fn logical(&self, axis: usize) -> i32 {
+        sat_add(self.position[axis], self.shift(axis))
+    }
+
     /// A length word in µm, in the current units.
     pub fn length_um(&self, letter: u8, value: Decimal) -> Result<i32, CommandError> {
-        let um = match self.units {
-            Units::Millimetres => value.to_scaled(3),
-            Units::Inches => inches_to_um(value),
-        }
-        .ok_or(CommandError::OutOfRange(letter))?;
+        // One scaling call for both units: thousandths of a mm are µm,
+        // hundred-thousandths of an inch are converted.
+        let inches = self.units == Units::Inches;
+        let scaled = value.to_scaled(if inches { 5 } else { 3 }).ok_or(CommandError::OutOfRange(letter))?;
+        let um = if inches { inches_to_um(scaled) } else { scaled };
         if um.unsigned_abs() > MAX_COORDINATE_UM as u32 {
             return Err(CommandError::OutOfRange(letter));
         }
@@ -175,15 +206,17 @@ impl ModalState {
             let Some(value) = command.value(letter)? else { continue };
             let um = self.length_um(letter, value)?;
             let distance = if letter == b'E' { self.extruder_distance } else { self.distance };
+            // Checked `i32` rather than `i64` (half the code on the AVR): a
+            // sum that overflows `i32` lies beyond MAX_COORDINATE_UM anyway.
             let machine = match distance {
-                _ if self.machine_frame && letter != b'E' => i64::from(um),
-                Distance::Absolute => i64::from(um) - i64::from(self.shift(axis)),
-                Distance::Relative => i64::from(self.position[axis]) + i64::from(um),
+                _ if self.machine_frame && letter != b'E' => Some(um),
+                Distance::Absolute => um.checked_sub(self.shift(axis)),
+                Distance::Relative => self.position[axis].checked_add(um),
             };
-            if machine.unsigned_abs() > MAX_COORDINATE_UM as u64 {
-                return Err(CommandError::OutOfRange(letter));
+            match machine {
+                Some(machine) if machine.unsigned_abs() <= MAX_COORDINATE_UM as u32 => target[axis] = machine,
+                _ => return Err(CommandError::OutOfRange(letter)),
             }
-            target[axis] = machine as i32;
         }
         Ok(target)
     }
@@ -200,7 +233,7 @@ impl ModalState {
                 None => continue,
             };
             // logical = machine + G92 − work zero = value
-            offset[axis] = value.saturating_sub(self.position[axis]).saturating_add(self.work_zero(axis));
+            offset[axis] = sat_add(sat_sub(value, self.position[axis]), self.work_zero(axis));
         }
         self.offset = offset;
         Ok(())
@@ -209,11 +242,12 @@ impl ModalState {
     /// `G10 L<n>` (the caller saw `L`): `L2` or `L20`, else out of range.
     #[inline(always)]
     pub fn work_offsets_command(&mut self, command: &Command) -> Result<(), CommandError> {
-        match command.value(b'L')?.and_then(|l| l.to_int()) {
-            Some(2) => self.set_work_offsets(command, false),
-            Some(20) => self.set_work_offsets(command, true),
-            _ => Err(CommandError::OutOfRange(b'L')),
-        }
+        let l20 = match command.value(b'L')?.and_then(|l| l.to_int()) {
+            Some(2) => false,
+            Some(20) => true,
+            _ => return Err(CommandError::OutOfRange(b'L')),
+        };
+        self.set_work_offsets(command, l20)
     }
 
     /// `G10 L2 P<n>` (`l20`: false) sets work system `n`'s zero to the
@@ -225,32 +259,50 @@ impl ModalState {
         let mut p = 0;
         super::set_scaled(command, b'P', 0, 0, WORK_SYSTEMS as i32, &mut p)?;
         let system = if p == 0 { usize::from(self.work) } else { p as usize - 1 };
-        let mut zero = self.work_offsets[system];
+        // Always there (`work` is below WORK_SYSTEMS); `get` rather than
+        // an index that would bring its panic path.
+        let Some(&zero) = self.work_offsets.get(system) else { return Ok(()) };
+        let mut zero = zero;
         for (axis, &letter) in AXIS_LETTERS[..3].iter().enumerate() {
             let Some(value) = command.value(letter)? else { continue };
             let um = self.length_um(letter, value)?;
             zero[axis] = if l20 {
                 // logical = machine + G92 − zero = um
-                self.position[axis].saturating_add(self.offset[axis]).saturating_sub(um)
+                sat_sub(sat_add(self.position[axis], self.offset[axis]), um)
             } else {
                 um
             };
         }
-        self.work_offsets[system] = zero;
+        if let Some(slot) = self.work_offsets.get_mut(system) {
+            *slot = zero;
+        }
         Ok(())
     }
+}
+
+/// `a + b`, saturating: one copy of the overflow checks (each inlined one
+/// cost some fifty bytes on the AVR).
+#[inline(never)]
+fn sat_add(a: i32, b: i32) -> i32 {
+    a.saturating_add(b)
+}
+
+/// `a - b`, saturating (see [`sat_add`]).
+#[inline(never)]
+fn sat_sub(a: i32, b: i32) -> i32 {
+    a.saturating_sub(b)
 }
 
 /// Inches to µm without float: `value · 25 400`, from units of 10⁻⁵ in
 /// (0.254 µm each), split so that no product leaves `i32` (64-bit division
 /// costs almost 3 KiB of flash on the AVR). `to_scaled(5)` already bounds
 /// the input to ±21 474 in.
-fn inches_to_um(value: Decimal) -> Option<i32> {
-    let hundred_thousandths = value.to_scaled(5)?;
+fn inches_to_um(hundred_thousandths: i32) -> i32 {
     let whole = hundred_thousandths / 1000 * 254;
     let rest = hundred_thousandths % 1000 * 254;
-    let rounded = if rest >= 0 { (rest + 500) / 1000 } else { (rest - 500) / 1000 };
-    Some(whole + rounded)
+    // Half away from zero, with one division.
+    let half = if rest >= 0 { 500 } else { -500 };
+    whole + (rest + half) / 1000
 }
 
 #[cfg(test)]
@@ -332,6 +384,29 @@ mod tests {
         relative.distance = Distance::Relative;
         relative.position = [MAX_COORDINATE_UM, 0, 0, 0];
         assert_eq!(target(&relative, "G1 X1"), Err(CommandError::OutOfRange(b'X')));
+    }
+
+    #[test]
+    fn targets_beyond_i32_after_the_shift_are_refused() {
+        let mut state = ModalState::new();
+        state.offset = [-MAX_COORDINATE_UM, MAX_COORDINATE_UM, 0, 0];
+        assert_eq!(target(&state, "G1 X2000000"), Err(CommandError::OutOfRange(b'X')));
+        assert_eq!(target(&state, "G1 Y-2000000"), Err(CommandError::OutOfRange(b'Y')));
+        assert_eq!(target(&state, "G1 X-2000000 Y2000000"), Ok([0, 0, 0, 0]));
+        state.distance = Distance::Relative;
+        state.position = [-MAX_COORDINATE_UM, 0, 0, 0];
+        assert_eq!(target(&state, "G1 X-2000000"), Err(CommandError::OutOfRange(b'X')));
+    }
+
+    #[test]
+    fn built_in_place_is_new() {
+        let mut slot = core::mem::MaybeUninit::<ModalState>::uninit();
+        // SAFETY: the slot is valid for writes; `init_in` writes it whole.
+        let built = unsafe {
+            ModalState::init_in(slot.as_mut_ptr());
+            slot.assume_init()
+        };
+        assert_eq!(std::format!("{built:?}"), std::format!("{:?}", ModalState::new()));
     }
 
     #[test]
