@@ -134,7 +134,21 @@ impl Delta {
         effector_offset: f32,
         tower_angles_deg: Vector3,
     ) -> Self {
-        let mut delta = Self {
+        let mut delta = Self::unplaced(rod_length, radius, effector_offset, tower_angles_deg);
+        delta.place_towers();
+        delta
+    }
+
+    /// [`Self::new`] without the tower positions (sines and cosines, not
+    /// `const`): [`Self::place_towers`] must follow before use. `const`,
+    /// so a board can keep its machine in flash.
+    pub const fn unplaced(
+        rod_length: f32,
+        radius: f32,
+        effector_offset: f32,
+        tower_angles_deg: Vector3,
+    ) -> Self {
+        Self {
             rod_length,
             radius,
             effector_offset,
@@ -145,20 +159,25 @@ impl Delta {
             homed_height: 300.0,
             endstop_trim: [0.0; 3],
             segment_length: 1.0,
-        };
-        delta.place_towers();
-        delta
+        }
     }
 
     /// SPEC §2's printer: L 361, R 227, OF 64, towers at 0°/120°/240°
     /// (`repetier_layout` gives 90°/330°/210°), printable radius 130 mm.
     pub fn spec_printer(repetier_layout: bool) -> Self {
+        let mut delta = Self::spec_printer_unplaced(repetier_layout);
+        delta.place_towers();
+        delta
+    }
+
+    /// [`Self::spec_printer`] before [`Self::place_towers`].
+    pub const fn spec_printer_unplaced(repetier_layout: bool) -> Self {
         let angles = if repetier_layout {
             [90.0, 330.0, 210.0]
         } else {
             [0.0, 120.0, 240.0]
         };
-        let mut delta = Self::new(361.0, 227.0, 64.0, angles);
+        let mut delta = Self::unplaced(361.0, 227.0, 64.0, angles);
         delta.printable_radius = 130.0;
         delta
     }
@@ -184,7 +203,8 @@ impl Delta {
         self.radius
     }
 
-    fn place_towers(&mut self) {
+    /// The tower pivots from the radius and the angles.
+    pub fn place_towers(&mut self) {
         for (tower, angle) in self.towers.iter_mut().zip(self.tower_angles_deg) {
             let (sin, cos) = sin_cos(math::radians(angle));
             *tower = [self.radius * cos, self.radius * sin];

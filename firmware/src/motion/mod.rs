@@ -225,7 +225,17 @@ impl MotionConfig {
     /// towers up at once; each carriage at most 150 mm/s.
     #[cfg(feature = "delta")]
     pub fn spec_delta(repetier_layout: bool) -> Self {
-        let mut delta = Delta::spec_printer(repetier_layout);
+        let mut config = Self::spec_delta_unplaced(repetier_layout);
+        config.place_towers();
+        config
+    }
+
+    /// [`Self::spec_delta`] before [`Self::place_towers`]: `const`, so a
+    /// board can keep it in flash (built field by field in code it cost
+    /// 1.1 KB on the AVR).
+    #[cfg(feature = "delta")]
+    pub const fn spec_delta_unplaced(repetier_layout: bool) -> Self {
+        let mut delta = Delta::spec_printer_unplaced(repetier_layout);
         delta.homed_height = 300.0;
         let tower = AxisHoming::bump(true, 80.0, 50.0, 400.0, 5.0);
         Self {
@@ -236,9 +246,18 @@ impl MotionConfig {
             soft_limits: None,
             homing: HomingConfig { sequence: [0b111, 0, 0], axes: [tower; 3], acceleration: 100_000.0 },
             home: HomePosition::DeltaTop,
-            stepper: StepperConfig::default(),
+            stepper: StepperConfig::DEFAULT,
             max_step_rate: 40_000.0,
             ..Self::prusa_i3()
+        }
+    }
+
+    /// A delta's tower pivots from its radius and tower angles (after
+    /// [`Self::spec_delta_unplaced`]); nothing for other machines.
+    #[cfg(feature = "delta")]
+    pub fn place_towers(&mut self) {
+        if let MachineKinematics::Delta(delta) = &mut self.kinematics {
+            delta.place_towers();
         }
     }
 
