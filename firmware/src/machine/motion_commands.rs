@@ -370,76 +370,98 @@ impl<'q> Machine<'q> {
     /// `M665 L<rod> R<radius> H<height>` (delta): new geometry, once the
     /// moves are done; positions are lost, so `G28` must follow (Marlin
     /// re-homes the same way). Bare `M665` reports the geometry.
+    ///
+    /// `M665` and `M666` share their reading, report and commit (out of
+    /// line: inlined into the dispatcher they cost 2 KB), and change the
+    /// kinematics in place rather than through copies of the delta.
     #[cfg(feature = "delta")]
+    #[inline(never)]
     pub(super) fn delta_geometry<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
-        let MachineKinematics::Delta(mut delta) = self.motion.config.kinematics else {
+        let MachineKinematics::Delta(delta) = &self.motion.config.kinematics else {
             return Err(CommandError::NotThisMachine);
         };
-        let mm = |letter| -> Result<Option<f32>, CommandError> {
-            match command.value(letter)? {
-                None => Ok(None),
-                Some(value) => match value.to_scaled(3) {
-                    Some(um) if um > 0 => Ok(Some(um as f32 / 1000.0)),
-                    _ => Err(CommandError::OutOfRange(letter)),
-                },
-            }
-        };
-        let (rod, radius, height) = (mm(b'L')?, mm(b'R')?, mm(b'H')?);
-        if rod.is_none() && radius.is_none() && height.is_none() {
-            let _ = ufmt::uwrite!(
-                out,
-                "echo:  M665 L{} R{} H{}\n",
-                crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(delta.rod_length() * 100.0)),
-                crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(delta.radius() * 100.0)),
-                crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(delta.homed_height * 100.0))
-            );
-            return Ok(());
+        let mut values = [delta.rod_length(), delta.radius(), delta.homed_height];
+        if !read_delta_values(command, b"LRH", &mut values, true)? {
+            return write_delta_values(out, 665, b"LRH", &values);
         }
-        let (rod, radius) = (rod.unwrap_or(delta.rod_length()), radius.unwrap_or(delta.radius()));
+        let [rod, radius, height] = values;
         if rod <= radius {
             return Err(CommandError::OutOfRange(b'L'));
         }
+        let delta = self.change_delta()?;
         delta.set_geometry(rod, radius);
-        if let Some(height) = height {
-            delta.homed_height = height;
-        }
-        self.change_kinematics(MachineKinematics::Delta(delta))
+        delta.homed_height = height;
+        self.motion.kinematics_changed();
+        Ok(())
     }
 
     /// `M666 X Y Z` (delta): endstop trims, mm (each tower's switch this
     /// far above the nominal one). Bare `M666` reports them.
     #[cfg(feature = "delta")]
+    #[inline(never)]
     pub(super) fn delta_trim<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
-        let MachineKinematics::Delta(mut delta) = self.motion.config.kinematics else {
+        let MachineKinematics::Delta(delta) = &self.motion.config.kinematics else {
             return Err(CommandError::NotThisMachine);
         };
-        let mut any = false;
-        for (tower, letter) in [b'X', b'Y', b'Z'].into_iter().enumerate() {
-            if let Some(value) = command.value(letter)? {
-                match value.to_scaled(3) {
-                    Some(um) if um.abs() <= 20_000 => delta.endstop_trim[tower] = um as f32 / 1000.0,
-                    _ => return Err(CommandError::OutOfRange(letter)),
-                }
-                any = true;
-            }
+        let mut trim = delta.endstop_trim;
+        if !read_delta_values(command, b"XYZ", &mut trim, false)? {
+            return write_delta_values(out, 666, b"XYZ", &trim);
         }
-        if !any {
-            let trim = delta.endstop_trim.map(|mm| crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(mm * 100.0)));
-            let _ = ufmt::uwrite!(out, "echo:  M666 X{} Y{} Z{}\n", trim[0], trim[1], trim[2]);
-            return Ok(());
-        }
-        self.change_kinematics(MachineKinematics::Delta(delta))
+        self.change_delta()?.endstop_trim = trim;
+        self.motion.kinematics_changed();
+        Ok(())
     }
 
     /// New kinematics take effect for the moves that follow; where the
-    /// carriages are in the new geometry is unknown until `G28`.
+    /// carriages are in the new geometry is unknown until `G28`. The
+    /// delta to change in place (the caller checked that it is one), once
+    /// the moves are done.
     #[cfg(feature = "delta")]
-    fn change_kinematics(&mut self, kinematics: MachineKinematics) -> Result<(), CommandError> {
+    #[inline(never)]
+    fn change_delta(&mut self) -> Result<&mut crate::motion::kinematics::Delta, CommandError> {
         if !self.motion.is_idle() {
             return Err(CommandError::Motion(MotionError::Busy));
         }
-        self.motion.set_kinematics(kinematics);
         self.position_lost = true;
-        Ok(())
+        self.motion.delta_mut().ok_or(CommandError::NotThisMachine)
     }
+}
+
+/// `M665`/`M666`'s three values, mm, in place: each letter given replaces
+/// its value; `Ok(false)` when none is. `M665`'s must be positive,
+/// `M666`'s within ±20 mm.
+#[cfg(feature = "delta")]
+#[inline(never)]
+fn read_delta_values(command: &Command, letters: &[u8; 3], values: &mut [f32; 3], positive: bool) -> Result<bool, CommandError> {
+    let mut any = false;
+    for (value, &letter) in values.iter_mut().zip(letters) {
+        if let Some(given) = command.value(letter)? {
+            match given.to_scaled(3) {
+                // (wrapping_abs: i32::MIN as the release build's abs()).
+                Some(um) if (if positive { um > 0 } else { um.wrapping_abs() <= 20_000 }) => {
+                    *value = um as f32 / 1000.0
+                }
+                _ => return Err(CommandError::OutOfRange(letter)),
+            }
+            any = true;
+        }
+    }
+    Ok(any)
+}
+
+/// `echo:  M665 L361.00 R227.00 H300.00` and the like.
+#[cfg(feature = "delta")]
+#[inline(never)]
+fn write_delta_values<W: uWrite + ?Sized>(out: &mut W, code: u16, letters: &[u8; 3], values: &[f32; 3]) -> Result<(), CommandError> {
+    let _ = ufmt::uwrite!(out, "echo:  M{}", code);
+    for (&letter, &value) in letters.iter().zip(values) {
+        let _ = ufmt::uwrite!(
+            out,
+            " {}{}",
+            char::from(letter),
+            crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(value * 100.0))
+        );
+    }
+    let _ = out.write_str("\n");
+    Ok(())
 }

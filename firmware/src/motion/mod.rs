@@ -601,6 +601,24 @@ impl<'q> Motion<'q> {
         self.configure();
     }
 
+    /// The delta's geometry to change in place (`M665`, `M666`), `None`
+    /// for other kinematics; [`Self::kinematics_changed`] must follow
+    /// (together what [`Self::set_kinematics`] does with a copy).
+    #[cfg(feature = "delta")]
+    pub fn delta_mut(&mut self) -> Option<&mut Delta> {
+        match &mut self.config.kinematics {
+            MachineKinematics::Delta(delta) => Some(delta),
+            _ => None,
+        }
+    }
+
+    /// The kinematics changed in place (see [`Self::delta_mut`]): for the
+    /// moves that follow.
+    #[cfg(feature = "delta")]
+    pub fn kinematics_changed(&mut self) {
+        self.configure();
+    }
+
     /// Declare the current position (mm) without moving (after homing, or
     /// for tests). Motor steps follow from the inverse kinematics.
     pub fn set_position_mm(&mut self, position: [f32; MOTORS]) {
