@@ -370,44 +370,73 @@ impl<'q> Machine<'q> {
     /// `M665 L<rod> R<radius> H<height>` (delta): new geometry, once the
     /// moves are done; positions are lost, so `G28` must follow (Marlin
     /// re-homes the same way). Bare `M665` reports the geometry.
-    ///
-    /// `M665` and `M666` share their reading, report and commit (out of
-    /// line: inlined into the dispatcher they cost 2 KB), and change the
-    /// kinematics in place rather than through copies of the delta.
     #[cfg(feature = "delta")]
-    #[inline(never)]
     pub(super) fn delta_geometry<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
-        let MachineKinematics::Delta(delta) = &self.motion.config.kinematics else {
-            return Err(CommandError::NotThisMachine);
-        };
-        let mut values = [delta.rod_length(), delta.radius(), delta.homed_height];
-        if !read_delta_values(command, b"LRH", &mut values, true)? {
-            return write_delta_values(out, 665, b"LRH", &values);
-        }
-        let [rod, radius, height] = values;
-        if rod <= radius {
-            return Err(CommandError::OutOfRange(b'L'));
-        }
-        let delta = self.change_delta()?;
-        delta.set_geometry(rod, radius);
-        delta.homed_height = height;
-        self.motion.kinematics_changed();
-        Ok(())
+        self.delta_setting(command, out, false)
     }
 
     /// `M666 X Y Z` (delta): endstop trims, mm (each tower's switch this
     /// far above the nominal one). Bare `M666` reports them.
     #[cfg(feature = "delta")]
-    #[inline(never)]
     pub(super) fn delta_trim<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
+        self.delta_setting(command, out, true)
+    }
+
+    /// `M665` (`trim` false) and `M666` in one function: their reading,
+    /// report and commit are the same but for the letters and checks (out
+    /// of line: inlined into the dispatcher they cost 2 KB). The delta is
+    /// changed in place, not through copies of it.
+    #[cfg(feature = "delta")]
+    #[inline(never)]
+    fn delta_setting<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W, trim: bool) -> Result<(), CommandError> {
         let MachineKinematics::Delta(delta) = &self.motion.config.kinematics else {
             return Err(CommandError::NotThisMachine);
         };
-        let mut trim = delta.endstop_trim;
-        if !read_delta_values(command, b"XYZ", &mut trim, false)? {
-            return write_delta_values(out, 666, b"XYZ", &trim);
+        let (code, letters, mut values) = if trim {
+            (666, b"XYZ", delta.endstop_trim)
+        } else {
+            (665, b"LRH", [delta.rod_length(), delta.radius(), delta.homed_height])
+        };
+        let mut any = false;
+        for (value, &letter) in values.iter_mut().zip(letters) {
+            if let Some(given) = command.value(letter)? {
+                match given.to_scaled(3) {
+                    // M665: positive; M666: within ±20 mm (wrapping_abs:
+                    // i32::MIN as the release build's abs()).
+                    Some(um) if (if trim { um.wrapping_abs() <= 20_000 } else { um > 0 }) => {
+                        *value = um as f32 / 1000.0
+                    }
+                    _ => return Err(CommandError::OutOfRange(letter)),
+                }
+                any = true;
+            }
         }
-        self.change_delta()?.endstop_trim = trim;
+        if !any {
+            // `echo:  M665 L361.00 R227.00 H300.00` and the like.
+            let _ = ufmt::uwrite!(out, "echo:  M{}", code as u16);
+            for (&letter, &value) in letters.iter().zip(&values) {
+                let _ = ufmt::uwrite!(
+                    out,
+                    " {}{}",
+                    char::from(letter),
+                    crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(value * 100.0))
+                );
+            }
+            let _ = out.write_str("\n");
+            return Ok(());
+        }
+        let [first, second, third] = values;
+        if !trim && first <= second {
+            // The rod must be longer than the radius.
+            return Err(CommandError::OutOfRange(b'L'));
+        }
+        let delta = self.change_delta()?;
+        if trim {
+            delta.endstop_trim = values;
+        } else {
+            delta.set_geometry(first, second);
+            delta.homed_height = third;
+        }
         self.motion.kinematics_changed();
         Ok(())
     }
@@ -417,7 +446,6 @@ impl<'q> Machine<'q> {
     /// delta to change in place (the caller checked that it is one), once
     /// the moves are done.
     #[cfg(feature = "delta")]
-    #[inline(never)]
     fn change_delta(&mut self) -> Result<&mut crate::motion::kinematics::Delta, CommandError> {
         if !self.motion.is_idle() {
             return Err(CommandError::Motion(MotionError::Busy));
@@ -425,43 +453,4 @@ impl<'q> Machine<'q> {
         self.position_lost = true;
         self.motion.delta_mut().ok_or(CommandError::NotThisMachine)
     }
-}
-
-/// `M665`/`M666`'s three values, mm, in place: each letter given replaces
-/// its value; `Ok(false)` when none is. `M665`'s must be positive,
-/// `M666`'s within ±20 mm.
-#[cfg(feature = "delta")]
-#[inline(never)]
-fn read_delta_values(command: &Command, letters: &[u8; 3], values: &mut [f32; 3], positive: bool) -> Result<bool, CommandError> {
-    let mut any = false;
-    for (value, &letter) in values.iter_mut().zip(letters) {
-        if let Some(given) = command.value(letter)? {
-            match given.to_scaled(3) {
-                // (wrapping_abs: i32::MIN as the release build's abs()).
-                Some(um) if (if positive { um > 0 } else { um.wrapping_abs() <= 20_000 }) => {
-                    *value = um as f32 / 1000.0
-                }
-                _ => return Err(CommandError::OutOfRange(letter)),
-            }
-            any = true;
-        }
-    }
-    Ok(any)
-}
-
-/// `echo:  M665 L361.00 R227.00 H300.00` and the like.
-#[cfg(feature = "delta")]
-#[inline(never)]
-fn write_delta_values<W: uWrite + ?Sized>(out: &mut W, code: u16, letters: &[u8; 3], values: &[f32; 3]) -> Result<(), CommandError> {
-    let _ = ufmt::uwrite!(out, "echo:  M{}", code);
-    for (&letter, &value) in letters.iter().zip(values) {
-        let _ = ufmt::uwrite!(
-            out,
-            " {}{}",
-            char::from(letter),
-            crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(value * 100.0))
-        );
-    }
-    let _ = out.write_str("\n");
-    Ok(())
 }

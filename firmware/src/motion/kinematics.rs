@@ -350,11 +350,7 @@ fn scale3(a: &mut Vector3, k: f32) {
 /// a · b, summed left to right.
 #[inline(never)]
 fn dot3(a: &Vector3, b: &Vector3) -> f32 {
-    let mut sum = a[0] * b[0];
-    for k in 1..3 {
-        sum += a[k] * b[k];
-    }
-    sum
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// |a|.
