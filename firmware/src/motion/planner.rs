@@ -45,7 +45,7 @@
 //! does the same on the AVR). The step interrupt never reads a block.
 
 use super::stepper::MOTORS;
-use super::math::sqrt;
+use super::math::{speed_sqr_after, sqrt};
 
 /// Blocks in the ring (one stays empty: 23 usable). Look-ahead must hold
 /// the distance to stop from full speed, v²/(2a): 3.3 mm at 100 mm/s and
@@ -121,6 +121,16 @@ pub struct Planner {
 impl Default for Planner {
     fn default() -> Self {
         Self::new()
+    }
+}
+
+/// Keep in `lowest` the (limit, steps) of the smallest limit/steps seen,
+/// by cross-multiplying; steps 0: none seen yet. Out of line: the rate
+/// and the acceleration share it.
+#[inline(never)]
+fn lower_ratio(lowest: &mut (f32, f32), limit: f32, steps: f32) {
+    if lowest.1 == 0.0 || limit * lowest.1 < lowest.0 * steps {
+        *lowest = (limit, steps);
     }
 }
 
@@ -292,8 +302,8 @@ impl Planner {
         // one division per limit instead of two per motor (each costs the
         // AVR hundreds of cycles, for every line of a slicer stream).
         // (limit, steps); steps 0: no motor seen yet (a moving motor has ≥ 1).
-        let (mut rate, mut rate_steps) = (0.0, 0.0);
-        let (mut accel, mut accel_steps) = (0.0, 0.0);
+        let mut rate = (0.0, 0.0);
+        let mut accel = (0.0, 0.0);
         // A running motor bit: a variable shift is a loop on the AVR.
         let mut bit = 1;
         for motor in 0..MOTORS {
@@ -310,20 +320,16 @@ impl Planner {
             }
             let steps = steps as f32;
             let (motor_rate, motor_accel) = (limits.max_rate[motor], limits.max_accel[motor]);
-            if rate_steps == 0.0 || motor_rate * rate_steps < rate * steps {
-                (rate, rate_steps) = (motor_rate, steps);
-            }
-            if accel_steps == 0.0 || motor_accel * accel_steps < accel * steps {
-                (accel, accel_steps) = (motor_accel, steps);
-            }
+            lower_ratio(&mut rate, motor_rate, steps);
+            lower_ratio(&mut accel, motor_accel, steps);
         }
         // No motor moves: nothing to plan (both limits are set by the first
         // moving motor).
         if block.events == 0 {
             return Ok(());
         }
-        let speed = motion.speed.min(rate * motion.millimetres / rate_steps);
-        let acceleration = motion.acceleration.min(accel * motion.millimetres / accel_steps);
+        let speed = motion.speed.min(rate.0 * motion.millimetres / rate.1);
+        let acceleration = motion.acceleration.min(accel.0 * motion.millimetres / accel.1);
         if !(motion.millimetres > 0.0) || !(speed > 0.0) || !(acceleration > 0.0) {
             return Ok(());
         }
@@ -378,7 +384,7 @@ impl Planner {
         while index != self.planned {
             let block = &mut self.blocks[index as usize];
             if block.entry_speed_sqr != block.max_entry_speed_sqr {
-                let reachable = next_entry_sqr + 2.0 * block.acceleration * block.millimetres;
+                let reachable = speed_sqr_after(next_entry_sqr, block.acceleration, block.millimetres);
                 block.entry_speed_sqr = block.max_entry_speed_sqr.min(reachable);
             }
             next_entry_sqr = block.entry_speed_sqr;
@@ -394,7 +400,7 @@ impl Planner {
                 (current.entry_speed_sqr, current.acceleration, current.millimetres);
             let block = &mut self.blocks[following as usize];
             if current_entry_sqr < block.entry_speed_sqr {
-                let reachable = current_entry_sqr + 2.0 * current_acceleration * current_millimetres;
+                let reachable = speed_sqr_after(current_entry_sqr, current_acceleration, current_millimetres);
                 if reachable < block.entry_speed_sqr {
                     // Full acceleration through `current`: nothing before
                     // `block` can improve any more.
