@@ -224,14 +224,19 @@ impl Planner {
 
     /// The oldest block: the one the segment preparation works on.
     pub fn current(&self) -> Option<&Block> {
-        (!self.is_empty()).then(|| &self.blocks[self.tail as usize])
+        // `get`: no bounds check (and panic path) for the ring index.
+        if self.is_empty() {
+            None
+        } else {
+            self.blocks.get(self.tail as usize)
+        }
     }
 
     pub fn current_mut(&mut self) -> Option<&mut Block> {
         if self.is_empty() {
             None
         } else {
-            Some(&mut self.blocks[self.tail as usize])
+            self.blocks.get_mut(self.tail as usize)
         }
     }
 
@@ -293,7 +298,10 @@ impl Planner {
         // Built in its slot (free: the ring is not full, and the head is
         // not published until the end), not as a temporary: the copy was a
         // memcpy and the temporary pushed the AVR frame past 63 bytes.
-        let block = &mut self.blocks[head];
+        // (`get_mut`: the head is always in the ring; no bounds check.)
+        let Some(block) = self.blocks.get_mut(head) else {
+            return Err(Full);
+        };
         *block = Block { watch: motion.watch, watch_release: motion.watch_release, ..Block::default() };
         // A motor covers steps/L steps per mm of path: the path's speed and
         // acceleration are capped so that each motor stays within its own
@@ -343,7 +351,9 @@ impl Planner {
         } else {
             self.junction_speed_sqr(&motion.unit, acceleration).min(nominal_speed_sqr).min(self.previous_nominal_speed_sqr)
         };
-        self.blocks[head].max_entry_speed_sqr = max_entry_speed_sqr;
+        if let Some(block) = self.blocks.get_mut(head) {
+            block.max_entry_speed_sqr = max_entry_speed_sqr;
+        }
         self.previous_unit = motion.unit;
         self.previous_nominal_speed_sqr = nominal_speed_sqr;
         self.head = next(self.head);
