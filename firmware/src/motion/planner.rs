@@ -246,7 +246,7 @@ impl Planner {
         if self.is_empty() || following == self.head {
             0.0
         } else {
-            self.blocks[following as usize].entry_speed_sqr
+            self.blocks.get(following as usize).map_or(0.0, |block| block.entry_speed_sqr)
         }
     }
 
@@ -392,7 +392,8 @@ impl Planner {
         let mut index = newest;
         let mut next_entry_sqr = 0.0;
         while index != self.planned {
-            let block = &mut self.blocks[index as usize];
+            // (`get`: ring indices, no bounds checks; never `None`.)
+            let Some(block) = self.blocks.get_mut(index as usize) else { break };
             if block.entry_speed_sqr != block.max_entry_speed_sqr {
                 let reachable = speed_sqr_after(next_entry_sqr, block.acceleration, block.millimetres);
                 block.entry_speed_sqr = block.max_entry_speed_sqr.min(reachable);
@@ -405,10 +406,10 @@ impl Planner {
         while index != newest {
             let following = next(index);
             // Three fields, not a copy of the whole block (a memcpy on the AVR).
-            let current = &self.blocks[index as usize];
+            let Some(current) = self.blocks.get(index as usize) else { break };
             let (current_entry_sqr, current_acceleration, current_millimetres) =
                 (current.entry_speed_sqr, current.acceleration, current.millimetres);
-            let block = &mut self.blocks[following as usize];
+            let Some(block) = self.blocks.get_mut(following as usize) else { break };
             if current_entry_sqr < block.entry_speed_sqr {
                 let reachable = speed_sqr_after(current_entry_sqr, current_acceleration, current_millimetres);
                 if reachable < block.entry_speed_sqr {
