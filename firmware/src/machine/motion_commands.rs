@@ -332,10 +332,13 @@ impl<'q> Machine<'q> {
     /// after the queued moves.
     pub(super) fn home(&mut self, command: &Command) -> Outcome {
         let mut motors = 0u8;
-        for (axis, letter) in [b'X', b'Y', b'Z'].into_iter().enumerate() {
+        // A running axis bit: a variable shift is a loop on the AVR.
+        let mut bit = 1;
+        for letter in [b'X', b'Y', b'Z'] {
             if command.has(letter) {
-                motors |= 1 << axis;
+                motors |= bit;
             }
+            bit <<= 1;
         }
         match self.motion.home(motors) {
             Ok(()) => {
@@ -355,10 +358,13 @@ impl<'q> Machine<'q> {
         #[cfg(feature = "encoders")]
         self.encoders_homed(homed);
         let position = self.motion.position_um();
+        // A running axis bit: a variable shift is a loop on the AVR.
+        let mut bit = 1;
         for axis in 0..3 {
-            if homed & (1 << axis) != 0 {
+            if homed & bit != 0 {
                 self.modal.offset[axis] = 0;
             }
+            bit <<= 1;
         }
         self.modal.position[..3].copy_from_slice(&position[..3]);
         if homed & 0b111 == 0b111 {
