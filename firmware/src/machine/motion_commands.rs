@@ -410,7 +410,7 @@ impl<'q> Machine<'q> {
                     // M665: positive; M666: within ±20 mm (wrapping_abs:
                     // i32::MIN as the release build's abs()).
                     Some(um) if (if trim { um.wrapping_abs() <= 20_000 } else { um > 0 }) => {
-                        *value = um as f32 / 1000.0
+                        *value = crate::motion::milli(um)
                     }
                     _ => return Err(CommandError::OutOfRange(letter)),
                 }

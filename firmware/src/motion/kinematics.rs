@@ -355,7 +355,7 @@ fn dot3(a: &Vector3, b: &Vector3) -> f32 {
 
 /// |a|.
 #[inline(never)]
-fn length3(a: &Vector3) -> f32 {
+pub(crate) fn length3(a: &Vector3) -> f32 {
     sqrt(dot3(a, a))
 }
 

@@ -425,7 +425,12 @@ impl LineCut {
         // length; a Cartesian line needs no square root here (this runs
         // for every G1 of a slicer stream).
         let mut pieces = match config.kinematics.segment_mm() {
-            Some(segment) if segment > 0.0 => sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]) / segment,
+            // (`length3`: the same sum, out of line; the kinematics that
+            // cut by length have it already.)
+            Some(segment) if segment > 0.0 => match delta.first_chunk::<LINEAR_AXES>() {
+                Some(xyz) => kinematics::length3(xyz) / segment,
+                None => 0.0,
+            },
             _ => 0.0,
         };
         // Keep each motor within a block's 16-bit step count (with room for
@@ -1075,7 +1080,7 @@ impl<'q> Motion<'q> {
 /// Thousandths (µm, milli-units) to units as f32. Out of line: a
 /// conversion and a division inline at each of a dozen sites cost flash.
 #[inline(never)]
-fn milli(value: i32) -> f32 {
+pub(crate) fn milli(value: i32) -> f32 {
     value as f32 / 1000.0
 }
 
