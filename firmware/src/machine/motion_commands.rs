@@ -334,7 +334,7 @@ impl<'q> Machine<'q> {
         let mut motors = 0u8;
         // A running axis bit: a variable shift is a loop on the AVR.
         let mut bit = 1;
-        for letter in [b'X', b'Y', b'Z'] {
+        for &letter in b"XYZ" {
             if command.has(letter) {
                 motors |= bit;
             }

@@ -205,8 +205,8 @@ impl Delta {
 
     /// The tower pivots from the radius and the angles.
     pub fn place_towers(&mut self) {
-        for (tower, angle) in self.towers.iter_mut().zip(self.tower_angles_deg) {
-            let (sin, cos) = sin_cos(math::radians(angle));
+        for (tower, angle) in self.towers.iter_mut().zip(&self.tower_angles_deg) {
+            let (sin, cos) = sin_cos(math::radians(*angle));
             *tower = [self.radius * cos, self.radius * sin];
         }
     }
