@@ -705,9 +705,13 @@ impl<'q> Motion<'q> {
     /// globally"). Off restores the machine's own hard limits (the arm's
     /// NC switches stay on).
     pub fn set_endstops_always(&mut self, on: bool) {
-        let homing_switches = (0..LINEAR_AXES).fold(0, |bits, motor| {
-            bits | homing::endstop_bit(motor, self.config.homing.axes[motor].towards_max)
-        });
+        // `homing::endstop_bit` of each axis, with a running motor bit: a
+        // variable shift is a loop on the AVR.
+        let (mut homing_switches, mut bit) = (0, 1);
+        for axis in &self.config.homing.axes {
+            homing_switches |= if axis.towards_max { bit << 4 } else { bit };
+            bit <<= 1;
+        }
         let limits = if on { self.machine_limits | homing_switches } else { self.machine_limits };
         if limits != self.config.stepper.limit_endstops {
             self.config.stepper.limit_endstops = limits;
