@@ -431,32 +431,31 @@ impl<'q> Machine<'q> {
             let _ = out.write_str("\n");
             return Ok(());
         }
-        let [first, second, third] = values;
-        if !trim && first <= second {
+        if !trim && values[0] <= values[1] {
             // The rod must be longer than the radius.
             return Err(CommandError::OutOfRange(b'L'));
         }
-        let delta = self.change_delta()?;
-        if trim {
-            delta.endstop_trim = values;
-        } else {
-            delta.set_geometry(first, second);
-            delta.homed_height = third;
-        }
-        self.motion.kinematics_changed();
-        Ok(())
+        self.change_delta(trim, &values)
     }
 
     /// New kinematics take effect for the moves that follow; where the
     /// carriages are in the new geometry is unknown until `G28`. The
-    /// delta to change in place (the caller checked that it is one), once
-    /// the moves are done.
+    /// delta is changed in place (the caller checked that it is one), once
+    /// the moves are done: the trims (`trim`), or rod, radius and height.
     #[cfg(feature = "delta")]
-    fn change_delta(&mut self) -> Result<&mut crate::motion::kinematics::Delta, CommandError> {
+    fn change_delta(&mut self, trim: bool, values: &[f32; 3]) -> Result<(), CommandError> {
         if !self.motion.is_idle() {
             return Err(CommandError::Motion(MotionError::Busy));
         }
         self.position_lost = true;
-        self.motion.delta_mut().ok_or(CommandError::NotThisMachine)
+        let delta = self.motion.delta_mut().ok_or(CommandError::NotThisMachine)?;
+        if trim {
+            delta.endstop_trim = *values;
+        } else {
+            delta.set_geometry(values[0], values[1]);
+            delta.homed_height = values[2];
+        }
+        self.motion.kinematics_changed();
+        Ok(())
     }
 }
