@@ -526,13 +526,15 @@ impl<'q> Motion<'q> {
         // the slot is initialised afterwards.
         let motion = unsafe {
             addr_of_mut!((*p).config).write(config);
-            // `configure` below computes the real limits.
-            addr_of_mut!((*p).limits).write(MotorLimits { max_rate: [0.0; MOTORS], max_accel: [0.0; MOTORS] });
+            // `configure` below computes the real limits. All-zero bytes
+            // are 0.0 (and 0) for these plain float and integer arrays:
+            // a memset, not a zeroed temporary on the stack and a copy.
+            core::ptr::write_bytes(addr_of_mut!((*p).limits), 0, 1);
             Planner::init_in(&mut *addr_of_mut!((*p).planner).cast::<MaybeUninit<Planner>>());
             addr_of_mut!((*p).prep).write(Prep::new());
             addr_of_mut!((*p).feeder).write(feeder);
-            addr_of_mut!((*p).position).write([0.0; MOTORS]);
-            addr_of_mut!((*p).motor_steps).write([0; MOTORS]);
+            core::ptr::write_bytes(addr_of_mut!((*p).position), 0, 1);
+            core::ptr::write_bytes(addr_of_mut!((*p).motor_steps), 0, 1);
             addr_of_mut!((*p).e_remainder).write(0.0);
             addr_of_mut!((*p).pending).write(Pending::Nothing);
             addr_of_mut!((*p).homing).write(Homing::new());

@@ -155,19 +155,18 @@ impl Planner {
     /// machine), block by block: `new()` would build the whole ring as a
     /// temporary, 1.6 KB of the AVR's stack at boot.
     pub fn init_in(slot: &mut core::mem::MaybeUninit<Self>) -> &mut Self {
-        let empty = Self::new_empty_block();
         let p = slot.as_mut_ptr();
-        // SAFETY: every field of the valid slot is written once (the ring
-        // element by element); the slot is initialised afterwards.
+        // SAFETY: every field of the valid slot is written once; the slot
+        // is initialised afterwards. The ring and the previous unit vector
+        // are zeroed with one memset each: all-zero bytes are a valid
+        // `Block` (integers, a bool, floats: `new_empty_block`, which a
+        // test compares) and 0.0.
         unsafe {
-            let blocks = core::ptr::addr_of_mut!((*p).blocks).cast::<Block>();
-            for i in 0..PLANNER_SLOTS {
-                blocks.add(i).write(empty);
-            }
+            core::ptr::write_bytes(core::ptr::addr_of_mut!((*p).blocks), 0, 1);
             core::ptr::addr_of_mut!((*p).head).write(0);
             core::ptr::addr_of_mut!((*p).tail).write(0);
             core::ptr::addr_of_mut!((*p).planned).write(0);
-            core::ptr::addr_of_mut!((*p).previous_unit).write([0.0; MOTORS]);
+            core::ptr::write_bytes(core::ptr::addr_of_mut!((*p).previous_unit), 0, 1);
             core::ptr::addr_of_mut!((*p).previous_nominal_speed_sqr).write(0.0);
             core::ptr::addr_of_mut!((*p).junction_deviation).write(0.013);
             slot.assume_init_mut()
@@ -430,6 +429,17 @@ impl Planner {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_ring_built_in_place_holds_empty_blocks() {
+        // `init_in` zeroes the ring with a memset: zero bytes must be the
+        // empty block.
+        let mut slot = core::mem::MaybeUninit::<Planner>::uninit();
+        let planner = Planner::init_in(&mut slot);
+        assert!(planner.blocks.iter().all(|block| *block == Planner::new_empty_block()));
+        assert_eq!(planner.previous_unit, [0.0; MOTORS]);
+        assert!(planner.is_empty() && planner.junction_deviation == 0.013);
+    }
 
     const LIMITS: MotorLimits = MotorLimits { max_rate: [30_000.0; MOTORS], max_accel: [300_000.0; MOTORS] };
 
