@@ -537,7 +537,7 @@ impl<'q> Motion<'q> {
             core::ptr::write_bytes(addr_of_mut!((*p).motor_steps), 0, 1);
             addr_of_mut!((*p).e_remainder).write(0.0);
             addr_of_mut!((*p).pending).write(Pending::Nothing);
-            addr_of_mut!((*p).homing).write(Homing::new());
+            Homing::init_in(&mut *addr_of_mut!((*p).homing).cast::<MaybeUninit<Homing>>());
             addr_of_mut!((*p).homing_requested).write(None);
             addr_of_mut!((*p).homing_move).write(None);
             addr_of_mut!((*p).homed).write(0);
