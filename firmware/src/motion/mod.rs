@@ -1045,11 +1045,8 @@ impl<'q> Motion<'q> {
         let home = match (&self.config.home, &self.config.kinematics) {
             #[cfg(feature = "delta")]
             (HomePosition::DeltaTop, MachineKinematics::Delta(delta)) => Ok(delta.homed_carriage_heights()),
-            // One call for both (the origin for a delta's home elsewhere).
-            (home, kinematics) => kinematics.inverse(match home {
-                HomePosition::Cartesian(point) => *point,
-                HomePosition::DeltaTop => [0.0; LINEAR_AXES],
-            }),
+            (HomePosition::Cartesian(point), kinematics) => kinematics.inverse(*point),
+            (HomePosition::DeltaTop, kinematics) => kinematics.inverse([0.0; LINEAR_AXES]),
         };
         let Ok(home) = home else {
             self.error = Some(MotionError::HomingFailed(motors));
