@@ -182,12 +182,22 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
 static PRUSA_I3: firmware::progmem::Flash<MotionConfig> = firmware::progmem::Flash::new(MotionConfig::prusa_i3());
 
+/// The SPEC delta, in flash as the Prusa i3; only its tower positions
+/// (sines and cosines) are computed at boot.
+#[cfg(feature = "machine-delta")]
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static SPEC_DELTA: firmware::progmem::Flash<MotionConfig> = firmware::progmem::Flash::new(MotionConfig::spec_delta_unplaced(false));
+
 /// The machine chosen at build time (cargo feature `machine-…`). Out of
 /// line: the configuration is built in the caller's slot through a pointer.
 #[inline(never)]
 fn machine_config() -> MotionConfig {
     #[cfg(feature = "machine-delta")]
-    return MotionConfig::spec_delta(false);
+    {
+        let mut config = SPEC_DELTA.load();
+        config.place_towers();
+        return config;
+    }
     #[cfg(feature = "machine-arm")]
     return MotionConfig::spec_arm(400);
     #[cfg(not(any(feature = "machine-delta", feature = "machine-arm")))]

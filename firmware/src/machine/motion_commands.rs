@@ -332,10 +332,13 @@ impl<'q> Machine<'q> {
     /// after the queued moves.
     pub(super) fn home(&mut self, command: &Command) -> Outcome {
         let mut motors = 0u8;
-        for (axis, letter) in [b'X', b'Y', b'Z'].into_iter().enumerate() {
+        // A running axis bit: a variable shift is a loop on the AVR.
+        let mut bit = 1;
+        for &letter in b"XYZ" {
             if command.has(letter) {
-                motors |= 1 << axis;
+                motors |= bit;
             }
+            bit <<= 1;
         }
         match self.motion.home(motors) {
             Ok(()) => {
@@ -355,10 +358,13 @@ impl<'q> Machine<'q> {
         #[cfg(feature = "encoders")]
         self.encoders_homed(homed);
         let position = self.motion.position_um();
+        // A running axis bit: a variable shift is a loop on the AVR.
+        let mut bit = 1;
         for axis in 0..3 {
-            if homed & (1 << axis) != 0 {
+            if homed & bit != 0 {
                 self.modal.offset[axis] = 0;
             }
+            bit <<= 1;
         }
         self.modal.position[..3].copy_from_slice(&position[..3]);
         if homed & 0b111 == 0b111 {
@@ -372,74 +378,84 @@ impl<'q> Machine<'q> {
     /// re-homes the same way). Bare `M665` reports the geometry.
     #[cfg(feature = "delta")]
     pub(super) fn delta_geometry<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
-        let MachineKinematics::Delta(mut delta) = self.motion.config.kinematics else {
-            return Err(CommandError::NotThisMachine);
-        };
-        let mm = |letter| -> Result<Option<f32>, CommandError> {
-            match command.value(letter)? {
-                None => Ok(None),
-                Some(value) => match value.to_scaled(3) {
-                    Some(um) if um > 0 => Ok(Some(um as f32 / 1000.0)),
-                    _ => Err(CommandError::OutOfRange(letter)),
-                },
-            }
-        };
-        let (rod, radius, height) = (mm(b'L')?, mm(b'R')?, mm(b'H')?);
-        if rod.is_none() && radius.is_none() && height.is_none() {
-            let _ = ufmt::uwrite!(
-                out,
-                "echo:  M665 L{} R{} H{}\n",
-                crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(delta.rod_length() * 100.0)),
-                crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(delta.radius() * 100.0)),
-                crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(delta.homed_height * 100.0))
-            );
-            return Ok(());
-        }
-        let (rod, radius) = (rod.unwrap_or(delta.rod_length()), radius.unwrap_or(delta.radius()));
-        if rod <= radius {
-            return Err(CommandError::OutOfRange(b'L'));
-        }
-        delta.set_geometry(rod, radius);
-        if let Some(height) = height {
-            delta.homed_height = height;
-        }
-        self.change_kinematics(MachineKinematics::Delta(delta))
+        self.delta_setting(command, out, false)
     }
 
     /// `M666 X Y Z` (delta): endstop trims, mm (each tower's switch this
     /// far above the nominal one). Bare `M666` reports them.
     #[cfg(feature = "delta")]
     pub(super) fn delta_trim<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
-        let MachineKinematics::Delta(mut delta) = self.motion.config.kinematics else {
+        self.delta_setting(command, out, true)
+    }
+
+    /// `M665` (`trim` false) and `M666` in one function: their reading,
+    /// report and commit are the same but for the letters and checks (out
+    /// of line: inlined into the dispatcher they cost 2 KB). The delta is
+    /// changed in place, not through copies of it.
+    #[cfg(feature = "delta")]
+    #[inline(never)]
+    fn delta_setting<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W, trim: bool) -> Result<(), CommandError> {
+        let MachineKinematics::Delta(delta) = &self.motion.config.kinematics else {
             return Err(CommandError::NotThisMachine);
         };
+        let (code, letters, mut values) = if trim {
+            (666, b"XYZ", delta.endstop_trim)
+        } else {
+            (665, b"LRH", [delta.rod_length(), delta.radius(), delta.homed_height])
+        };
         let mut any = false;
-        for (tower, letter) in [b'X', b'Y', b'Z'].into_iter().enumerate() {
-            if let Some(value) = command.value(letter)? {
-                match value.to_scaled(3) {
-                    Some(um) if um.abs() <= 20_000 => delta.endstop_trim[tower] = um as f32 / 1000.0,
+        for (value, &letter) in values.iter_mut().zip(letters) {
+            if let Some(given) = command.value(letter)? {
+                match given.to_scaled(3) {
+                    // M665: positive; M666: within ±20 mm (wrapping_abs:
+                    // i32::MIN as the release build's abs()).
+                    Some(um) if (if trim { um.wrapping_abs() <= 20_000 } else { um > 0 }) => {
+                        *value = crate::motion::milli(um)
+                    }
                     _ => return Err(CommandError::OutOfRange(letter)),
                 }
                 any = true;
             }
         }
         if !any {
-            let trim = delta.endstop_trim.map(|mm| crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(mm * 100.0)));
-            let _ = ufmt::uwrite!(out, "echo:  M666 X{} Y{} Z{}\n", trim[0], trim[1], trim[2]);
+            // `echo:  M665 L361.00 R227.00 H300.00` and the like.
+            let _ = ufmt::uwrite!(out, "echo:  M{}", code as u16);
+            for (&letter, &value) in letters.iter().zip(&values) {
+                let _ = ufmt::uwrite!(
+                    out,
+                    " {}{}",
+                    char::from(letter),
+                    crate::reply::Fixed::hundredths(crate::motion::math::round_to_i32(value * 100.0))
+                );
+            }
+            let _ = out.write_str("\n");
             return Ok(());
         }
-        self.change_kinematics(MachineKinematics::Delta(delta))
+        if !trim && values[0] <= values[1] {
+            // The rod must be longer than the radius.
+            return Err(CommandError::OutOfRange(b'L'));
+        }
+        self.change_delta(trim, &values)
     }
 
     /// New kinematics take effect for the moves that follow; where the
-    /// carriages are in the new geometry is unknown until `G28`.
+    /// carriages are in the new geometry is unknown until `G28`. The
+    /// delta is changed in place (the caller checked that it is one), once
+    /// the moves are done: the trims (`trim`), or rod, radius and height.
     #[cfg(feature = "delta")]
-    fn change_kinematics(&mut self, kinematics: MachineKinematics) -> Result<(), CommandError> {
+    fn change_delta(&mut self, trim: bool, values: &[f32; 3]) -> Result<(), CommandError> {
         if !self.motion.is_idle() {
             return Err(CommandError::Motion(MotionError::Busy));
         }
-        self.motion.set_kinematics(kinematics);
         self.position_lost = true;
+        let delta = self.motion.delta_mut().ok_or(CommandError::NotThisMachine)?;
+        if trim {
+            delta.endstop_trim = *values;
+        } else {
+            delta.set_geometry(values[0], values[1]);
+            delta.homed_height = values[2];
+        }
+        self.motion.kinematics_changed();
         Ok(())
     }
 }

@@ -99,7 +99,10 @@ pub enum HomingStep {
     Failed(u8),
 }
 
+/// `repr(u8)`: `NextGroup` is the tag 0, so an all-zero `Homing` is
+/// [`Homing::new`] (see [`Homing::init_in`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
 enum Phase {
     NextGroup,
     AfterApproach,
@@ -145,9 +148,22 @@ impl Homing {
         Self { requested: 0, group_index: 0, group: 0, phase: Phase::NextGroup, active: false, travel: [0; MOTORS] }
     }
 
+    /// [`Self::new`] built in `slot` with a memset: all-zero bytes are
+    /// `new()` (zero integers, `false`, `Phase::NextGroup` as tag 0 of a
+    /// `repr(u8)` enum; a test compares), where the constant was written
+    /// byte by byte to absolute addresses of the board's `static` machine.
+    pub fn init_in(slot: &mut core::mem::MaybeUninit<Self>) {
+        // SAFETY: zero bytes are a valid `Homing`, see above.
+        unsafe { core::ptr::write_bytes(slot.as_mut_ptr(), 0, 1) };
+    }
+
     /// Begin homing these motors (a mask of motors 0–2).
     pub fn start(&mut self, motors: u8) {
-        *self = Self { requested: motors & 0b111, active: true, ..Self::new() };
+        // `new()` by a memset, as `init_in`.
+        // SAFETY: zero bytes are a valid `Homing` (see `init_in`).
+        unsafe { core::ptr::write_bytes(self as *mut Self, 0, 1) };
+        self.requested = motors & 0b111;
+        self.active = true;
     }
 
     pub fn is_active(&self) -> bool {
@@ -347,6 +363,14 @@ mod tests {
         }
         assert_eq!(homing.next(&config, 0, now), HomingStep::Done);
         assert!(!homing.is_active());
+    }
+
+    #[test]
+    fn a_zeroed_homing_is_new() {
+        let mut slot = core::mem::MaybeUninit::<Homing>::uninit();
+        Homing::init_in(&mut slot);
+        // SAFETY: `init_in` initialised it.
+        assert_eq!(unsafe { slot.assume_init() }, Homing::new());
     }
 
     #[test]

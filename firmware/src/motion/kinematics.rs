@@ -51,7 +51,10 @@ pub trait Kinematics {
 /// Motor coordinates → whole steps, rounded to the nearest step (half away
 /// from zero).
 pub fn to_steps(motors: Vector3, steps_per_unit: Vector3) -> [i32; LINEAR_AXES] {
-    motor_steps(&motors, &[steps_per_unit[0], steps_per_unit[1], steps_per_unit[2], 0.0])
+    motor_steps(
+        &motors,
+        &[steps_per_unit[0], steps_per_unit[1], steps_per_unit[2], 0.0],
+    )
 }
 
 /// [`to_steps`] given the steps per unit of all four motors (the motion
@@ -125,8 +128,27 @@ pub struct Delta {
 impl Delta {
     /// A delta with the given geometry (mm, degrees); printable radius
     /// defaults to the reach L − R, no tilt check, no trim.
-    pub fn new(rod_length: f32, radius: f32, effector_offset: f32, tower_angles_deg: Vector3) -> Self {
-        let mut delta = Self {
+    pub fn new(
+        rod_length: f32,
+        radius: f32,
+        effector_offset: f32,
+        tower_angles_deg: Vector3,
+    ) -> Self {
+        let mut delta = Self::unplaced(rod_length, radius, effector_offset, tower_angles_deg);
+        delta.place_towers();
+        delta
+    }
+
+    /// [`Self::new`] without the tower positions (sines and cosines, not
+    /// `const`): [`Self::place_towers`] must follow before use. `const`,
+    /// so a board can keep its machine in flash.
+    pub const fn unplaced(
+        rod_length: f32,
+        radius: f32,
+        effector_offset: f32,
+        tower_angles_deg: Vector3,
+    ) -> Self {
+        Self {
             rod_length,
             radius,
             effector_offset,
@@ -137,16 +159,25 @@ impl Delta {
             homed_height: 300.0,
             endstop_trim: [0.0; 3],
             segment_length: 1.0,
-        };
-        delta.place_towers();
-        delta
+        }
     }
 
     /// SPEC §2's printer: L 361, R 227, OF 64, towers at 0°/120°/240°
     /// (`repetier_layout` gives 90°/330°/210°), printable radius 130 mm.
     pub fn spec_printer(repetier_layout: bool) -> Self {
-        let angles = if repetier_layout { [90.0, 330.0, 210.0] } else { [0.0, 120.0, 240.0] };
-        let mut delta = Self::new(361.0, 227.0, 64.0, angles);
+        let mut delta = Self::spec_printer_unplaced(repetier_layout);
+        delta.place_towers();
+        delta
+    }
+
+    /// [`Self::spec_printer`] before [`Self::place_towers`].
+    pub const fn spec_printer_unplaced(repetier_layout: bool) -> Self {
+        let angles = if repetier_layout {
+            [90.0, 330.0, 210.0]
+        } else {
+            [0.0, 120.0, 240.0]
+        };
+        let mut delta = Self::unplaced(361.0, 227.0, 64.0, angles);
         delta.printable_radius = 130.0;
         delta
     }
@@ -172,17 +203,31 @@ impl Delta {
         self.radius
     }
 
-    fn place_towers(&mut self) {
-        for (tower, angle) in self.towers.iter_mut().zip(self.tower_angles_deg) {
-            let (sin, cos) = sin_cos(math::radians(angle));
+    /// The tower pivots from the radius and the angles.
+    pub fn place_towers(&mut self) {
+        for (tower, angle) in self.towers.iter_mut().zip(&self.tower_angles_deg) {
+            let (sin, cos) = sin_cos(math::radians(*angle));
             *tower = [self.radius * cos, self.radius * sin];
+        }
+    }
+
+    /// The carriage pivot of one tower (tower x, tower y, h − OF), out
+    /// of line (filling an array of them in a loop compiled to a zeroing
+    /// loop and a memcpy per element).
+    #[inline(never)]
+    fn pivot(&self, heights: &Vector3, tower: usize) -> Vector3 {
+        match (self.towers.get(tower), heights.get(tower)) {
+            (Some(&[x, y]), Some(height)) => [x, y, height - self.effector_offset],
+            _ => [0.0; 3],
         }
     }
 
     /// Carriage height of every tower when all sit at their top endstops:
     /// the nozzle is then at (0, 0, homed_height), trims aside.
     pub fn homed_carriage_heights(&self) -> Vector3 {
-        let nominal = self.homed_height + self.effector_offset + sqrt(self.rod_length * self.rod_length - self.radius * self.radius);
+        let nominal = self.homed_height
+            + self.effector_offset
+            + sqrt(self.rod_length * self.rod_length - self.radius * self.radius);
         [
             nominal + self.endstop_trim[0],
             nominal + self.endstop_trim[1],
@@ -220,32 +265,38 @@ impl Kinematics for Delta {
     /// Trilateration: the nozzle (less OF) lies at distance L from each
     /// carriage pivot (tower x, tower y, h_i); of the two intersections of
     /// the three spheres, the one below the carriages.
+    ///
+    /// Written for the soft-float AVR, where each operation is a call:
+    /// out-of-line vector helpers working in place (a − b is a + b·(−1),
+    /// bit for bit), and few vectors alive at once, so the frame stays
+    /// small. Spelled out per component this was 2 KB.
+    #[inline(never)]
     fn forward(&self, heights: Vector3) -> Result<Vector3, KinematicsError> {
-        let centre = |i: usize| -> Vector3 { [self.towers[i][0], self.towers[i][1], heights[i] - self.effector_offset] };
-        let (p1, p2, p3) = (centre(0), centre(1), centre(2));
-        let sub = |a: Vector3, b: Vector3| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-        let dot = |a: Vector3, b: Vector3| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-        let scale = |a: Vector3, k: f32| [a[0] * k, a[1] * k, a[2] * k];
-        let p21 = sub(p2, p1);
-        let d = sqrt(dot(p21, p21));
+        // p1, then p2 − p1 (becomes ex) and p3 − p1.
+        let mut v = [
+            self.pivot(&heights, 0),
+            self.pivot(&heights, 1),
+            self.pivot(&heights, 2),
+        ];
+        let [p1, ex, p31] = &mut v;
+        add_scaled3(ex, p1, -1.0);
+        add_scaled3(p31, p1, -1.0);
+        let d = length3(ex);
         if !(d > 0.0) {
             return Err(KinematicsError::NoSolution);
         }
-        let ex = scale(p21, 1.0 / d);
-        let p31 = sub(p3, p1);
-        let i = dot(ex, p31);
-        let ey_raw = sub(p31, scale(ex, i));
-        let ey_len = sqrt(dot(ey_raw, ey_raw));
+        scale3(ex, 1.0 / d);
+        let i = dot3(ex, p31);
+        // p1 is computed again at the end: it becomes ey meanwhile.
+        *p1 = *p31;
+        let ey = p1;
+        add_scaled3(ey, ex, -i);
+        let ey_len = length3(ey);
         if !(ey_len > 0.0) {
             return Err(KinematicsError::NoSolution);
         }
-        let ey = scale(ey_raw, 1.0 / ey_len);
-        let ez = [
-            ex[1] * ey[2] - ex[2] * ey[1],
-            ex[2] * ey[0] - ex[0] * ey[2],
-            ex[0] * ey[1] - ex[1] * ey[0],
-        ];
-        let j = dot(ey, p31);
+        scale3(ey, 1.0 / ey_len);
+        let j = dot3(ey, p31);
         // All three radii are L, so the r₁² − r₂² terms vanish.
         let x = d / 2.0;
         let y = (i * i + j * j) / (2.0 * j) - i * x / j;
@@ -254,13 +305,20 @@ impl Kinematics for Delta {
             return Err(KinematicsError::NoSolution);
         }
         let z = sqrt(z_sqr);
-        let base = [p1[0] + ex[0] * x + ey[0] * y, p1[1] + ex[1] * x + ey[1] * y, p1[2] + ex[2] * x + ey[2] * y];
-        let (a, b) = ([base[0] + ez[0] * z, base[1] + ez[1] * z, base[2] + ez[2] * z], [
-            base[0] - ez[0] * z,
-            base[1] - ez[1] * z,
-            base[2] - ez[2] * z,
-        ]);
-        Ok(if a[2] < b[2] { a } else { b })
+        // The base point p1 + ex·x + ey·y where p3 − p1 was; ez in ex.
+        let base = p31;
+        *base = self.pivot(&heights, 0);
+        add_scaled3(base, ex, x);
+        add_scaled3(base, ey, y);
+        let ez = cross3(ex, ey);
+        // Of base ± ez·z, the lower (base − ez·z when neither is).
+        let z = if base[2] + ez[2] * z < base[2] - ez[2] * z {
+            z
+        } else {
+            -z
+        };
+        add_scaled3(base, &ez, z);
+        Ok(*base)
     }
 
     fn segment_mm(&self) -> Option<f32> {
@@ -270,6 +328,44 @@ impl Kinematics for Delta {
     fn motor_steps_per_unit(&self, steps_per_mm: Vector3) -> Vector3 {
         steps_per_mm
     }
+}
+
+/// a ← a + v·k. The vector helpers are out of line and work in place:
+/// the delta's trilateration calls each several times.
+#[inline(never)]
+fn add_scaled3(a: &mut Vector3, v: &Vector3, k: f32) {
+    for axis in 0..3 {
+        a[axis] += v[axis] * k;
+    }
+}
+
+/// a ← a·k.
+#[inline(never)]
+fn scale3(a: &mut Vector3, k: f32) {
+    for axis in 0..3 {
+        a[axis] *= k;
+    }
+}
+
+/// a · b, summed left to right.
+#[inline(never)]
+fn dot3(a: &Vector3, b: &Vector3) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// |a|.
+#[inline(never)]
+pub(crate) fn length3(a: &Vector3) -> f32 {
+    sqrt(dot3(a, a))
+}
+
+/// a × b.
+fn cross3(a: &Vector3, b: &Vector3) -> Vector3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 /// SPEC §3: the planar RR arm in the Y–Z plane with a lead-screw X.
@@ -358,7 +454,11 @@ impl Kinematics for Arm {
     }
 
     fn motor_steps_per_unit(&self, steps_per_mm: Vector3) -> Vector3 {
-        [steps_per_mm[0], self.joint_steps_per_degree, self.joint_steps_per_degree]
+        [
+            steps_per_mm[0],
+            self.joint_steps_per_degree,
+            self.joint_steps_per_degree,
+        ]
     }
 }
 
@@ -423,7 +523,10 @@ mod tests {
         // And back: forward kinematics lands on the point.
         let back = delta.forward(got).unwrap();
         for (b, w) in back.iter().zip([x, y, 0.25]) {
-            assert!((b - w).abs() <= 0.002, "forward({got:?}) = {back:?}, want ({x}, {y}, 0.25)");
+            assert!(
+                (b - w).abs() <= 0.002,
+                "forward({got:?}) = {back:?}, want ({x}, {y}, 0.25)"
+            );
         }
     }
 
@@ -459,18 +562,30 @@ mod tests {
     #[test]
     fn delta_reach_and_radius_checks() {
         let mut delta = Delta::spec_printer(false);
-        assert_eq!(delta.inverse([131.0, 0.0, 0.0]), Err(KinematicsError::OutsidePrintable));
+        assert_eq!(
+            delta.inverse([131.0, 0.0, 0.0]),
+            Err(KinematicsError::OutsidePrintable)
+        );
         delta.printable_radius = 1000.0;
         // Reach is L − R = 134 mm straight away from a tower (opposite tower 0).
         assert!(delta.inverse([-133.9, 0.0, 0.0]).is_ok());
-        assert_eq!(delta.inverse([-134.1, 0.0, 0.0]), Err(KinematicsError::OutOfReach));
+        assert_eq!(
+            delta.inverse([-134.1, 0.0, 0.0]),
+            Err(KinematicsError::OutOfReach)
+        );
         // Exactly on the reach circle L² − d² = 0 is refused too.
-        assert_eq!(delta.inverse([-134.0, 0.0, 0.0]), Err(KinematicsError::OutOfReach));
+        assert_eq!(
+            delta.inverse([-134.0, 0.0, 0.0]),
+            Err(KinematicsError::OutOfReach)
+        );
         // Tilt: limit the rod to 40° from vertical.
         let sin40 = sin_cos(math::radians(40.0)).0;
         delta.max_tilt_sin_sqr = Some(sin40 * sin40);
         assert!(delta.inverse([0.0, 0.0, 0.0]).is_ok()); // 227/361 → 39°
-        assert_eq!(delta.inverse([-20.0, 0.0, 0.0]), Err(KinematicsError::TooTilted));
+        assert_eq!(
+            delta.inverse([-20.0, 0.0, 0.0]),
+            Err(KinematicsError::TooTilted)
+        );
     }
 
     #[test]
@@ -484,7 +599,12 @@ mod tests {
                 }
                 let h = delta.inverse([x, y, 7.5]).unwrap();
                 let p = delta.forward(h).unwrap();
-                assert!((p[0] - x).abs() < 0.002 && (p[1] - y).abs() < 0.002 && (p[2] - 7.5).abs() < 0.002, "{x},{y}: {p:?}");
+                assert!(
+                    (p[0] - x).abs() < 0.002
+                        && (p[1] - y).abs() < 0.002
+                        && (p[2] - 7.5).abs() < 0.002,
+                    "{x},{y}: {p:?}"
+                );
             }
         }
     }
@@ -496,7 +616,10 @@ mod tests {
         delta.endstop_trim = [0.0, -3.0, 0.0];
         let h = delta.homed_carriage_heights();
         let p = delta.forward([h[0], h[1] + 3.0, h[2]]).unwrap();
-        assert!(p[0].abs() < 1e-3 && p[1].abs() < 1e-3 && (p[2] - 300.0).abs() < 2e-3, "{p:?}");
+        assert!(
+            p[0].abs() < 1e-3 && p[1].abs() < 1e-3 && (p[2] - 300.0).abs() < 2e-3,
+            "{p:?}"
+        );
     }
 
     /// SPEC §3: (y, z) → θ2°, θ1°, elbow pulses, shoulder pulses at 200 ppr.
@@ -515,15 +638,33 @@ mod tests {
         let spu = arm.motor_steps_per_unit([50.0; 3]);
         for (y, z, elbow, shoulder, elbow_pulses, shoulder_pulses) in ARM_VECTORS {
             let m = arm.inverse([0.0, y, z]).unwrap();
-            assert!((m[1] - elbow).abs() < 1e-3, "({y}, {z}) θ2 {} want {elbow}", m[1]);
-            assert!((m[2] - shoulder).abs() < 1e-3, "({y}, {z}) θ1 {} want {shoulder}", m[2]);
+            assert!(
+                (m[1] - elbow).abs() < 1e-3,
+                "({y}, {z}) θ2 {} want {elbow}",
+                m[1]
+            );
+            assert!(
+                (m[2] - shoulder).abs() < 1e-3,
+                "({y}, {z}) θ1 {} want {shoulder}",
+                m[2]
+            );
             let steps = to_steps(m, spu);
-            assert_eq!((steps[1], steps[2]), (elbow_pulses, shoulder_pulses), "({y}, {z})");
+            assert_eq!(
+                (steps[1], steps[2]),
+                (elbow_pulses, shoulder_pulses),
+                "({y}, {z})"
+            );
             let back = arm.forward(m).unwrap();
-            assert!((back[1] - y).abs() < 1e-3 && (back[2] - z).abs() < 1e-3, "forward: {back:?}");
+            assert!(
+                (back[1] - y).abs() < 1e-3 && (back[2] - z).abs() < 1e-3,
+                "forward: {back:?}"
+            );
         }
         // r = 332.4 > 320: out of reach.
-        assert_eq!(arm.inverse([0.0, -110.0, -40.0]), Err(KinematicsError::OutOfReach));
+        assert_eq!(
+            arm.inverse([0.0, -110.0, -40.0]),
+            Err(KinematicsError::OutOfReach)
+        );
     }
 
     /// The f64 reference: SPEC §3's formulas verbatim (acos), rounded to
@@ -538,7 +679,10 @@ mod tests {
         let t2 = -cos2.acos();
         let t1 = pz.atan2(py) + (l2 * t2.sin()).atan2(l1 + l2 * t2.cos());
         let per_degree = 100.0 * ppr / 360.0;
-        Some(((t2.to_degrees() * per_degree).round() as i64, (t1.to_degrees() * per_degree).round() as i64))
+        Some((
+            (t2.to_degrees() * per_degree).round() as i64,
+            (t1.to_degrees() * per_degree).round() as i64,
+        ))
     }
 
     #[test]
@@ -553,17 +697,24 @@ mod tests {
                     match (arm.inverse([0.0, y as f32, z as f32]), reference) {
                         (Ok(m), Some((elbow, shoulder))) => {
                             let s = to_steps(m, spu);
-                            worst = worst.max((s[1] as i64 - elbow).abs()).max((s[2] as i64 - shoulder).abs());
+                            worst = worst
+                                .max((s[1] as i64 - elbow).abs())
+                                .max((s[2] as i64 - shoulder).abs());
                             checked += 1;
                         }
                         (Err(_), None) => refused += 1,
-                        (ours, reference) => panic!("({y}, {z}) ppr {ppr}: {ours:?} vs {reference:?}"),
+                        (ours, reference) => {
+                            panic!("({y}, {z}) ppr {ppr}: {ours:?} vs {reference:?}")
+                        }
                     }
                 }
             }
             assert!(worst <= 1, "ppr {ppr}: worst {worst} pulses");
             assert_eq!(checked + refused, 221 * 81);
-            assert!(refused > 0 && checked > 17_000, "{checked} reachable, {refused} not");
+            assert!(
+                refused > 0 && checked > 17_000,
+                "{checked} reachable, {refused} not"
+            );
         }
     }
 

@@ -77,6 +77,14 @@ pub fn length2(x: f32, y: f32) -> f32 {
     sqrt(x * x + y * y)
 }
 
+/// v² + 2·a·d: the speed² after accelerating at `accel` over `distance`
+/// from speed² `v_sqr` (the planner's passes and the segment profile; out
+/// of line: five call sites).
+#[inline(never)]
+pub fn speed_sqr_after(v_sqr: f32, accel: f32, distance: f32) -> f32 {
+    v_sqr + 2.0 * accel * distance
+}
+
 /// Arc tangent in (−π/2, π/2).
 pub fn atan(value: f32) -> f32 {
     if value.is_nan() {

@@ -225,7 +225,17 @@ impl MotionConfig {
     /// towers up at once; each carriage at most 150 mm/s.
     #[cfg(feature = "delta")]
     pub fn spec_delta(repetier_layout: bool) -> Self {
-        let mut delta = Delta::spec_printer(repetier_layout);
+        let mut config = Self::spec_delta_unplaced(repetier_layout);
+        config.place_towers();
+        config
+    }
+
+    /// [`Self::spec_delta`] before [`Self::place_towers`]: `const`, so a
+    /// board can keep it in flash (built field by field in code it cost
+    /// 1.1 KB on the AVR).
+    #[cfg(feature = "delta")]
+    pub const fn spec_delta_unplaced(repetier_layout: bool) -> Self {
+        let mut delta = Delta::spec_printer_unplaced(repetier_layout);
         delta.homed_height = 300.0;
         let tower = AxisHoming::bump(true, 80.0, 50.0, 400.0, 5.0);
         Self {
@@ -236,9 +246,18 @@ impl MotionConfig {
             soft_limits: None,
             homing: HomingConfig { sequence: [0b111, 0, 0], axes: [tower; 3], acceleration: 100_000.0 },
             home: HomePosition::DeltaTop,
-            stepper: StepperConfig::default(),
+            stepper: StepperConfig::DEFAULT,
             max_step_rate: 40_000.0,
             ..Self::prusa_i3()
+        }
+    }
+
+    /// A delta's tower pivots from its radius and tower angles (after
+    /// [`Self::spec_delta_unplaced`]); nothing for other machines.
+    #[cfg(feature = "delta")]
+    pub fn place_towers(&mut self) {
+        if let MachineKinematics::Delta(delta) = &mut self.kinematics {
+            delta.place_towers();
         }
     }
 
@@ -406,7 +425,12 @@ impl LineCut {
         // length; a Cartesian line needs no square root here (this runs
         // for every G1 of a slicer stream).
         let mut pieces = match config.kinematics.segment_mm() {
-            Some(segment) if segment > 0.0 => sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]) / segment,
+            // (`length3`: the same sum, out of line; the kinematics that
+            // cut by length have it already.)
+            Some(segment) if segment > 0.0 => match delta.first_chunk::<LINEAR_AXES>() {
+                Some(xyz) => kinematics::length3(xyz) / segment,
+                None => 0.0,
+            },
             _ => 0.0,
         };
         // Keep each motor within a block's 16-bit step count (with room for
@@ -502,16 +526,18 @@ impl<'q> Motion<'q> {
         // the slot is initialised afterwards.
         let motion = unsafe {
             addr_of_mut!((*p).config).write(config);
-            // `configure` below computes the real limits.
-            addr_of_mut!((*p).limits).write(MotorLimits { max_rate: [0.0; MOTORS], max_accel: [0.0; MOTORS] });
+            // `configure` below computes the real limits. All-zero bytes
+            // are 0.0 (and 0) for these plain float and integer arrays:
+            // a memset, not a zeroed temporary on the stack and a copy.
+            core::ptr::write_bytes(addr_of_mut!((*p).limits), 0, 1);
             Planner::init_in(&mut *addr_of_mut!((*p).planner).cast::<MaybeUninit<Planner>>());
             addr_of_mut!((*p).prep).write(Prep::new());
             addr_of_mut!((*p).feeder).write(feeder);
-            addr_of_mut!((*p).position).write([0.0; MOTORS]);
-            addr_of_mut!((*p).motor_steps).write([0; MOTORS]);
+            core::ptr::write_bytes(addr_of_mut!((*p).position), 0, 1);
+            core::ptr::write_bytes(addr_of_mut!((*p).motor_steps), 0, 1);
             addr_of_mut!((*p).e_remainder).write(0.0);
             addr_of_mut!((*p).pending).write(Pending::Nothing);
-            addr_of_mut!((*p).homing).write(Homing::new());
+            Homing::init_in(&mut *addr_of_mut!((*p).homing).cast::<MaybeUninit<Homing>>());
             addr_of_mut!((*p).homing_requested).write(None);
             addr_of_mut!((*p).homing_move).write(None);
             addr_of_mut!((*p).homed).write(0);
@@ -579,6 +605,24 @@ impl<'q> Motion<'q> {
     #[cfg(feature = "delta")]
     pub fn set_kinematics(&mut self, kinematics: MachineKinematics) {
         self.config.kinematics = kinematics;
+        self.configure();
+    }
+
+    /// The delta's geometry to change in place (`M665`, `M666`), `None`
+    /// for other kinematics; [`Self::kinematics_changed`] must follow
+    /// (together what [`Self::set_kinematics`] does with a copy).
+    #[cfg(feature = "delta")]
+    pub fn delta_mut(&mut self) -> Option<&mut Delta> {
+        match &mut self.config.kinematics {
+            MachineKinematics::Delta(delta) => Some(delta),
+            _ => None,
+        }
+    }
+
+    /// The kinematics changed in place (see [`Self::delta_mut`]): for the
+    /// moves that follow.
+    #[cfg(feature = "delta")]
+    pub fn kinematics_changed(&mut self) {
         self.configure();
     }
 
@@ -663,9 +707,13 @@ impl<'q> Motion<'q> {
     /// globally"). Off restores the machine's own hard limits (the arm's
     /// NC switches stay on).
     pub fn set_endstops_always(&mut self, on: bool) {
-        let homing_switches = (0..LINEAR_AXES).fold(0, |bits, motor| {
-            bits | homing::endstop_bit(motor, self.config.homing.axes[motor].towards_max)
-        });
+        // `homing::endstop_bit` of each axis, with a running motor bit: a
+        // variable shift is a loop on the AVR.
+        let (mut homing_switches, mut bit) = (0, 1);
+        for axis in &self.config.homing.axes {
+            homing_switches |= if axis.towards_max { bit << 4 } else { bit };
+            bit <<= 1;
+        }
         let limits = if on { self.machine_limits | homing_switches } else { self.machine_limits };
         if limits != self.config.stepper.limit_endstops {
             self.config.stepper.limit_endstops = limits;
@@ -1035,7 +1083,7 @@ impl<'q> Motion<'q> {
 /// Thousandths (µm, milli-units) to units as f32. Out of line: a
 /// conversion and a division inline at each of a dozen sites cost flash.
 #[inline(never)]
-fn milli(value: i32) -> f32 {
+pub(crate) fn milli(value: i32) -> f32 {
     value as f32 / 1000.0
 }
 

@@ -45,7 +45,7 @@
 //! does the same on the AVR). The step interrupt never reads a block.
 
 use super::stepper::MOTORS;
-use super::math::sqrt;
+use super::math::{speed_sqr_after, sqrt};
 
 /// Blocks in the ring (one stays empty: 23 usable). Look-ahead must hold
 /// the distance to stop from full speed, v²/(2a): 3.3 mm at 100 mm/s and
@@ -124,6 +124,16 @@ impl Default for Planner {
     }
 }
 
+/// Keep in `lowest` the (limit, steps) of the smallest limit/steps seen,
+/// by cross-multiplying; steps 0: none seen yet. Out of line: the rate
+/// and the acceleration share it.
+#[inline(never)]
+fn lower_ratio(lowest: &mut (f32, f32), limit: f32, steps: f32) {
+    if lowest.1 == 0.0 || limit * lowest.1 < lowest.0 * steps {
+        *lowest = (limit, steps);
+    }
+}
+
 const fn next(index: u8) -> u8 {
     if index as usize + 1 == PLANNER_SLOTS {
         0
@@ -145,19 +155,18 @@ impl Planner {
     /// machine), block by block: `new()` would build the whole ring as a
     /// temporary, 1.6 KB of the AVR's stack at boot.
     pub fn init_in(slot: &mut core::mem::MaybeUninit<Self>) -> &mut Self {
-        let empty = Self::new_empty_block();
         let p = slot.as_mut_ptr();
-        // SAFETY: every field of the valid slot is written once (the ring
-        // element by element); the slot is initialised afterwards.
+        // SAFETY: every field of the valid slot is written once; the slot
+        // is initialised afterwards. The ring and the previous unit vector
+        // are zeroed with one memset each: all-zero bytes are a valid
+        // `Block` (integers, a bool, floats: `new_empty_block`, which a
+        // test compares) and 0.0.
         unsafe {
-            let blocks = core::ptr::addr_of_mut!((*p).blocks).cast::<Block>();
-            for i in 0..PLANNER_SLOTS {
-                blocks.add(i).write(empty);
-            }
+            core::ptr::write_bytes(core::ptr::addr_of_mut!((*p).blocks), 0, 1);
             core::ptr::addr_of_mut!((*p).head).write(0);
             core::ptr::addr_of_mut!((*p).tail).write(0);
             core::ptr::addr_of_mut!((*p).planned).write(0);
-            core::ptr::addr_of_mut!((*p).previous_unit).write([0.0; MOTORS]);
+            core::ptr::write_bytes(core::ptr::addr_of_mut!((*p).previous_unit), 0, 1);
             core::ptr::addr_of_mut!((*p).previous_nominal_speed_sqr).write(0.0);
             core::ptr::addr_of_mut!((*p).junction_deviation).write(0.013);
             slot.assume_init_mut()
@@ -214,14 +223,19 @@ impl Planner {
 
     /// The oldest block: the one the segment preparation works on.
     pub fn current(&self) -> Option<&Block> {
-        (!self.is_empty()).then(|| &self.blocks[self.tail as usize])
+        // `get`: no bounds check (and panic path) for the ring index.
+        if self.is_empty() {
+            None
+        } else {
+            self.blocks.get(self.tail as usize)
+        }
     }
 
     pub fn current_mut(&mut self) -> Option<&mut Block> {
         if self.is_empty() {
             None
         } else {
-            Some(&mut self.blocks[self.tail as usize])
+            self.blocks.get_mut(self.tail as usize)
         }
     }
 
@@ -231,7 +245,7 @@ impl Planner {
         if self.is_empty() || following == self.head {
             0.0
         } else {
-            self.blocks[following as usize].entry_speed_sqr
+            self.blocks.get(following as usize).map_or(0.0, |block| block.entry_speed_sqr)
         }
     }
 
@@ -283,7 +297,10 @@ impl Planner {
         // Built in its slot (free: the ring is not full, and the head is
         // not published until the end), not as a temporary: the copy was a
         // memcpy and the temporary pushed the AVR frame past 63 bytes.
-        let block = &mut self.blocks[head];
+        // (`get_mut`: the head is always in the ring; no bounds check.)
+        let Some(block) = self.blocks.get_mut(head) else {
+            return Err(Full);
+        };
         *block = Block { watch: motion.watch, watch_release: motion.watch_release, ..Block::default() };
         // A motor covers steps/L steps per mm of path: the path's speed and
         // acceleration are capped so that each motor stays within its own
@@ -292,8 +309,8 @@ impl Planner {
         // one division per limit instead of two per motor (each costs the
         // AVR hundreds of cycles, for every line of a slicer stream).
         // (limit, steps); steps 0: no motor seen yet (a moving motor has ≥ 1).
-        let (mut rate, mut rate_steps) = (0.0, 0.0);
-        let (mut accel, mut accel_steps) = (0.0, 0.0);
+        let mut rate = (0.0, 0.0);
+        let mut accel = (0.0, 0.0);
         // A running motor bit: a variable shift is a loop on the AVR.
         let mut bit = 1;
         for motor in 0..MOTORS {
@@ -310,20 +327,16 @@ impl Planner {
             }
             let steps = steps as f32;
             let (motor_rate, motor_accel) = (limits.max_rate[motor], limits.max_accel[motor]);
-            if rate_steps == 0.0 || motor_rate * rate_steps < rate * steps {
-                (rate, rate_steps) = (motor_rate, steps);
-            }
-            if accel_steps == 0.0 || motor_accel * accel_steps < accel * steps {
-                (accel, accel_steps) = (motor_accel, steps);
-            }
+            lower_ratio(&mut rate, motor_rate, steps);
+            lower_ratio(&mut accel, motor_accel, steps);
         }
         // No motor moves: nothing to plan (both limits are set by the first
         // moving motor).
         if block.events == 0 {
             return Ok(());
         }
-        let speed = motion.speed.min(rate * motion.millimetres / rate_steps);
-        let acceleration = motion.acceleration.min(accel * motion.millimetres / accel_steps);
+        let speed = motion.speed.min(rate.0 * motion.millimetres / rate.1);
+        let acceleration = motion.acceleration.min(accel.0 * motion.millimetres / accel.1);
         if !(motion.millimetres > 0.0) || !(speed > 0.0) || !(acceleration > 0.0) {
             return Ok(());
         }
@@ -337,7 +350,9 @@ impl Planner {
         } else {
             self.junction_speed_sqr(&motion.unit, acceleration).min(nominal_speed_sqr).min(self.previous_nominal_speed_sqr)
         };
-        self.blocks[head].max_entry_speed_sqr = max_entry_speed_sqr;
+        if let Some(block) = self.blocks.get_mut(head) {
+            block.max_entry_speed_sqr = max_entry_speed_sqr;
+        }
         self.previous_unit = motion.unit;
         self.previous_nominal_speed_sqr = nominal_speed_sqr;
         self.head = next(self.head);
@@ -376,9 +391,10 @@ impl Planner {
         let mut index = newest;
         let mut next_entry_sqr = 0.0;
         while index != self.planned {
-            let block = &mut self.blocks[index as usize];
+            // (`get`: ring indices, no bounds checks; never `None`.)
+            let Some(block) = self.blocks.get_mut(index as usize) else { break };
             if block.entry_speed_sqr != block.max_entry_speed_sqr {
-                let reachable = next_entry_sqr + 2.0 * block.acceleration * block.millimetres;
+                let reachable = speed_sqr_after(next_entry_sqr, block.acceleration, block.millimetres);
                 block.entry_speed_sqr = block.max_entry_speed_sqr.min(reachable);
             }
             next_entry_sqr = block.entry_speed_sqr;
@@ -389,12 +405,12 @@ impl Planner {
         while index != newest {
             let following = next(index);
             // Three fields, not a copy of the whole block (a memcpy on the AVR).
-            let current = &self.blocks[index as usize];
+            let Some(current) = self.blocks.get(index as usize) else { break };
             let (current_entry_sqr, current_acceleration, current_millimetres) =
                 (current.entry_speed_sqr, current.acceleration, current.millimetres);
-            let block = &mut self.blocks[following as usize];
+            let Some(block) = self.blocks.get_mut(following as usize) else { break };
             if current_entry_sqr < block.entry_speed_sqr {
-                let reachable = current_entry_sqr + 2.0 * current_acceleration * current_millimetres;
+                let reachable = speed_sqr_after(current_entry_sqr, current_acceleration, current_millimetres);
                 if reachable < block.entry_speed_sqr {
                     // Full acceleration through `current`: nothing before
                     // `block` can improve any more.
@@ -413,6 +429,17 @@ impl Planner {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_ring_built_in_place_holds_empty_blocks() {
+        // `init_in` zeroes the ring with a memset: zero bytes must be the
+        // empty block.
+        let mut slot = core::mem::MaybeUninit::<Planner>::uninit();
+        let planner = Planner::init_in(&mut slot);
+        assert!(planner.blocks.iter().all(|block| *block == Planner::new_empty_block()));
+        assert_eq!(planner.previous_unit, [0.0; MOTORS]);
+        assert!(planner.is_empty() && planner.junction_deviation == 0.013);
+    }
 
     const LIMITS: MotorLimits = MotorLimits { max_rate: [30_000.0; MOTORS], max_accel: [300_000.0; MOTORS] };
 

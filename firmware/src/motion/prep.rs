@@ -34,7 +34,7 @@
 //! into the planner (`entry_speed_sqr`, `millimetres`), which is what lets
 //! the look-ahead raise the exit speed of a block already under way.
 
-use super::math::{clamp, sqrt, to_i32, to_u32};
+use super::math::{clamp, speed_sqr_after, sqrt, to_i32, to_u32};
 use super::planner::Planner;
 use super::stepper::{Segment, StepBlock, StepFeeder, TIMER_HZ};
 
@@ -124,7 +124,8 @@ impl Profile {
         // be reached (it always can, by the planner's passes, but rounding
         // happens) accelerate throughout; if the speed is too high to slow
         // to the exit (likewise), decelerate throughout.
-        let peak_sqr = ((2.0 * accel * distance + v0_sqr + exit_sqr) * 0.5).max(v0_sqr);
+        // (2·a·d + v0², as speed_sqr_after: addition commutes exactly.)
+        let peak_sqr = ((speed_sqr_after(v0_sqr, accel, distance) + exit_sqr) * 0.5).max(v0_sqr);
         let peak = sqrt(peak_sqr).max(start_speed);
         let accel_end = clamp((peak_sqr - v0_sqr) * half_inv_a, 0.0, distance);
         let inv_peak = inverse(peak);
@@ -134,11 +135,13 @@ impl Profile {
     /// Speed after `e` events.
     fn speed_at(&self, e: f32) -> f32 {
         if e <= self.accel_end {
-            sqrt(self.start_speed * self.start_speed + 2.0 * self.accel * e)
+            sqrt(speed_sqr_after(self.start_speed * self.start_speed, self.accel, e))
         } else if e <= self.decel_start {
             self.peak
         } else {
-            sqrt((self.peak * self.peak - 2.0 * self.accel * (e - self.decel_start)).max(0.0))
+            // peak² − 2·a·(e − d) as peak² + 2·a·(d − e): the same bits
+            // (d − e is −(e − d) exactly, and peak² is never −0).
+            sqrt(speed_sqr_after(self.peak * self.peak, self.accel, self.decel_start - e).max(0.0))
         }
     }
 
