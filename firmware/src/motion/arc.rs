@@ -25,7 +25,7 @@
 //! and a negative R asks for the arc longer than half a turn. I/J with the
 //! end point on the start point is a full circle.
 
-use super::math::{atan2, clamp, length2, sin_cos, sqrt, to_u32, PI};
+use super::math::{atan2, clamp, length2, max, min, sin_cos, sqrt, to_u32, PI};
 
 /// X, Y, Z, E in mm.
 pub type Point = [f32; 4];
@@ -184,7 +184,7 @@ impl ArcCutter {
                 // arc of at most half a turn the centre lies to the right of
                 // the chord when going clockwise, to the left when
                 // counter-clockwise.
-                let rise = sqrt((r * r - half * half).max(0.0));
+                let rise = sqrt(max(r * r - half * half, 0.0));
                 let (ux, uy) = (dx / chord, dy / chord);
                 let mut side = if clockwise { 1.0 } else { -1.0 };
                 if radius < 0.0 {
@@ -218,9 +218,9 @@ impl ArcCutter {
         }
         let tolerance = clamp(tolerance, 1.0e-4, radius);
         let chord = 2.0 * sqrt(tolerance * (2.0 * radius - tolerance));
-        let chords = (sweep.abs() * radius / chord).max(1.0);
+        let chords = max(sweep.abs() * radius / chord, 1.0);
         // Round up, saturating far beyond any real arc.
-        let chords = (to_u32(chords.min(1.0e6)) + 1).min(1_000_000);
+        let chords = (to_u32(min(chords, 1.0e6)) + 1).min(1_000_000);
         self.start_angle = start_angle;
         self.sweep = sweep;
         self.chords = chords;

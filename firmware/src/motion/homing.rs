@@ -308,7 +308,7 @@ impl Homing {
             let distance = distance.min(i32::MAX as u32) as i32;
             let positive = axis.towards_max == towards;
             *step = if positive { distance } else { -distance };
-            rate = rate.min(axis_rate);
+            rate = super::math::min(rate, axis_rate);
             if watch {
                 // `endstop_bit`: bit i (min) or 4 + i (max).
                 watch_bits |= if axis.towards_max { motor_bit << 4 } else { motor_bit };

@@ -345,7 +345,7 @@ impl MotionConfig {
     pub fn motor_limits(&self, limits: &mut MotorLimits) {
         let spu = self.steps_per_unit();
         for motor in 0..MOTORS {
-            limits.max_rate[motor] = (self.max_feed[motor] * spu[motor]).min(self.max_step_rate);
+            limits.max_rate[motor] = math::min(self.max_feed[motor] * spu[motor], self.max_step_rate);
             limits.max_accel[motor] = self.max_accel[motor] * spu[motor];
         }
     }
@@ -438,10 +438,10 @@ impl LineCut {
         let spu = config.steps_per_unit();
         const PER_HEADROOM: f32 = 4.0 / MAX_BLOCK_STEPS as f32;
         for axis in 0..LINEAR_AXES {
-            pieces = pieces.max(math::abs(delta[axis]) * config.steps_per_mm[axis].max(spu[axis]) * PER_HEADROOM);
+            pieces = math::max(pieces, math::abs(delta[axis]) * math::max(config.steps_per_mm[axis], spu[axis]) * PER_HEADROOM);
         }
-        pieces = pieces.max(math::abs(delta[E]) * spu[E] * config.flow_factor * PER_HEADROOM);
-        self.pieces = math::to_u32(pieces.min(1.0e7)).saturating_add(1);
+        pieces = math::max(pieces, math::abs(delta[E]) * spu[E] * config.flow_factor * PER_HEADROOM);
+        self.pieces = math::to_u32(math::min(pieces, 1.0e7)).saturating_add(1);
     }
 
     /// The next piece's end into `point`; `false` once the line is done.
@@ -588,7 +588,7 @@ impl<'q> Motion<'q> {
     fn configure(&mut self) {
         self.config.motor_limits(&mut self.limits);
         self.planner.junction_deviation = self.config.junction_deviation;
-        let min_ticks = (stepper::TIMER_HZ as f32 / self.config.max_step_rate).max(4.0);
+        let min_ticks = math::max(stepper::TIMER_HZ as f32 / self.config.max_step_rate, 4.0);
         self.prep.min_interval_q8 = math::to_u32(min_ticks * 256.0);
     }
 

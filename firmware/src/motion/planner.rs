@@ -45,7 +45,7 @@
 //! does the same on the AVR). The step interrupt never reads a block.
 
 use super::stepper::MOTORS;
-use super::math::{speed_sqr_after, sqrt};
+use super::math::{min, speed_sqr_after, sqrt};
 
 /// Blocks in the ring (one stays empty: 23 usable). Look-ahead must hold
 /// the distance to stop from full speed, v²/(2a): 3.3 mm at 100 mm/s and
@@ -335,8 +335,8 @@ impl Planner {
         if block.events == 0 {
             return Ok(());
         }
-        let speed = motion.speed.min(rate.0 * motion.millimetres / rate.1);
-        let acceleration = motion.acceleration.min(accel.0 * motion.millimetres / accel.1);
+        let speed = min(motion.speed, rate.0 * motion.millimetres / rate.1);
+        let acceleration = min(motion.acceleration, accel.0 * motion.millimetres / accel.1);
         if !(motion.millimetres > 0.0) || !(speed > 0.0) || !(acceleration > 0.0) {
             return Ok(());
         }
@@ -348,7 +348,7 @@ impl Planner {
         let max_entry_speed_sqr = if was_empty {
             0.0
         } else {
-            self.junction_speed_sqr(&motion.unit, acceleration).min(nominal_speed_sqr).min(self.previous_nominal_speed_sqr)
+            min(min(self.junction_speed_sqr(&motion.unit, acceleration), nominal_speed_sqr), self.previous_nominal_speed_sqr)
         };
         if let Some(block) = self.blocks.get_mut(head) {
             block.max_entry_speed_sqr = max_entry_speed_sqr;
@@ -395,7 +395,7 @@ impl Planner {
             let Some(block) = self.blocks.get_mut(index as usize) else { break };
             if block.entry_speed_sqr != block.max_entry_speed_sqr {
                 let reachable = speed_sqr_after(next_entry_sqr, block.acceleration, block.millimetres);
-                block.entry_speed_sqr = block.max_entry_speed_sqr.min(reachable);
+                block.entry_speed_sqr = min(block.max_entry_speed_sqr, reachable);
             }
             next_entry_sqr = block.entry_speed_sqr;
             index = prev(index);

@@ -34,7 +34,7 @@
 //! into the planner (`entry_speed_sqr`, `millimetres`), which is what lets
 //! the look-ahead raise the exit speed of a block already under way.
 
-use super::math::{clamp, speed_sqr_after, sqrt, to_i32, to_u32};
+use super::math::{clamp, max, min, speed_sqr_after, sqrt, to_i32, to_u32};
 use super::planner::Planner;
 use super::stepper::{Segment, StepBlock, StepFeeder, TIMER_HZ};
 
@@ -125,8 +125,8 @@ impl Profile {
         // happens) accelerate throughout; if the speed is too high to slow
         // to the exit (likewise), decelerate throughout.
         // (2·a·d + v0², as speed_sqr_after: addition commutes exactly.)
-        let peak_sqr = ((speed_sqr_after(v0_sqr, accel, distance) + exit_sqr) * 0.5).max(v0_sqr);
-        let peak = sqrt(peak_sqr).max(start_speed);
+        let peak_sqr = max((speed_sqr_after(v0_sqr, accel, distance) + exit_sqr) * 0.5, v0_sqr);
+        let peak = max(sqrt(peak_sqr), start_speed);
         let accel_end = clamp((peak_sqr - v0_sqr) * half_inv_a, 0.0, distance);
         let inv_peak = inverse(peak);
         Self { start_speed, accel, inv_accel, inv_peak, peak, accel_end, decel_start: accel_end }
@@ -141,7 +141,7 @@ impl Profile {
         } else {
             // peak² − 2·a·(e − d) as peak² + 2·a·(d − e): the same bits
             // (d − e is −(e − d) exactly, and peak² is never −0).
-            sqrt(speed_sqr_after(self.peak * self.peak, self.accel, self.decel_start - e).max(0.0))
+            sqrt(max(speed_sqr_after(self.peak * self.peak, self.accel, self.decel_start - e), 0.0))
         }
     }
 
@@ -168,7 +168,7 @@ impl Profile {
     fn segment_events(&self, left: u16) -> u16 {
         let v = self.start_speed;
         let (mut target, boundary) = if self.accel_end >= 0.5 {
-            let faster = (v * SPEED_RATIO).min(self.peak);
+            let faster = min(v * SPEED_RATIO, self.peak);
             ((faster * faster - v * v) * 0.5 * self.inv_accel, self.accel_end)
         } else if self.decel_start >= 0.5 {
             // Cruising: constant speed up to the deceleration.
@@ -179,7 +179,7 @@ impl Profile {
         };
         let within_time = v * MAX_SEGMENT_S + 0.5 * self.accel * MAX_SEGMENT_S * MAX_SEGMENT_S;
         if self.accel_end >= 0.5 || self.decel_start < 0.5 {
-            target = target.min(within_time);
+            target = min(target, within_time);
         }
         // End near the phase boundary rather than just past it.
         if target > boundary {
@@ -315,7 +315,7 @@ impl Prep {
     fn fit(&self, events: u16, total_q8: f32, first_q8: f32) -> (u32, i32, f32) {
         let k = events as f32;
         let min = self.min_interval_q8 as f32;
-        let total_q8 = total_q8.max(min * k);
+        let total_q8 = max(total_q8, min * k);
         if events == 1 {
             let interval = total_q8 + 0.5;
             let interval = to_u32(interval);
@@ -330,7 +330,7 @@ impl Prep {
         let mut interval = round_f32((total_q8 - add * pairs) * inv_k);
         if interval < min || interval + add * (k - 1.0) < min {
             add = 0.0;
-            interval = round_f32(total_q8 * inv_k).max(min);
+            interval = max(round_f32(total_q8 * inv_k), min);
         }
         let actual = k * interval + add * pairs;
         (to_u32(interval), to_i32(add), actual)
