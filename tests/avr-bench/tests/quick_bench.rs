@@ -962,8 +962,10 @@ fn the_encoder_build_corrects_a_belt_slip_and_stops_the_job_on_a_jam_or_a_silent
     let report = replies(&mut board, &["M822"]);
     // (Leaving the 20 mm boundary may add an accepted pulse: its dither.)
     assert!(word(&report[0], "idx:") as u64 >= accepted && report[0].contains(" glitch:1 "), "{report:?}");
-    // (At most the loop's one step of dither.)
-    assert!((board.position(X) - x).abs() <= 1, "{x} {report:?}");
+    // (At most the loop's dither: one step either side of where it
+    // settled, so two samples may be two steps apart; a glitch taken as
+    // an Index pulse would move the carriage by up to a pole pair, 200.)
+    assert!((board.position(X) - x).abs() <= 2, "{x} now {} {report:?}", board.position(X));
 
     // M92 on X rescales its loop and re-zeroes its encoder there; the
     // bench's strip is rescaled the same way: nothing to correct.
