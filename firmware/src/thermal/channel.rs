@@ -14,7 +14,8 @@ use super::thermistor::{Oversampled, Thermistor};
 use super::{Celsius, Heater, HeaterId};
 use crate::progmem::Flash;
 
-/// Everything fixed about one heater: 27 bytes, pointer-free, kept in
+/// Everything fixed about one heater: 28 bytes (its one pointer, the
+/// thermistor table, is itself in flash), kept in
 /// flash ([`Flash`]) and copied out when a sample needs it, so it costs no
 /// RAM on the AVR. The stock ones are [`HOTEND_0`], [`BED`] and [`BARREL`];
 /// a board with others declares its own

@@ -92,7 +92,7 @@
 //!   `channel.clear_fault()`.
 //!
 //! **RAM (AVR, packed).** `HeaterChannel` 44 bytes (a compile-time
-//! assertion keeps it there); its 27-byte `HeaterConfig` stays in flash
+//! assertion keeps it there); its 28-byte `HeaterConfig` stays in flash
 //! ([`channel::HOTEND_0`], [`channel::BED`], [`channel::BARREL`]…, copied
 //! out per sample). `SampleAverager` 7, `SlowPwm` 7, `AutoReport` 5,
 //! `ColdExtrusionGuard` 5; `Autotune` 76 and `TemperatureWait` 34 only
@@ -104,7 +104,7 @@
 //! a bed through every call above, `opt-level = "s"`, LTO):** ≈ 8.6 KiB
 //! beyond what the firmware already links (u32 division, `ufmt` integers,
 //! `write_fixed`, `FlashStr`), of which ≈ 2 KiB is the harness's own
-//! executor-like glue; the two 54-row tables 324 bytes each. `M303`
+//! executor-like glue; the two 54-row tables 216 bytes each (a build links only the ones its configurations name). `M303`
 //! (auto-tune, gains, its messages) adds ≈ 6 KiB and is linked only if the
 //! executor calls it. No float, no 64-bit division, no `checked_mul`.
 
