@@ -302,18 +302,21 @@ impl Autotune {
         let bias = (i32::from(self.bias) + shift).clamp(20.min(max_power / 2), (max_power - 20).max(max_power / 2));
         self.bias = bias as u8;
         self.d = (if bias > max_power / 2 { max_power - 1 - bias } else { bias }) as u8;
-        let previous = self.last.result;
+        // Only what the agreement test needs of the previous result.
+        let previous = self.last.result.map(|p| (p.oscillation.0 as u32, p.period_ms));
         self.last = CycleReport { bias: self.bias, d: self.d, min: self.min, max: self.max, result: None };
         if self.cycles <= 3 {
             return false;
         }
         let amplitude = self.max.0.saturating_sub(self.min.0) / 2;
-        let (total, period) = ((t_high + t_low) as u32, u32::from(self.config.sample_period_ms.max(1)));
-        let period_ms = if total > u32::MAX / period { u32::MAX } else { total * period };
+        // 0 ≤ t_high + t_low ≤ 2²⁵. A product that saturates (at
+        // `i32::MAX`) is refused by `relay_gains` (Pu above 2³²/256 ms)
+        // exactly as the true one would be.
+        let period_ms = saturating_mul(t_high + t_low, i32::from(self.config.sample_period_ms.max(1))) as u32;
         let Some(gains) = relay_gains(measured_d, Celsius(amplitude), period_ms) else {
             return false;
         };
-        let converged = previous.is_some_and(|p| within_5_percent(amplitude as u32, p.oscillation.0 as u32) && within_5_percent(period_ms, p.period_ms));
+        let converged = previous.is_some_and(|(oscillation, period)| within_5_percent(amplitude as u32, oscillation) && within_5_percent(period_ms, period));
         self.last.result = Some(TuneResult { relay_amplitude: measured_d, oscillation: Celsius(amplitude), period_ms, ku: gains.ku, gains: gains.gains, converged });
         converged || self.cycles > self.config.cycles.max(3)
     }
@@ -323,8 +326,9 @@ impl Autotune {
 fn within_5_percent(a: u32, b: u32) -> bool {
     let difference = a.abs_diff(b);
     let larger = a.max(b);
-    // 20·difference ≤ larger, compared without overflowing.
-    difference <= larger / 20
+    // difference ≤ ⌊larger/20⌋ ⟺ 20·difference ≤ larger; a difference
+    // whose 20-fold overflows is larger than any u32.
+    difference <= u32::MAX / 20 && (difference << 4) + (difference << 2) <= larger
 }
 
 #[cfg(test)]
@@ -431,6 +435,23 @@ mod tests {
         assert_eq!(tune.on_sample(Celsius(20_031)), TuneStep::Heat(0));
         assert_eq!(tune.on_sample(Celsius(19_970)), TuneStep::Heat(0));
         assert_eq!(tune.on_sample(Celsius(19_969)), TuneStep::Heat(254));
+    }
+
+    #[test]
+    fn within_5_percent_is_the_larger_divided_by_20() {
+        let mut values: std::vec::Vec<u32> = (0..2_000).collect();
+        values.extend((0..2_000u32).map(|i| i.wrapping_mul(2_654_435_761)));
+        values.extend([u32::MAX, u32::MAX - 1, u32::MAX / 20, u32::MAX / 20 + 1, 214_748_364, 4_294_967_280]);
+        for &a in &values {
+            for &b in values.iter().step_by(7) {
+                assert_eq!(within_5_percent(a, b), a.abs_diff(b) <= a.max(b) / 20, "{a} {b}");
+            }
+        }
+        for a in 0..3_000u32 {
+            for b in a..a + 200 {
+                assert_eq!(within_5_percent(a, b), a.abs_diff(b) <= a.max(b) / 20, "{a} {b}");
+            }
+        }
     }
 
     #[test]

@@ -59,19 +59,21 @@ pub fn mul_div_round(x: u32, m: u32, n: u32) -> Option<u32> {
     if high >= n {
         return None;
     }
+    // The quotient's bits are shifted into `low` as its bits move out
+    // into the remainder (`high`); a `u8` count.
     let mut remainder = high;
-    let mut quotient = 0u32;
-    for _ in 0..32 {
+    let mut count = 32u8;
+    while count > 0 {
+        count -= 1;
         let overflow = remainder >> 31;
         remainder = (remainder << 1) | (low >> 31);
         low <<= 1;
-        quotient <<= 1;
         if overflow != 0 || remainder >= n {
             remainder = remainder.wrapping_sub(n);
-            quotient |= 1;
+            low |= 1;
         }
     }
-    Some(quotient)
+    Some(low)
 }
 
 #[cfg(test)]
