@@ -255,7 +255,7 @@ impl Autotune {
             return TuneStep::Failed(TuneError::TemperatureTooHigh);
         }
         let last_switch = if self.heating { self.heat_started } else { self.cool_started };
-        let timeout = u32::from(self.config.timeout_s) * 1000 / u32::from(self.config.sample_period_ms.max(1));
+        let timeout = super::millis(self.config.timeout_s) / u32::from(self.config.sample_period_ms.max(1));
         if self.now.wrapping_sub(last_switch) > timeout {
             return TuneStep::Failed(TuneError::Timeout);
         }

@@ -92,7 +92,7 @@ impl HeaterConfig {
 
     /// The highest target [`HeaterChannel::set_target`] accepts.
     pub fn max_target(&self) -> Celsius {
-        Celsius((i32::from(self.guard.max_c) - i32::from(self.guard.target_margin_c)) * 100)
+        Celsius(super::guard::centi(self.guard.max_c) - i32::from(u16::from(self.guard.target_margin_c) * 100))
     }
 }
 

@@ -142,6 +142,12 @@ impl ufmt::uDisplay for Celsius {
     }
 }
 
+/// `seconds` in milliseconds (one multiplication for every timer).
+#[inline(never)]
+pub(crate) fn millis(seconds: u16) -> u32 {
+    u32::from(seconds) * 1000
+}
+
 /// Which heater, as Marlin names it in messages (`Heater_ID: 0`,
 /// `Heater_ID: bed`) and in `M303 E` (`E-1` is the bed, `E-2` the chamber).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -230,7 +230,7 @@ impl PidState {
         let period = i32::from(control_period_ms.max(1));
         let max = i32::from(max_power) * MICRO;
         let error = target.0 - measured.0;
-        let range = i32::from(functional_range_c) * 100;
+        let range = i32::from(u16::from(functional_range_c) * 100);
         if range > 0 && error > range {
             self.integral = 0;
             return max_power;
@@ -262,7 +262,7 @@ fn bounded(value: i32) -> i32 {
 
 /// Bang-bang with hysteresis: `on` is the heater's state before this sample.
 pub fn bang_bang(hysteresis_tenths: u8, max_power: u8, target: Celsius, measured: Celsius, on: bool) -> u8 {
-    let band = i32::from(hysteresis_tenths) * 10;
+    let band = i32::from(u16::from(hysteresis_tenths) * 10);
     let on = if measured.0 <= target.0.saturating_sub(band) {
         true
     } else if measured.0 >= target.0.saturating_add(band) {

@@ -43,7 +43,7 @@ impl AutoReport {
     /// comes one interval later.
     pub fn set_interval(&mut self, seconds: u8, now_ms: u32) {
         self.interval_s = seconds.min(Self::MAX_INTERVAL_S);
-        self.next_ms = now_ms.wrapping_add(u32::from(self.interval_s) * 1000);
+        self.next_ms = now_ms.wrapping_add(super::millis(u16::from(self.interval_s)));
     }
 
     /// Whether a report is due at `now_ms`; if so the next one is
@@ -53,7 +53,7 @@ impl AutoReport {
         if self.interval_s == 0 || (now_ms.wrapping_sub(self.next_ms) as i32) < 0 {
             return false;
         }
-        let interval = u32::from(self.interval_s) * 1000;
+        let interval = super::millis(u16::from(self.interval_s));
         self.next_ms = self.next_ms.wrapping_add(interval);
         if (now_ms.wrapping_sub(self.next_ms) as i32) >= 0 {
             self.next_ms = now_ms.wrapping_add(interval);
@@ -139,7 +139,7 @@ impl TemperatureWait {
         if self.target.0 <= 0 || (wants_to_cool && !self.cooling) {
             return WaitStatus::Reached;
         }
-        if self.config.timeout_s > 0 && now_ms.wrapping_sub(self.started_ms) >= u32::from(self.config.timeout_s) * 1000 {
+        if self.config.timeout_s > 0 && now_ms.wrapping_sub(self.started_ms) >= super::millis(self.config.timeout_s) {
             return WaitStatus::TimedOut;
         }
         let distance = measured.0.abs_diff(self.target.0);
@@ -150,14 +150,14 @@ impl TemperatureWait {
         }
         if let Some(since) = self.residency_since {
             let held = now_ms.wrapping_sub(since);
-            let residency = u32::from(self.config.residency_s) * 1000;
+            let residency = super::millis(u16::from(self.config.residency_s));
             if held >= residency {
                 return WaitStatus::Reached;
             }
             return WaitStatus::Waiting(Some(((residency - held) / 1000) as u8));
         }
         if wants_to_cool {
-            let period = u32::from(self.config.cooling_check_s) * 1000;
+            let period = super::millis(u16::from(self.config.cooling_check_s));
             match self.cool_check {
                 None => self.cool_check = Some((measured, now_ms)),
                 Some((previous, at)) if now_ms.wrapping_sub(at) >= period => {
