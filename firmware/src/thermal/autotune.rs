@@ -250,8 +250,10 @@ impl Autotune {
     #[inline(never)]
     pub fn on_sample(&mut self, measured: Celsius) -> TuneStep {
         self.now = self.now.wrapping_add(1);
-        let target = self.config.target.0;
-        if measured.0 > target.saturating_add(3000) {
+        // `measured > target + c` and `measured < target − c`, saturating
+        // (see `excess`).
+        let excess = super::excess(measured, self.config.target);
+        if excess > 3000 {
             return TuneStep::Failed(TuneError::TemperatureTooHigh);
         }
         let last_switch = if self.heating { self.heat_started } else { self.cool_started };
@@ -263,12 +265,12 @@ impl Autotune {
         self.min = self.min.min(measured);
         let band = i32::from(self.config.noise_band.max(0));
 
-        if self.heating && measured.0 > target.saturating_add(band) {
+        if self.heating && excess > band {
             self.heating = false;
             self.cool_started = self.now;
             self.t_high = self.now.wrapping_sub(self.heat_started);
             self.max = measured;
-        } else if !self.heating && measured.0 < target.saturating_sub(band) {
+        } else if !self.heating && excess < -band {
             self.heating = true;
             let t_low = self.now.wrapping_sub(self.cool_started);
             self.heat_started = self.now;
@@ -308,7 +310,7 @@ impl Autotune {
         if self.cycles <= 3 {
             return false;
         }
-        let amplitude = self.max.0.saturating_sub(self.min.0) / 2;
+        let amplitude = super::excess(self.max, self.min) / 2;
         // 0 ≤ t_high + t_low ≤ 2²⁵. A product that saturates (at
         // `i32::MAX`) is refused by `relay_gains` (Pu above 2³²/256 ms)
         // exactly as the true one would be.

@@ -249,7 +249,7 @@ impl HeaterGuard {
 
     fn arm_watch(&mut self, config: &GuardConfig, period_ms: u16, target: Celsius, measured: Celsius) {
         let increase = i32::from(u16::from(config.watch_increase_c) * 100);
-        if config.watch_period_s > 0 && measured.0 < target.0.saturating_sub(increase + WATCH_ARM_MARGIN) {
+        if config.watch_period_s > 0 && super::excess(measured, target) < -(increase + WATCH_ARM_MARGIN) {
             self.watch_samples = samples(config.watch_period_s, period_ms);
             self.watch_goal = Celsius(measured.0.saturating_add(increase));
         } else {
@@ -314,8 +314,8 @@ impl HeaterGuard {
             self.runaway = Runaway::Holding;
         }
         if self.runaway == Runaway::Holding {
-            let floor = target.0.saturating_sub(i32::from(u16::from(config.runaway_hysteresis_c) * 100));
-            if measured.0 >= floor {
+            // measured ≥ target − hysteresis (saturating; see `excess`).
+            if super::excess(measured, target) >= -i32::from(u16::from(config.runaway_hysteresis_c) * 100) {
                 self.runaway_samples = 0;
             } else {
                 self.runaway_samples = self.runaway_samples.saturating_add(1);

@@ -142,6 +142,15 @@ impl ufmt::uDisplay for Celsius {
     }
 }
 
+/// `a − b`, saturating. For a bound `c ≥ 0` (not near `i32::MIN`),
+/// `a > b.saturating_add(c)` ⟺ `excess(a, b) > c` and
+/// `a < b.saturating_sub(c)` ⟺ `excess(a, b) < −c`, exactly (also where
+/// the bounds saturate): one subtraction for several comparisons.
+#[inline(never)]
+pub(crate) fn excess(a: Celsius, b: Celsius) -> i32 {
+    a.0.saturating_sub(b.0)
+}
+
 /// `seconds` in milliseconds (one multiplication for every timer).
 #[inline(never)]
 pub(crate) fn millis(seconds: u16) -> u32 {
@@ -180,5 +189,25 @@ pub struct Heater {
 impl Heater {
     pub const fn new() -> Self {
         Self { measured: Celsius(0), target: Celsius(0), power: 0 }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn excess_compares_like_the_saturated_bounds() {
+        let values = [i32::MIN, i32::MIN + 1, i32::MIN + 2_999, i32::MIN + 3_000, i32::MIN + 3_001, -100_000, -1, 0, 1, 2_999, 3_000, 20_000, i32::MAX - 3_001, i32::MAX - 3_000, i32::MAX - 1, i32::MAX];
+        for a in values {
+            for b in values {
+                for c in [0, 1, 30, 400, 3_000, 25_900, 32_767] {
+                    let e = excess(Celsius(a), Celsius(b));
+                    assert_eq!(a > b.saturating_add(c), e > c, "{a} > {b} + {c}");
+                    assert_eq!(a < b.saturating_sub(c), e < -c, "{a} < {b} - {c}");
+                    assert_eq!(a >= b.saturating_sub(c), e >= -c, "{a} >= {b} - {c}");
+                }
+            }
+        }
     }
 }
