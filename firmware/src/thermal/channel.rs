@@ -405,6 +405,16 @@ mod tests {
     }
 
     #[test]
+    fn control_period_is_the_saturating_product() {
+        for period in (0..=u16::MAX).step_by(7).chain([u16::MAX, 256, 257, 6553, 6554]) {
+            for every in 0..=u8::MAX {
+                let config = HeaterConfig { sample_period_ms: period, control_every: every, ..HeaterConfig::hotend(0) };
+                assert_eq!(config.control_period_ms(), period.saturating_mul(u16::from(every.max(1))), "{period} × {every}");
+            }
+        }
+    }
+
+    #[test]
     fn a_cold_hot_end_with_a_target_heats_at_full_power() {
         let mut heater = hotend();
         assert_eq!(heater.on_sample(reading(25.0)), None);
