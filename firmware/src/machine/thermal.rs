@@ -14,7 +14,8 @@
 //!   closing block, and with `U1` applies the gains (`M500` saves them).
 
 use super::{Machine, Running};
-use crate::thermal::{write_temperatures, Gains, HeaterChannel, Oversampled, TuneProgress, WaitStatus};
+use crate::thermal::channel::TuningStep;
+use crate::thermal::{write_temperatures, Gains, HeaterChannel, Oversampled, WaitStatus};
 // The heater commands (not on the powder bed, which has no heaters).
 #[cfg(feature = "heaters")]
 use super::error::CommandError;
@@ -79,26 +80,29 @@ impl<'q> Machine<'q> {
             HeaterSlot::Bed => &mut self.bed,
         };
         let Running::Autotune { slot: _, apply, ref mut tune } = self.running else { return Ok(()) };
-        let progress = channel.on_tuning_sample(reading, tune);
-        if let TuneProgress::Cycle = progress {
+        // The result stays in the tune (`last_cycle().result`): no copy.
+        let progress = channel.tuning_step(reading, tune);
+        if let TuningStep::Cycle = progress {
             tune.last_cycle().write(out)?;
         }
         let id = channel.id();
         match progress {
-            TuneProgress::Running | TuneProgress::Cycle => {}
-            TuneProgress::Done(result) => {
+            TuningStep::Running | TuningStep::Cycle => {}
+            TuningStep::Done => {
+                let Some(result) = &tune.last_cycle().result else { return Ok(()) };
                 result.write_finished(id, out)?;
+                let gains = result.gains;
                 if apply {
-                    self.channel(slot).set_gains(result.gains);
-                    self.store_gains(slot, result.gains);
+                    self.channel(slot).set_gains(gains);
+                    self.store_gains(slot, gains);
                 }
                 self.running = Running::AutotuneDone;
             }
-            TuneProgress::Failed(error) => {
+            TuningStep::Failed(error) => {
                 error.write(out)?;
                 self.running = Running::AutotuneDone;
             }
-            TuneProgress::Fault(fault) => {
+            TuningStep::Fault(fault) => {
                 fault.write(id, out)?;
                 self.kill(out)?;
             }

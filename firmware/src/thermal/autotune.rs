@@ -192,6 +192,16 @@ pub enum TuneStep {
     Failed(TuneError),
 }
 
+/// [`TuneStep`] without the result (the firmware's own path: no copy of
+/// it; on `Done` it is [`Autotune::last_cycle`]'s).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Step {
+    Heat(u8),
+    Cycle(u8),
+    Done,
+    Failed(TuneError),
+}
+
 /// The relay experiment: 76 bytes on the AVR, alive only during `M303`.
 #[derive(Clone, Copy, Debug)]
 pub struct Autotune {
@@ -247,19 +257,31 @@ impl Autotune {
     }
 
     /// One sample with the measured temperature.
-    #[inline(never)]
     pub fn on_sample(&mut self, measured: Celsius) -> TuneStep {
+        match self.step(measured) {
+            Step::Heat(duty) => TuneStep::Heat(duty),
+            Step::Cycle(duty) => TuneStep::Cycle(duty),
+            // `step` says `Done` only with a result.
+            Step::Done => self.last.result.map_or(TuneStep::Cycle(self.power()), TuneStep::Done),
+            Step::Failed(error) => TuneStep::Failed(error),
+        }
+    }
+
+    /// [`on_sample`](Self::on_sample) without copying the result out:
+    /// on [`Step::Done`] it is `last_cycle().result`.
+    #[inline(never)]
+    pub(crate) fn step(&mut self, measured: Celsius) -> Step {
         self.now = self.now.wrapping_add(1);
         // `measured > target + c` and `measured < target − c`, saturating
         // (see `excess`).
         let excess = super::excess(measured, self.config.target);
         if excess > 3000 {
-            return TuneStep::Failed(TuneError::TemperatureTooHigh);
+            return Step::Failed(TuneError::TemperatureTooHigh);
         }
         let last_switch = if self.heating { self.heat_started } else { self.cool_started };
         let timeout = super::millis(self.config.timeout_s) / u32::from(self.config.sample_period_ms.max(1));
         if self.now.wrapping_sub(last_switch) > timeout {
-            return TuneStep::Failed(TuneError::Timeout);
+            return Step::Failed(TuneError::Timeout);
         }
         self.max = self.max.max(measured);
         self.min = self.min.min(measured);
@@ -279,16 +301,14 @@ impl Autotune {
             if !first {
                 let done = self.cycle_completed(t_low);
                 self.min = measured;
-                if done {
-                    if let Some(result) = self.last.result {
-                        return TuneStep::Done(result);
-                    }
+                if done && self.last.result.is_some() {
+                    return Step::Done;
                 }
-                return TuneStep::Cycle(self.power());
+                return Step::Cycle(self.power());
             }
             self.min = measured;
         }
-        TuneStep::Heat(self.power())
+        Step::Heat(self.power())
     }
 
     /// End of a cycle (`cycles` counts it): adapt the bias, measure, and
