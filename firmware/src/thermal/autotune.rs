@@ -50,16 +50,19 @@ pub fn relay_gains(relay_amplitude: u8, oscillation: Celsius, period_ms: u32) ->
     // (Bounds are compared, never `checked_mul`: see `math`.)
     // Ku·10⁴·256 = 4d·10⁴·100·256/(π·a_centi), π = 104348/33215.
     let ku256 = mul_div_round(4_000_000 * u32::from(relay_amplitude), 33_215 * 256, a * 104_348)?;
-    let gain = |m: u32, n: u32| mul_div_round(ku256, m, n).filter(|g| *g <= Gains::MAX);
-    Some(RelayGains {
-        ku: gain(1, 256)?,
-        gains: Gains {
-            // 0.6·Ku; 1.2·Ku·1000/Pu_ms; 0.075·Ku·Pu_ms/1000.
-            kp: gain(3, 5 * 256)?,
-            ki: gain(1200, period_ms * 256)?,
-            kd: gain(3 * period_ms, 40_000 * 256)?,
-        },
-    })
+    // Ku; 0.6·Ku; 1.2·Ku·1000/Pu_ms; 0.075·Ku·Pu_ms/1000 (one call site).
+    let mut gains = [0u32; 4];
+    for (index, gain) in gains.iter_mut().enumerate() {
+        let (m, n) = match index {
+            0 => (1, 256),
+            1 => (3, 5 * 256),
+            2 => (1200, period_ms * 256),
+            _ => (3 * period_ms, 40_000 * 256),
+        };
+        *gain = mul_div_round(ku256, m, n).filter(|g| *g <= Gains::MAX)?;
+    }
+    let [ku, kp, ki, kd] = gains;
+    Some(RelayGains { ku, gains: Gains { kp, ki, kd } })
 }
 
 /// Settings of one `M303` run.
@@ -170,9 +173,14 @@ impl TuneResult {
             HeaterId::Bed => "bed",
             HeaterId::Chamber => "chamber",
         };
-        for (name, value) in [("Kp ", self.gains.kp), ("Ki ", self.gains.ki), ("Kd ", self.gains.kd)] {
+        let mut value = self.gains.kp;
+        for name in *b"pid" {
             flash_str!("#define DEFAULT_").write_to(out)?;
-            ufmt::uwrite!(out, "{}{}{}\n", prefix, name, Gain(value))?;
+            out.write_str(prefix)?;
+            out.write_char('K')?;
+            out.write_char(char::from(name))?;
+            ufmt::uwrite!(out, " {}\n", Gain(value))?;
+            value = if name == b'p' { self.gains.ki } else { self.gains.kd };
         }
         Ok(())
     }
@@ -370,6 +378,33 @@ mod tests {
         let g = relay_gains(100, Celsius(5000), 1000).unwrap();
         assert_eq!(g.ku, 25_465); // Ku 2.5465
         assert_eq!(g.gains, Gains { kp: 15_279, ki: 30_558, kd: 1_910 }); // 1.5279, 3.0558, 0.1910
+    }
+
+    /// The rules with exact 128-bit arithmetic, as the reference.
+    fn reference_gains(d: u8, a: i32, period_ms: u32) -> Option<RelayGains> {
+        let a = u32::try_from(a).ok().filter(|a| *a > 0 && *a <= u32::MAX / 104_348)?;
+        if period_ms == 0 || period_ms > u32::MAX / 256 {
+            return None;
+        }
+        let round = |x: u128, m: u128, n: u128| u32::try_from((x * m + n / 2) / n).ok();
+        let ku256 = round(4_000_000 * u128::from(d), 33_215 * 256, u128::from(a) * 104_348)?;
+        let gain = |m: u32, n: u32| round(u128::from(ku256), u128::from(m), u128::from(n)).filter(|g| *g <= Gains::MAX);
+        Some(RelayGains {
+            ku: gain(1, 256)?,
+            gains: Gains { kp: gain(3, 5 * 256)?, ki: gain(1200, period_ms * 256)?, kd: gain(3 * period_ms, 40_000 * 256)? },
+        })
+    }
+
+    #[test]
+    fn relay_gains_match_exact_arithmetic_over_their_range() {
+        let periods = [1, 2, 99, 100, 200, 1_000, 21_340, 65_535, 1_000_000, 16_777_215, 16_777_216, u32::MAX];
+        for d in [0u8, 1, 2, 50, 92, 127, 128, 200, 254, 255] {
+            for a in (-3..3_000).chain((3_000..41_200).step_by(37)).chain([41_159, 41_160, 41_161, i32::MAX]) {
+                for period in periods {
+                    assert_eq!(relay_gains(d, Celsius(a), period), reference_gains(d, a, period), "d {d} a {a} Pu {period}");
+                }
+            }
+        }
     }
 
     #[test]
