@@ -34,6 +34,15 @@ pub(super) enum HeaterSlot {
     Bed,
 }
 
+/// Stored gains into a channel when they are valid (one copy for both
+/// heaters).
+#[inline(never)]
+fn load_gains(channel: &mut HeaterChannel, &[kp, ki, kd]: &[i32; 3]) {
+    if let Some(gains) = Gains::new(kp, ki, kd) {
+        channel.set_gains(gains);
+    }
+}
+
 impl<'q> Machine<'q> {
     fn channel(&mut self, slot: HeaterSlot) -> &mut HeaterChannel {
         match slot {
@@ -120,11 +129,8 @@ impl<'q> Machine<'q> {
 
     /// The settings' gains into the channels (boot, `M501`, `M502`).
     pub(super) fn apply_heater_settings(&mut self) {
-        for (slot, [kp, ki, kd]) in [(HeaterSlot::Hotend, self.settings.hotend_pid), (HeaterSlot::Bed, self.settings.bed_pid)] {
-            if let Some(gains) = Gains::new(kp, ki, kd) {
-                self.channel(slot).set_gains(gains);
-            }
-        }
+        load_gains(&mut self.hotend, &self.settings.hotend_pid);
+        load_gains(&mut self.bed, &self.settings.bed_pid);
     }
 
     /// Drive the bed with `config` instead of RAMPS' MOSFET bed (e.g.
@@ -234,7 +240,9 @@ impl<'q> Machine<'q> {
                 if now_ms.wrapping_sub(self.last_report_ms) >= 1000 {
                     self.last_report_ms = now_ms;
                     // Marlin's format: the report without its newline, then W.
-                    ufmt::uwrite!(out, " T:{} /{} B:{} /{} @:{} B@:{} W:", self.hotend.measured(), self.hotend.target(), self.bed.measured(), self.bed.target(), self.hotend.power_report(), self.bed.power_report())?;
+                    out.write_str(" ")?;
+                    crate::thermal::report::write_temperature_fields(&self.hotend, Some(&self.bed), out)?;
+                    out.write_str(" W:")?;
                     match left {
                         Some(s) => ufmt::uwrite!(out, "{}\n", s)?,
                         None => out.write_str("?\n")?,

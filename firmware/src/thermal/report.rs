@@ -8,6 +8,14 @@ use super::Celsius;
 /// `M105` report; `@:` is the duty halved (0–127). Without a bed, `B:…`
 /// and `B@:…` are left out.
 pub fn write_temperatures<W: ufmt::uWrite + ?Sized>(hotend: &HeaterChannel, bed: Option<&HeaterChannel>, out: &mut W) -> Result<(), W::Error> {
+    write_temperature_fields(hotend, bed, out)?;
+    out.write_str("\n")
+}
+
+/// The `M105` report without its newline (`M109`'s keep-alive line adds
+/// ` W:…` to it).
+#[inline(never)]
+pub fn write_temperature_fields<W: ufmt::uWrite + ?Sized>(hotend: &HeaterChannel, bed: Option<&HeaterChannel>, out: &mut W) -> Result<(), W::Error> {
     ufmt::uwrite!(out, "T:{} /{}", hotend.measured(), hotend.target())?;
     if let Some(bed) = bed {
         ufmt::uwrite!(out, " B:{} /{}", bed.measured(), bed.target())?;
@@ -16,7 +24,7 @@ pub fn write_temperatures<W: ufmt::uWrite + ?Sized>(hotend: &HeaterChannel, bed:
     if let Some(bed) = bed {
         ufmt::uwrite!(out, " B@:{}", bed.power_report())?;
     }
-    out.write_str("\n")
+    Ok(())
 }
 
 /// `M155 S<seconds>`: when the next automatic temperature report is due.
@@ -199,6 +207,26 @@ mod tests {
         let mut out = Text::default();
         write_temperatures(&hotend, None, &mut out).unwrap();
         assert!(out.0.ends_with(" /210.00 @:127\n"), "{}", out.0);
+    }
+
+    #[test]
+    fn the_m109_keep_alive_line_is_the_report_fields_with_w() {
+        let mut hotend = HeaterChannel::new(&HOTEND_0, Gains::MARLIN_HOTEND);
+        let mut bed = HeaterChannel::new(&BED, Gains::MARLIN_BED);
+        hotend.on_sample(Oversampled::from_count(300));
+        bed.on_sample(Oversampled::from_count(900));
+        hotend.set_target(Celsius(21_050)).unwrap();
+        bed.set_target(Celsius(6_000)).unwrap();
+        hotend.on_sample(Oversampled::from_count(301));
+        bed.on_sample(Oversampled::from_count(901));
+        // What the executor printed before it shared the fields.
+        let mut expected = Text::default();
+        ufmt::uwrite!(expected, " T:{} /{} B:{} /{} @:{} B@:{} W:", hotend.measured(), hotend.target(), bed.measured(), bed.target(), hotend.power_report(), bed.power_report()).unwrap();
+        let mut out = Text::default();
+        out.0.push(' ');
+        write_temperature_fields(&hotend, Some(&bed), &mut out).unwrap();
+        out.0.push_str(" W:");
+        assert_eq!(out.0, expected.0);
     }
 
     #[test]
