@@ -256,6 +256,7 @@ impl PidState {
 
 /// Terms of the law are kept within ±2²⁹ micro-counts (±536 counts, twice
 /// any output), so that sums of three of them cannot overflow.
+#[inline(never)]
 fn bounded(value: i32) -> i32 {
     value.clamp(-(1 << 29), 1 << 29)
 }
