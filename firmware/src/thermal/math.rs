@@ -114,6 +114,27 @@ mod tests {
             }
         }
         assert_eq!(mul_div_round(7, 1, 2), Some(4));
+        // Pseudo-random operands, and quotients near 2³².
+        let mut seed = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for i in 0..400_000u32 {
+            let r = next();
+            let (x, m) = ((r >> 32) as u32 >> (i % 32), r as u32 >> (i / 32 % 32));
+            let n = match i % 4 {
+                0 => next() as u32,
+                1 => (next() as u32) >> (i % 31),
+                2 => ((u64::from(x) * u64::from(m)) >> 32) as u32 + (i % 3),
+                _ => u32::MAX - (i % 5),
+            };
+            let exact = (u128::from(x) * u128::from(m) + u128::from(n / 2)).checked_div(u128::from(n));
+            let expected = exact.and_then(|q| u32::try_from(q).ok());
+            assert_eq!(mul_div_round(x, m, n), expected, "{x} × {m} / {n}");
+        }
         assert_eq!(mul_div_round(5, 1, 0), None);
     }
 }
