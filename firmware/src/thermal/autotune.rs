@@ -279,6 +279,13 @@ impl Autotune {
     /// on [`Step::Done`] it is `last_cycle().result`.
     #[inline(never)]
     pub(crate) fn step(&mut self, measured: Celsius) -> Step {
+        // Through a pointer register (`ldd`/`std`, 2 bytes) rather than
+        // the static's absolute address LTO would fold in (`lds`/`sts`, 4).
+        let this = core::hint::black_box(self);
+        this.step_at(measured)
+    }
+
+    fn step_at(&mut self, measured: Celsius) -> Step {
         self.now = self.now.wrapping_add(1);
         // `measured > target + c` and `measured < target − c`, saturating
         // (see `excess`).
