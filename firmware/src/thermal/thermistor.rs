@@ -137,19 +137,17 @@ pub fn celsius_from_adc<const N: usize>(table: Table<N>, adc: u16) -> Result<Cel
 pub fn celsius_from_oversampled<const N: usize>(table: Table<N>, reading: Oversampled) -> Result<Celsius, SensorFault> {
     let row = |index: usize| row(table, index);
     let x16 = reading.0;
-    // ADC counts are at most 1023: × 16 fits a u16.
-    let sixteenths = |(adc, _): (u16, u16)| adc.wrapping_mul(16);
-    if N < 2 || x16 < sixteenths(row(0)) {
+    if N < 2 || x16 < row(0).0 {
         return Err(SensorFault::Shorted);
     }
-    if x16 > sixteenths(row(N - 1)) {
+    if x16 > row(N - 1).0 {
         return Err(SensorFault::Open);
     }
     // Invariant: row(low) ≤ x16 ≤ row(high).
     let (mut low, mut high) = (0, N - 1);
     while high - low > 1 {
         let middle = (low + high) / 2;
-        if sixteenths(row(middle)) <= x16 {
+        if row(middle).0 <= x16 {
             low = middle;
         } else {
             high = middle;
@@ -158,22 +156,24 @@ pub fn celsius_from_oversampled<const N: usize>(table: Table<N>, reading: Oversa
     Ok(Celsius(celsius_of(interpolate(x16, row(low), row(high)))))
 }
 
-/// One stored row out of flash (one copy of the copying loop, not one per
-/// use).
+/// One stored row out of flash with its ADC count in sixteenths (counts
+/// are at most 1023: × 16 fits a u16); one copy of the copying loop, not
+/// one per use.
 #[inline(never)]
 fn row<const N: usize>(table: Table<N>, index: usize) -> (u16, u16) {
-    table.0.get(index).unwrap_or((0, 0))
+    let (adc, stored) = table.0.get(index).unwrap_or((0, 0));
+    (adc.wrapping_mul(16), stored)
 }
 
-/// The stored temperature at `x16` (with `row0 ≤ x16 ≤ row1`) between two
-/// rows: `t0 + (t1 − t0)·(x16 − adc0·16)/((adc1 − adc0)·16)`, the quotient
-/// rounded half away from zero. `build.rs` evaluates the table's error
-/// with the same arithmetic. The product stays below 2³²: |t1 − t0| <
-/// 2¹⁶ and the offset < 2¹⁴.
-fn interpolate(x16: u16, (adc0, t0): (u16, u16), (adc1, t1): (u16, u16)) -> u16 {
-    let offset = x16.wrapping_sub(adc0.wrapping_mul(16));
-    let span = adc1.wrapping_sub(adc0).wrapping_mul(16);
-    if span == 0 || adc1 < adc0 {
+/// The stored temperature at `x16` (with `row0 ≤ x16 ≤ row1`, ADC counts
+/// in sixteenths) between two rows: `t0 + (t1 − t0)·(x16 − x0)/(x1 − x0)`,
+/// the quotient rounded half away from zero. `build.rs` evaluates the
+/// table's error with the same arithmetic. The product stays below 2³²:
+/// |t1 − t0| < 2¹⁶ and the offset < 2¹⁴.
+fn interpolate(x16: u16, (x0, t0): (u16, u16), (x1, t1): (u16, u16)) -> u16 {
+    let offset = x16.wrapping_sub(x0);
+    let span = x1.wrapping_sub(x0);
+    if span == 0 || x1 < x0 {
         return t0;
     }
     let falling = t1 < t0;
