@@ -65,17 +65,21 @@ impl<'q> Machine<'q> {
             Running::Autotune { slot, .. } => Some(slot),
             _ => None,
         };
-        for (slot, reading) in [(HeaterSlot::Hotend, hotend), (HeaterSlot::Bed, bed)] {
-            let Some(reading) = reading else { continue };
-            if tuning == Some(slot) {
-                self.tuning_sample(slot, reading, out)?;
-                continue;
-            }
-            if let Some(fault) = self.channel(slot).on_sample(reading) {
-                let id = self.channel(slot).id();
-                fault.write(id, out)?;
-                self.kill(out)?;
-            }
+        self.heater_sample(HeaterSlot::Hotend, hotend, tuning, out)?;
+        self.heater_sample(HeaterSlot::Bed, bed, tuning, out)
+    }
+
+    /// One heater's part of [`on_thermal_samples`](Self::on_thermal_samples).
+    #[inline(never)]
+    fn heater_sample<W: uWrite + ?Sized>(&mut self, slot: HeaterSlot, reading: Option<Oversampled>, tuning: Option<HeaterSlot>, out: &mut W) -> Result<(), W::Error> {
+        let Some(reading) = reading else { return Ok(()) };
+        if tuning == Some(slot) {
+            return self.tuning_sample(slot, reading, out);
+        }
+        if let Some(fault) = self.channel(slot).on_sample(reading) {
+            let id = self.channel(slot).id();
+            fault.write(id, out)?;
+            self.kill(out)?;
         }
         Ok(())
     }
