@@ -328,7 +328,6 @@ impl Autotune {
 
     /// End of a cycle (`cycles` counts it): adapt the bias, measure, and
     /// say whether the experiment is over.
-    #[inline(never)]
     fn cycle_completed(&mut self, t_low: u32) -> bool {
         let max_power = i32::from(self.config.max_power);
         let samples = |t: u32| t.min(1 << 24) as i32;
