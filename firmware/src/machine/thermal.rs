@@ -84,7 +84,6 @@ impl<'q> Machine<'q> {
         Ok(())
     }
 
-    #[inline(never)]
     fn tuning_sample<W: uWrite + ?Sized>(&mut self, slot: HeaterSlot, reading: Oversampled, out: &mut W) -> Result<(), W::Error> {
         // The tune is updated where it lies (no copy of it on the stack):
         // the channel and `running` are disjoint fields.

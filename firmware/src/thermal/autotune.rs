@@ -41,7 +41,6 @@ pub struct RelayGains {
 /// SPEC §5's rules for relay amplitude `d` (duty counts), oscillation
 /// amplitude `a` (hundredths of °C) and period `Pu` (ms). `None` when `a`
 /// or `Pu` is zero, Ku exceeds 1677 or a gain does not fit [`Gains::MAX`].
-#[inline(never)]
 pub fn relay_gains(relay_amplitude: u8, oscillation: Celsius, period_ms: u32) -> Option<RelayGains> {
     let a = u32::try_from(oscillation.0).ok().filter(|a| *a > 0 && *a <= u32::MAX / 104_348)?;
     if period_ms == 0 || period_ms > u32::MAX / 256 {
@@ -165,7 +164,6 @@ impl TuneResult {
     /// #define DEFAULT_Kd 53.00
     /// ```
     /// (`DEFAULT_bedKp`… for the bed, `DEFAULT_chamberKp`… for a chamber).
-    #[inline(never)]
     pub fn write_finished<W: ufmt::uWrite + ?Sized>(&self, heater: HeaterId, out: &mut W) -> Result<(), W::Error> {
         flash_str!("PID Autotune finished! Put the last Kp, Ki and Kd constants from below into Configuration.h\n").write_to(out)?;
         let prefix = match heater {

@@ -231,7 +231,6 @@ impl HeaterGuard {
     /// A new target: re-arm the runaway check and the heating watch.
     /// `measured` is the latest good temperature, `None` before the first
     /// (the watch then arms at the first reading).
-    #[inline(never)]
     pub fn on_target(&mut self, config: &GuardConfig, period_ms: u16, target: Celsius, measured: Option<Celsius>) {
         self.runaway_samples = 0;
         self.watch_samples = 0;
@@ -260,7 +259,6 @@ impl HeaterGuard {
     /// One sample. `reading` is the converted temperature or the sensor
     /// fault; `tuning` suspends the runaway check (the auto-tune relay
     /// swings around the target on purpose and has its own limits).
-    #[inline(never)]
     pub fn check(
         &mut self,
         config: &GuardConfig,

@@ -205,7 +205,6 @@ impl PidState {
     /// Every sample: the derivative on the measurement (no kick when the
     /// target changes), a rate, so it may be sampled faster than the law
     /// runs.
-    #[inline(never)]
     pub fn observe(&mut self, gains: &Gains, derivative_filter_shift: u8, sample_period_ms: u16, measured: Celsius, previous: Celsius) {
         let period = i32::from(sample_period_ms.max(1));
         // Temperatures are table values (−30..420 °C): no overflow.
@@ -224,7 +223,6 @@ impl PidState {
     /// temperatures on the stack, where it reads them one byte off on the
     /// ATmega2560 (a 3-byte return address; `tests/scripts/size-check.sh`
     /// refuses such code).
-    #[inline(never)]
     pub fn control(&mut self, gains: &Gains, law: &Law) -> u8 {
         let Law { functional_range_c, control_period_ms, max_power, target, measured } = *law;
         let period = i32::from(control_period_ms.max(1));

@@ -133,7 +133,6 @@ pub fn celsius_from_adc<const N: usize>(table: Table<N>, adc: u16) -> Result<Cel
 
 /// Convert a reading in 1/16 counts with `table` (binary search for the
 /// row pair, then linear interpolation rounded half away from zero).
-#[inline(never)]
 pub fn celsius_from_oversampled<const N: usize>(table: Table<N>, reading: Oversampled) -> Result<Celsius, SensorFault> {
     let row = |index: usize| row(table, index);
     let x16 = reading.0;
