@@ -124,7 +124,6 @@ impl CycleReport {
     /// Marlin's lines: ` bias: 92 d: 92 min: 196.56 max: 203.75` and, with
     /// a result, ` Ku: 33.18 Tu: 21.34` / ` Classic PID ` /
     /// ` Kp: 19.91 Ki: 1.87 Kd: 53.00`.
-    #[inline(never)]
     pub fn write<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         ufmt::uwrite!(out, " bias: {} d: {} min: {} max: {}", self.bias, self.d, self.min, self.max)?;
         match &self.result {

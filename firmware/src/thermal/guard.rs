@@ -325,7 +325,6 @@ impl HeaterGuard {
         Verdict::Run(measured)
     }
 
-    #[inline(never)]
     fn latch(&mut self, fault: ThermalFault) -> Verdict {
         self.fault = Some(fault);
         self.watch_samples = 0;
