@@ -35,6 +35,8 @@ const HOTTEST_C: f64 = 420.0;
 /// Coldest temperature in a table: above its ADC count the sensor is
 /// reported open (a disconnected thermistor reads full scale, 1023).
 const COLDEST_C: f64 = -30.0;
+/// Added to a temperature (hundredths of °C) to store it as a `u16`.
+const STORED_OFFSET: i64 = 5_000;
 /// Interpolation error bound between 0 and 300 °C.
 const ERROR_IN_RANGE_C: f64 = 0.1;
 /// Interpolation error bound outside 0–300 °C (still inside the table).
@@ -96,6 +98,7 @@ fn segment_errors(d: &Divider, adc0: u32, adc1: u32) -> Option<(f64, f64)> {
 
 fn main() {
     let mut out = String::new();
+    let mut table_rows = None;
     for d in DIVIDERS {
         let first = adc_count(d, HOTTEST_C).ceil() as u32;
         let last = adc_count(d, COLDEST_C).floor() as u32;
@@ -138,15 +141,25 @@ fn main() {
             cold = COLDEST_C,
         )
         .unwrap();
+        // Each temperature is stored as a `u16`, hundredths of °C plus
+        // `STORED_OFFSET` (4 bytes a row instead of 6).
         writeln!(out, "#[cfg_attr(target_arch = \"avr\", link_section = \".progmem.data\")]").unwrap();
-        writeln!(out, "pub static {}: crate::progmem::Flash<[(u16, i32); {}]> = crate::progmem::Flash::new([", d.name, rows.len()).unwrap();
+        writeln!(out, "pub static {}: ThermistorTable<{}> = ThermistorTable::new([", d.name, rows.len()).unwrap();
         for adc in &rows {
-            writeln!(out, "    ({adc}, {}),", stored(d, *adc)).unwrap();
+            let raw = stored(d, *adc) + STORED_OFFSET;
+            assert!((0..=i64::from(u16::MAX)).contains(&raw), "{}: {} °C/100 does not fit the u16 storage", d.name, stored(d, *adc));
+            writeln!(out, "    ({adc}, {raw}),").unwrap();
         }
         writeln!(out, "]);").unwrap();
+        match table_rows {
+            None => table_rows = Some(rows.len()),
+            Some(n) => assert_eq!(n, rows.len(), "every table must have the same number of rows (`thermistor::ROWS`)"),
+        }
         writeln!(out, "/// Worst interpolation error of [`{}`] from 0 to 300 °C, hundredths of °C.", d.name).unwrap();
         writeln!(out, "pub const {}_ERROR_CENTI: i32 = {inside_centi};", d.name).unwrap();
     }
+    writeln!(out, "/// Rows of every table.\npub const ROWS: usize = {};", table_rows.unwrap()).unwrap();
+    writeln!(out, "/// What is added to hundredths of °C to store them as `u16`.\nconst STORED_OFFSET: i32 = {STORED_OFFSET};").unwrap();
     let path = std::path::Path::new(&std::env::var("OUT_DIR").unwrap()).join("thermistor_tables.rs");
     std::fs::write(path, out).unwrap();
     println!("cargo:rerun-if-changed=build.rs");

@@ -14,7 +14,8 @@
 //!   closing block, and with `U1` applies the gains (`M500` saves them).
 
 use super::{Machine, Running};
-use crate::thermal::{write_temperatures, Gains, HeaterChannel, Oversampled, TuneProgress, WaitStatus};
+use crate::thermal::channel::TuningStep;
+use crate::thermal::{write_temperatures, Gains, HeaterChannel, Oversampled, WaitStatus};
 // The heater commands (not on the powder bed, which has no heaters).
 #[cfg(feature = "heaters")]
 use super::error::CommandError;
@@ -31,6 +32,15 @@ use ufmt::uWrite;
 pub(super) enum HeaterSlot {
     Hotend,
     Bed,
+}
+
+/// Stored gains into a channel when they are valid (one copy for both
+/// heaters).
+#[inline(never)]
+fn load_gains(channel: &mut HeaterChannel, &[kp, ki, kd]: &[i32; 3]) {
+    if let Some(gains) = Gains::new(kp, ki, kd) {
+        channel.set_gains(gains);
+    }
 }
 
 impl<'q> Machine<'q> {
@@ -55,17 +65,21 @@ impl<'q> Machine<'q> {
             Running::Autotune { slot, .. } => Some(slot),
             _ => None,
         };
-        for (slot, reading) in [(HeaterSlot::Hotend, hotend), (HeaterSlot::Bed, bed)] {
-            let Some(reading) = reading else { continue };
-            if tuning == Some(slot) {
-                self.tuning_sample(slot, reading, out)?;
-                continue;
-            }
-            if let Some(fault) = self.channel(slot).on_sample(reading) {
-                let id = self.channel(slot).id();
-                fault.write(id, out)?;
-                self.kill(out)?;
-            }
+        self.heater_sample(HeaterSlot::Hotend, hotend, tuning, out)?;
+        self.heater_sample(HeaterSlot::Bed, bed, tuning, out)
+    }
+
+    /// One heater's part of [`on_thermal_samples`](Self::on_thermal_samples).
+    #[inline(never)]
+    fn heater_sample<W: uWrite + ?Sized>(&mut self, slot: HeaterSlot, reading: Option<Oversampled>, tuning: Option<HeaterSlot>, out: &mut W) -> Result<(), W::Error> {
+        let Some(reading) = reading else { return Ok(()) };
+        if tuning == Some(slot) {
+            return self.tuning_sample(slot, reading, out);
+        }
+        if let Some(fault) = self.channel(slot).on_sample(reading) {
+            let id = self.channel(slot).id();
+            fault.write(id, out)?;
+            self.kill(out)?;
         }
         Ok(())
     }
@@ -78,26 +92,29 @@ impl<'q> Machine<'q> {
             HeaterSlot::Bed => &mut self.bed,
         };
         let Running::Autotune { slot: _, apply, ref mut tune } = self.running else { return Ok(()) };
-        let progress = channel.on_tuning_sample(reading, tune);
-        if let TuneProgress::Cycle = progress {
+        // The result stays in the tune (`last_cycle().result`): no copy.
+        let progress = channel.tuning_step(reading, tune);
+        if let TuningStep::Cycle = progress {
             tune.last_cycle().write(out)?;
         }
         let id = channel.id();
         match progress {
-            TuneProgress::Running | TuneProgress::Cycle => {}
-            TuneProgress::Done(result) => {
+            TuningStep::Running | TuningStep::Cycle => {}
+            TuningStep::Done => {
+                let Some(result) = &tune.last_cycle().result else { return Ok(()) };
                 result.write_finished(id, out)?;
+                let gains = result.gains;
                 if apply {
-                    self.channel(slot).set_gains(result.gains);
-                    self.store_gains(slot, result.gains);
+                    self.channel(slot).set_gains(gains);
+                    self.store_gains(slot, gains);
                 }
                 self.running = Running::AutotuneDone;
             }
-            TuneProgress::Failed(error) => {
+            TuningStep::Failed(error) => {
                 error.write(out)?;
                 self.running = Running::AutotuneDone;
             }
-            TuneProgress::Fault(fault) => {
+            TuningStep::Fault(fault) => {
                 fault.write(id, out)?;
                 self.kill(out)?;
             }
@@ -115,11 +132,8 @@ impl<'q> Machine<'q> {
 
     /// The settings' gains into the channels (boot, `M501`, `M502`).
     pub(super) fn apply_heater_settings(&mut self) {
-        for (slot, [kp, ki, kd]) in [(HeaterSlot::Hotend, self.settings.hotend_pid), (HeaterSlot::Bed, self.settings.bed_pid)] {
-            if let Some(gains) = Gains::new(kp, ki, kd) {
-                self.channel(slot).set_gains(gains);
-            }
-        }
+        load_gains(&mut self.hotend, &self.settings.hotend_pid);
+        load_gains(&mut self.bed, &self.settings.bed_pid);
     }
 
     /// Drive the bed with `config` instead of RAMPS' MOSFET bed (e.g.
@@ -229,7 +243,9 @@ impl<'q> Machine<'q> {
                 if now_ms.wrapping_sub(self.last_report_ms) >= 1000 {
                     self.last_report_ms = now_ms;
                     // Marlin's format: the report without its newline, then W.
-                    ufmt::uwrite!(out, " T:{} /{} B:{} /{} @:{} B@:{} W:", self.hotend.measured(), self.hotend.target(), self.bed.measured(), self.bed.target(), self.hotend.power_report(), self.bed.power_report())?;
+                    out.write_str(" ")?;
+                    crate::thermal::report::write_temperature_fields(&self.hotend, Some(&self.bed), out)?;
+                    out.write_str(" W:")?;
                     match left {
                         Some(s) => ufmt::uwrite!(out, "{}\n", s)?,
                         None => out.write_str("?\n")?,

@@ -41,7 +41,6 @@ pub struct RelayGains {
 /// SPEC §5's rules for relay amplitude `d` (duty counts), oscillation
 /// amplitude `a` (hundredths of °C) and period `Pu` (ms). `None` when `a`
 /// or `Pu` is zero, Ku exceeds 1677 or a gain does not fit [`Gains::MAX`].
-#[inline(never)]
 pub fn relay_gains(relay_amplitude: u8, oscillation: Celsius, period_ms: u32) -> Option<RelayGains> {
     let a = u32::try_from(oscillation.0).ok().filter(|a| *a > 0 && *a <= u32::MAX / 104_348)?;
     if period_ms == 0 || period_ms > u32::MAX / 256 {
@@ -50,16 +49,19 @@ pub fn relay_gains(relay_amplitude: u8, oscillation: Celsius, period_ms: u32) ->
     // (Bounds are compared, never `checked_mul`: see `math`.)
     // Ku·10⁴·256 = 4d·10⁴·100·256/(π·a_centi), π = 104348/33215.
     let ku256 = mul_div_round(4_000_000 * u32::from(relay_amplitude), 33_215 * 256, a * 104_348)?;
-    let gain = |m: u32, n: u32| mul_div_round(ku256, m, n).filter(|g| *g <= Gains::MAX);
-    Some(RelayGains {
-        ku: gain(1, 256)?,
-        gains: Gains {
-            // 0.6·Ku; 1.2·Ku·1000/Pu_ms; 0.075·Ku·Pu_ms/1000.
-            kp: gain(3, 5 * 256)?,
-            ki: gain(1200, period_ms * 256)?,
-            kd: gain(3 * period_ms, 40_000 * 256)?,
-        },
-    })
+    // Ku; 0.6·Ku; 1.2·Ku·1000/Pu_ms; 0.075·Ku·Pu_ms/1000 (one call site).
+    let mut gains = [0u32; 4];
+    for (index, gain) in gains.iter_mut().enumerate() {
+        let (m, n) = match index {
+            0 => (1, 256),
+            1 => (3, 5 * 256),
+            2 => (1200, period_ms * 256),
+            _ => (3 * period_ms, 40_000 * 256),
+        };
+        *gain = mul_div_round(ku256, m, n).filter(|g| *g <= Gains::MAX)?;
+    }
+    let [ku, kp, ki, kd] = gains;
+    Some(RelayGains { ku, gains: Gains { kp, ki, kd } })
 }
 
 /// Settings of one `M303` run.
@@ -122,7 +124,6 @@ impl CycleReport {
     /// Marlin's lines: ` bias: 92 d: 92 min: 196.56 max: 203.75` and, with
     /// a result, ` Ku: 33.18 Tu: 21.34` / ` Classic PID ` /
     /// ` Kp: 19.91 Ki: 1.87 Kd: 53.00`.
-    #[inline(never)]
     pub fn write<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
         ufmt::uwrite!(out, " bias: {} d: {} min: {} max: {}", self.bias, self.d, self.min, self.max)?;
         match &self.result {
@@ -162,7 +163,6 @@ impl TuneResult {
     /// #define DEFAULT_Kd 53.00
     /// ```
     /// (`DEFAULT_bedKp`… for the bed, `DEFAULT_chamberKp`… for a chamber).
-    #[inline(never)]
     pub fn write_finished<W: ufmt::uWrite + ?Sized>(&self, heater: HeaterId, out: &mut W) -> Result<(), W::Error> {
         flash_str!("PID Autotune finished! Put the last Kp, Ki and Kd constants from below into Configuration.h\n").write_to(out)?;
         let prefix = match heater {
@@ -170,9 +170,14 @@ impl TuneResult {
             HeaterId::Bed => "bed",
             HeaterId::Chamber => "chamber",
         };
-        for (name, value) in [("Kp ", self.gains.kp), ("Ki ", self.gains.ki), ("Kd ", self.gains.kd)] {
+        let mut value = self.gains.kp;
+        for name in *b"pid" {
             flash_str!("#define DEFAULT_").write_to(out)?;
-            ufmt::uwrite!(out, "{}{}{}\n", prefix, name, Gain(value))?;
+            out.write_str(prefix)?;
+            out.write_char('K')?;
+            out.write_char(char::from(name))?;
+            ufmt::uwrite!(out, " {}\n", Gain(value))?;
+            value = if name == b'p' { self.gains.ki } else { self.gains.kd };
         }
         Ok(())
     }
@@ -189,6 +194,16 @@ pub enum TuneStep {
     /// Finished: heater off; apply the gains on `U1`.
     Done(TuneResult),
     /// Failed: heater off.
+    Failed(TuneError),
+}
+
+/// [`TuneStep`] without the result (the firmware's own path: no copy of
+/// it; on `Done` it is [`Autotune::last_cycle`]'s).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Step {
+    Heat(u8),
+    Cycle(u8),
+    Done,
     Failed(TuneError),
 }
 
@@ -247,28 +262,49 @@ impl Autotune {
     }
 
     /// One sample with the measured temperature.
-    #[inline(never)]
     pub fn on_sample(&mut self, measured: Celsius) -> TuneStep {
+        match self.step(measured) {
+            Step::Heat(duty) => TuneStep::Heat(duty),
+            Step::Cycle(duty) => TuneStep::Cycle(duty),
+            // `step` says `Done` only with a result.
+            Step::Done => self.last.result.map_or(TuneStep::Cycle(self.power()), TuneStep::Done),
+            Step::Failed(error) => TuneStep::Failed(error),
+        }
+    }
+
+    /// [`on_sample`](Self::on_sample) without copying the result out:
+    /// on [`Step::Done`] it is `last_cycle().result`.
+    #[inline(never)]
+    pub(crate) fn step(&mut self, measured: Celsius) -> Step {
+        // Through a pointer register (`ldd`/`std`, 2 bytes) rather than
+        // the static's absolute address LTO would fold in (`lds`/`sts`, 4).
+        let this = core::hint::black_box(self);
+        this.step_at(measured)
+    }
+
+    fn step_at(&mut self, measured: Celsius) -> Step {
         self.now = self.now.wrapping_add(1);
-        let target = self.config.target.0;
-        if measured.0 > target.saturating_add(3000) {
-            return TuneStep::Failed(TuneError::TemperatureTooHigh);
+        // `measured > target + c` and `measured < target − c`, saturating
+        // (see `excess`).
+        let excess = super::excess(measured, self.config.target);
+        if excess > 3000 {
+            return Step::Failed(TuneError::TemperatureTooHigh);
         }
         let last_switch = if self.heating { self.heat_started } else { self.cool_started };
-        let timeout = u32::from(self.config.timeout_s) * 1000 / u32::from(self.config.sample_period_ms.max(1));
+        let timeout = super::millis(self.config.timeout_s) / u32::from(self.config.sample_period_ms.max(1));
         if self.now.wrapping_sub(last_switch) > timeout {
-            return TuneStep::Failed(TuneError::Timeout);
+            return Step::Failed(TuneError::Timeout);
         }
         self.max = self.max.max(measured);
         self.min = self.min.min(measured);
         let band = i32::from(self.config.noise_band.max(0));
 
-        if self.heating && measured.0 > target.saturating_add(band) {
+        if self.heating && excess > band {
             self.heating = false;
             self.cool_started = self.now;
             self.t_high = self.now.wrapping_sub(self.heat_started);
             self.max = measured;
-        } else if !self.heating && measured.0 < target.saturating_sub(band) {
+        } else if !self.heating && excess < -band {
             self.heating = true;
             let t_low = self.now.wrapping_sub(self.cool_started);
             self.heat_started = self.now;
@@ -277,21 +313,18 @@ impl Autotune {
             if !first {
                 let done = self.cycle_completed(t_low);
                 self.min = measured;
-                if done {
-                    if let Some(result) = self.last.result {
-                        return TuneStep::Done(result);
-                    }
+                if done && self.last.result.is_some() {
+                    return Step::Done;
                 }
-                return TuneStep::Cycle(self.power());
+                return Step::Cycle(self.power());
             }
             self.min = measured;
         }
-        TuneStep::Heat(self.power())
+        Step::Heat(self.power())
     }
 
     /// End of a cycle (`cycles` counts it): adapt the bias, measure, and
     /// say whether the experiment is over.
-    #[inline(never)]
     fn cycle_completed(&mut self, t_low: u32) -> bool {
         let max_power = i32::from(self.config.max_power);
         let samples = |t: u32| t.min(1 << 24) as i32;
@@ -302,18 +335,21 @@ impl Autotune {
         let bias = (i32::from(self.bias) + shift).clamp(20.min(max_power / 2), (max_power - 20).max(max_power / 2));
         self.bias = bias as u8;
         self.d = (if bias > max_power / 2 { max_power - 1 - bias } else { bias }) as u8;
-        let previous = self.last.result;
+        // Only what the agreement test needs of the previous result.
+        let previous = self.last.result.map(|p| (p.oscillation.0 as u32, p.period_ms));
         self.last = CycleReport { bias: self.bias, d: self.d, min: self.min, max: self.max, result: None };
         if self.cycles <= 3 {
             return false;
         }
-        let amplitude = self.max.0.saturating_sub(self.min.0) / 2;
-        let (total, period) = ((t_high + t_low) as u32, u32::from(self.config.sample_period_ms.max(1)));
-        let period_ms = if total > u32::MAX / period { u32::MAX } else { total * period };
+        let amplitude = super::excess(self.max, self.min) / 2;
+        // 0 ≤ t_high + t_low ≤ 2²⁵. A product that saturates (at
+        // `i32::MAX`) is refused by `relay_gains` (Pu above 2³²/256 ms)
+        // exactly as the true one would be.
+        let period_ms = saturating_mul(t_high + t_low, i32::from(self.config.sample_period_ms.max(1))) as u32;
         let Some(gains) = relay_gains(measured_d, Celsius(amplitude), period_ms) else {
             return false;
         };
-        let converged = previous.is_some_and(|p| within_5_percent(amplitude as u32, p.oscillation.0 as u32) && within_5_percent(period_ms, p.period_ms));
+        let converged = previous.is_some_and(|(oscillation, period)| within_5_percent(amplitude as u32, oscillation) && within_5_percent(period_ms, period));
         self.last.result = Some(TuneResult { relay_amplitude: measured_d, oscillation: Celsius(amplitude), period_ms, ku: gains.ku, gains: gains.gains, converged });
         converged || self.cycles > self.config.cycles.max(3)
     }
@@ -323,8 +359,9 @@ impl Autotune {
 fn within_5_percent(a: u32, b: u32) -> bool {
     let difference = a.abs_diff(b);
     let larger = a.max(b);
-    // 20·difference ≤ larger, compared without overflowing.
-    difference <= larger / 20
+    // difference ≤ ⌊larger/20⌋ ⟺ 20·difference ≤ larger; a difference
+    // whose 20-fold overflows is larger than any u32.
+    difference <= u32::MAX / 20 && (difference << 4) + (difference << 2) <= larger
 }
 
 #[cfg(test)]
@@ -344,6 +381,33 @@ mod tests {
         let g = relay_gains(100, Celsius(5000), 1000).unwrap();
         assert_eq!(g.ku, 25_465); // Ku 2.5465
         assert_eq!(g.gains, Gains { kp: 15_279, ki: 30_558, kd: 1_910 }); // 1.5279, 3.0558, 0.1910
+    }
+
+    /// The rules with exact 128-bit arithmetic, as the reference.
+    fn reference_gains(d: u8, a: i32, period_ms: u32) -> Option<RelayGains> {
+        let a = u32::try_from(a).ok().filter(|a| *a > 0 && *a <= u32::MAX / 104_348)?;
+        if period_ms == 0 || period_ms > u32::MAX / 256 {
+            return None;
+        }
+        let round = |x: u128, m: u128, n: u128| u32::try_from((x * m + n / 2) / n).ok();
+        let ku256 = round(4_000_000 * u128::from(d), 33_215 * 256, u128::from(a) * 104_348)?;
+        let gain = |m: u32, n: u32| round(u128::from(ku256), u128::from(m), u128::from(n)).filter(|g| *g <= Gains::MAX);
+        Some(RelayGains {
+            ku: gain(1, 256)?,
+            gains: Gains { kp: gain(3, 5 * 256)?, ki: gain(1200, period_ms * 256)?, kd: gain(3 * period_ms, 40_000 * 256)? },
+        })
+    }
+
+    #[test]
+    fn relay_gains_match_exact_arithmetic_over_their_range() {
+        let periods = [1, 2, 99, 100, 200, 1_000, 21_340, 65_535, 1_000_000, 16_777_215, 16_777_216, u32::MAX];
+        for d in [0u8, 1, 2, 50, 92, 127, 128, 200, 254, 255] {
+            for a in (-3..3_000).chain((3_000..41_200).step_by(37)).chain([41_159, 41_160, 41_161, i32::MAX]) {
+                for period in periods {
+                    assert_eq!(relay_gains(d, Celsius(a), period), reference_gains(d, a, period), "d {d} a {a} Pu {period}");
+                }
+            }
+        }
     }
 
     #[test]
@@ -431,6 +495,23 @@ mod tests {
         assert_eq!(tune.on_sample(Celsius(20_031)), TuneStep::Heat(0));
         assert_eq!(tune.on_sample(Celsius(19_970)), TuneStep::Heat(0));
         assert_eq!(tune.on_sample(Celsius(19_969)), TuneStep::Heat(254));
+    }
+
+    #[test]
+    fn within_5_percent_is_the_larger_divided_by_20() {
+        let mut values: std::vec::Vec<u32> = (0..2_000).collect();
+        values.extend((0..2_000u32).map(|i| i.wrapping_mul(2_654_435_761)));
+        values.extend([u32::MAX, u32::MAX - 1, u32::MAX / 20, u32::MAX / 20 + 1, 214_748_364, 4_294_967_280]);
+        for &a in &values {
+            for &b in values.iter().step_by(7) {
+                assert_eq!(within_5_percent(a, b), a.abs_diff(b) <= a.max(b) / 20, "{a} {b}");
+            }
+        }
+        for a in 0..3_000u32 {
+            for b in a..a + 200 {
+                assert_eq!(within_5_percent(a, b), a.abs_diff(b) <= a.max(b) / 20, "{a} {b}");
+            }
+        }
     }
 
     #[test]

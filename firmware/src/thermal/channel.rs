@@ -6,7 +6,7 @@
 //! PID or bang-bang law and leaves the duty in [`HeaterChannel::duty`]. A
 //! latched fault is returned once and keeps the duty at 0.
 
-use super::autotune::{Autotune, TuneError, TuneResult, TuneStep};
+use super::autotune::{Autotune, Step, TuneError, TuneResult};
 use super::guard::{GuardConfig, HeaterGuard, ThermalFault, Verdict};
 use super::output::{OutputMode, TimeProportioning};
 use super::pid::{bang_bang, Control, Gains, Law, PidState};
@@ -14,7 +14,8 @@ use super::thermistor::{Oversampled, Thermistor};
 use super::{Celsius, Heater, HeaterId};
 use crate::progmem::Flash;
 
-/// Everything fixed about one heater: 27 bytes, pointer-free, kept in
+/// Everything fixed about one heater: 28 bytes (its one pointer, the
+/// thermistor table, is itself in flash), kept in
 /// flash ([`Flash`]) and copied out when a sample needs it, so it costs no
 /// RAM on the AVR. The stock ones are [`HOTEND_0`], [`BED`] and [`BARREL`];
 /// a board with others declares its own
@@ -91,7 +92,7 @@ impl HeaterConfig {
 
     /// The highest target [`HeaterChannel::set_target`] accepts.
     pub fn max_target(&self) -> Celsius {
-        Celsius((i32::from(self.guard.max_c) - i32::from(self.guard.target_margin_c)) * 100)
+        Celsius(super::guard::centi(self.guard.max_c) - i32::from(u16::from(self.guard.target_margin_c) * 100))
     }
 }
 
@@ -131,6 +132,17 @@ pub enum TuneProgress {
     Failed(TuneError),
     /// The guard latched a fault (heater off): report and halt as for
     /// [`HeaterChannel::on_sample`].
+    Fault(ThermalFault),
+}
+
+/// [`TuneProgress`] without the result (the executor's path: on `Done`
+/// the result is `tune.last_cycle().result`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum TuningStep {
+    Running,
+    Cycle,
+    Done,
+    Failed(TuneError),
     Fault(ThermalFault),
 }
 
@@ -344,36 +356,50 @@ impl HeaterChannel {
     /// One sample during `M303`: the guard still watches (sensor, max/min
     /// temperature, heating watch); the runaway check is suspended.
     pub fn on_tuning_sample(&mut self, reading: Oversampled, tune: &mut Autotune) -> TuneProgress {
+        match self.tuning_step(reading, tune) {
+            TuningStep::Running => TuneProgress::Running,
+            TuningStep::Cycle => TuneProgress::Cycle,
+            // `Done` comes only with a result.
+            TuningStep::Done => tune.last_cycle().result.map_or(TuneProgress::Running, TuneProgress::Done),
+            TuningStep::Failed(error) => TuneProgress::Failed(error),
+            TuningStep::Fault(fault) => TuneProgress::Fault(fault),
+        }
+    }
+
+    /// [`on_tuning_sample`](Self::on_tuning_sample) without copying the
+    /// result out: on [`TuningStep::Done`] it is
+    /// `tune.last_cycle().result`.
+    pub(crate) fn tuning_step(&mut self, reading: Oversampled, tune: &mut Autotune) -> TuningStep {
         let config = self.config();
         let measured = match self.judge(&config, reading, true) {
             Ok(measured) => measured,
             Err(Some(fault)) => {
                 self.duty = 0;
-                return TuneProgress::Fault(fault);
+                return TuningStep::Fault(fault);
             }
             Err(None) => {
                 self.duty = 0;
-                return TuneProgress::Running;
+                return TuningStep::Running;
             }
         };
         self.accept(measured);
         let limit = |duty: u8| duty.min(config.max_power);
-        match tune.on_sample(measured) {
-            TuneStep::Heat(duty) => {
+        match tune.step(measured) {
+            Step::Heat(duty) => {
                 self.duty = limit(duty);
-                TuneProgress::Running
+                TuningStep::Running
             }
-            TuneStep::Cycle(duty) => {
+            Step::Cycle(duty) => {
                 self.duty = limit(duty);
-                TuneProgress::Cycle
+                TuningStep::Cycle
             }
-            TuneStep::Done(result) => {
+            Step::Done => {
                 self.turn_off();
-                TuneProgress::Done(result)
+                TuningStep::Done
             }
-            TuneStep::Failed(error) => {
+            Step::Failed(error) => {
                 self.turn_off();
-                TuneProgress::Failed(error)
+                TuningStep::Failed(error)
             }
         }
     }
@@ -401,6 +427,16 @@ mod tests {
 
     fn hotend() -> HeaterChannel {
         HeaterChannel::new(&HOTEND_0, Gains::MARLIN_HOTEND)
+    }
+
+    #[test]
+    fn control_period_is_the_saturating_product() {
+        for period in (0..=u16::MAX).step_by(7).chain([u16::MAX, 256, 257, 6553, 6554]) {
+            for every in 0..=u8::MAX {
+                let config = HeaterConfig { sample_period_ms: period, control_every: every, ..HeaterConfig::hotend(0) };
+                assert_eq!(config.control_period_ms(), period.saturating_mul(u16::from(every.max(1))), "{period} × {every}");
+            }
+        }
     }
 
     #[test]

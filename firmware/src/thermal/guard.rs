@@ -198,10 +198,17 @@ impl Default for HeaterGuard {
     }
 }
 
+/// Whole °C of a configuration in hundredths (one multiplication for
+/// every limit).
+#[inline(never)]
+pub(super) fn centi(degrees: i16) -> i32 {
+    i32::from(degrees) * 100
+}
+
 /// Samples in `seconds`, at least 1, saturating at `u16::MAX`.
 #[inline(never)]
 fn samples(seconds: u16, period_ms: u16) -> u16 {
-    let samples = u32::from(seconds) * 1000 / u32::from(period_ms.max(1));
+    let samples = super::millis(seconds) / u32::from(period_ms.max(1));
     samples.clamp(1, u32::from(u16::MAX)) as u16
 }
 
@@ -224,7 +231,6 @@ impl HeaterGuard {
     /// A new target: re-arm the runaway check and the heating watch.
     /// `measured` is the latest good temperature, `None` before the first
     /// (the watch then arms at the first reading).
-    #[inline(never)]
     pub fn on_target(&mut self, config: &GuardConfig, period_ms: u16, target: Celsius, measured: Option<Celsius>) {
         self.runaway_samples = 0;
         self.watch_samples = 0;
@@ -241,8 +247,8 @@ impl HeaterGuard {
     }
 
     fn arm_watch(&mut self, config: &GuardConfig, period_ms: u16, target: Celsius, measured: Celsius) {
-        let increase = i32::from(config.watch_increase_c) * 100;
-        if config.watch_period_s > 0 && measured.0 < target.0.saturating_sub(increase + WATCH_ARM_MARGIN) {
+        let increase = i32::from(u16::from(config.watch_increase_c) * 100);
+        if config.watch_period_s > 0 && super::excess(measured, target) < -(increase + WATCH_ARM_MARGIN) {
             self.watch_samples = samples(config.watch_period_s, period_ms);
             self.watch_goal = Celsius(measured.0.saturating_add(increase));
         } else {
@@ -253,7 +259,6 @@ impl HeaterGuard {
     /// One sample. `reading` is the converted temperature or the sensor
     /// fault; `tuning` suspends the runaway check (the auto-tune relay
     /// swings around the target on purpose and has its own limits).
-    #[inline(never)]
     pub fn check(
         &mut self,
         config: &GuardConfig,
@@ -266,7 +271,7 @@ impl HeaterGuard {
             return Verdict::Faulted(reading.ok());
         }
         let measured = match reading {
-            Ok(t) if t.0 < i32::from(config.min_c) * 100 => Err(ThermalFault::MinTemp),
+            Ok(t) if t.0 < centi(config.min_c) => Err(ThermalFault::MinTemp),
             Ok(t) => Ok(t),
             Err(super::thermistor::SensorFault::Open) => Err(ThermalFault::SensorOpen),
             Err(super::thermistor::SensorFault::Shorted) => Err(ThermalFault::SensorShorted),
@@ -279,7 +284,7 @@ impl HeaterGuard {
             }
         };
         self.bad = 0;
-        if measured.0 > i32::from(config.max_c) * 100 {
+        if measured.0 > centi(config.max_c) {
             return self.latch(ThermalFault::MaxTemp);
         }
         if target.0 <= 0 {
@@ -307,8 +312,8 @@ impl HeaterGuard {
             self.runaway = Runaway::Holding;
         }
         if self.runaway == Runaway::Holding {
-            let floor = target.0.saturating_sub(i32::from(config.runaway_hysteresis_c) * 100);
-            if measured.0 >= floor {
+            // measured ≥ target − hysteresis (saturating; see `excess`).
+            if super::excess(measured, target) >= -i32::from(u16::from(config.runaway_hysteresis_c) * 100) {
                 self.runaway_samples = 0;
             } else {
                 self.runaway_samples = self.runaway_samples.saturating_add(1);

@@ -59,19 +59,21 @@ pub fn mul_div_round(x: u32, m: u32, n: u32) -> Option<u32> {
     if high >= n {
         return None;
     }
+    // The quotient's bits are shifted into `low` as its bits move out
+    // into the remainder (`high`); a `u8` count.
     let mut remainder = high;
-    let mut quotient = 0u32;
-    for _ in 0..32 {
+    let mut count = 32u8;
+    while count > 0 {
+        count -= 1;
         let overflow = remainder >> 31;
         remainder = (remainder << 1) | (low >> 31);
         low <<= 1;
-        quotient <<= 1;
         if overflow != 0 || remainder >= n {
             remainder = remainder.wrapping_sub(n);
-            quotient |= 1;
+            low |= 1;
         }
     }
-    Some(quotient)
+    Some(low)
 }
 
 #[cfg(test)]
@@ -112,6 +114,27 @@ mod tests {
             }
         }
         assert_eq!(mul_div_round(7, 1, 2), Some(4));
+        // Pseudo-random operands, and quotients near 2³².
+        let mut seed = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for i in 0..400_000u32 {
+            let r = next();
+            let (x, m) = ((r >> 32) as u32 >> (i % 32), r as u32 >> (i / 32 % 32));
+            let n = match i % 4 {
+                0 => next() as u32,
+                1 => (next() as u32) >> (i % 31),
+                2 => ((u64::from(x) * u64::from(m)) >> 32) as u32 + (i % 3),
+                _ => u32::MAX - (i % 5),
+            };
+            let exact = (u128::from(x) * u128::from(m) + u128::from(n / 2)).checked_div(u128::from(n));
+            let expected = exact.and_then(|q| u32::try_from(q).ok());
+            assert_eq!(mul_div_round(x, m, n), expected, "{x} × {m} / {n}");
+        }
         assert_eq!(mul_div_round(5, 1, 0), None);
     }
 }

@@ -92,7 +92,7 @@
 //!   `channel.clear_fault()`.
 //!
 //! **RAM (AVR, packed).** `HeaterChannel` 44 bytes (a compile-time
-//! assertion keeps it there); its 27-byte `HeaterConfig` stays in flash
+//! assertion keeps it there); its 28-byte `HeaterConfig` stays in flash
 //! ([`channel::HOTEND_0`], [`channel::BED`], [`channel::BARREL`]…, copied
 //! out per sample). `SampleAverager` 7, `SlowPwm` 7, `AutoReport` 5,
 //! `ColdExtrusionGuard` 5; `Autotune` 76 and `TemperatureWait` 34 only
@@ -104,7 +104,7 @@
 //! a bed through every call above, `opt-level = "s"`, LTO):** ≈ 8.6 KiB
 //! beyond what the firmware already links (u32 division, `ufmt` integers,
 //! `write_fixed`, `FlashStr`), of which ≈ 2 KiB is the harness's own
-//! executor-like glue; the two 54-row tables 324 bytes each. `M303`
+//! executor-like glue; the two 54-row tables 216 bytes each (a build links only the ones its configurations name). `M303`
 //! (auto-tune, gains, its messages) adds ≈ 6 KiB and is linked only if the
 //! executor calls it. No float, no 64-bit division, no `checked_mul`.
 
@@ -142,6 +142,21 @@ impl ufmt::uDisplay for Celsius {
     }
 }
 
+/// `a − b`, saturating. For a bound `c ≥ 0` (not near `i32::MIN`),
+/// `a > b.saturating_add(c)` ⟺ `excess(a, b) > c` and
+/// `a < b.saturating_sub(c)` ⟺ `excess(a, b) < −c`, exactly (also where
+/// the bounds saturate): one subtraction for several comparisons.
+#[inline(never)]
+pub(crate) fn excess(a: Celsius, b: Celsius) -> i32 {
+    a.0.saturating_sub(b.0)
+}
+
+/// `seconds` in milliseconds (one multiplication for every timer).
+#[inline(never)]
+pub(crate) fn millis(seconds: u16) -> u32 {
+    u32::from(seconds) * 1000
+}
+
 /// Which heater, as Marlin names it in messages (`Heater_ID: 0`,
 /// `Heater_ID: bed`) and in `M303 E` (`E-1` is the bed, `E-2` the chamber).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -174,5 +189,25 @@ pub struct Heater {
 impl Heater {
     pub const fn new() -> Self {
         Self { measured: Celsius(0), target: Celsius(0), power: 0 }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn excess_compares_like_the_saturated_bounds() {
+        let values = [i32::MIN, i32::MIN + 1, i32::MIN + 2_999, i32::MIN + 3_000, i32::MIN + 3_001, -100_000, -1, 0, 1, 2_999, 3_000, 20_000, i32::MAX - 3_001, i32::MAX - 3_000, i32::MAX - 1, i32::MAX];
+        for a in values {
+            for b in values {
+                for c in [0, 1, 30, 400, 3_000, 25_900, 32_767] {
+                    let e = excess(Celsius(a), Celsius(b));
+                    assert_eq!(a > b.saturating_add(c), e > c, "{a} > {b} + {c}");
+                    assert_eq!(a < b.saturating_sub(c), e < -c, "{a} < {b} - {c}");
+                    assert_eq!(a >= b.saturating_sub(c), e >= -c, "{a} >= {b} - {c}");
+                }
+            }
+        }
     }
 }

@@ -61,7 +61,13 @@ impl Gains {
     /// Gains × 10⁴ (e.g. from `Decimal::to_scaled(4)`); `None` if one is
     /// negative or above [`Gains::MAX`].
     pub fn new(kp: i32, ki: i32, kd: i32) -> Option<Self> {
-        let check = |value: i32| if (0..=Self::MAX as i32).contains(&value) { Some(value as u32) } else { None };
+        let check = |value: i32| {
+            if (0..=Self::MAX as i32).contains(&value) {
+                Some(value as u32)
+            } else {
+                None
+            }
+        };
         Some(Self { kp: check(kp)?, ki: check(ki)?, kd: check(kd)? })
     }
 
@@ -92,21 +98,19 @@ pub struct Gain(pub u32);
 
 impl ufmt::uDisplay for Gain {
     fn fmt<W: ufmt::uWrite + ?Sized>(&self, f: &mut ufmt::Formatter<'_, W>) -> Result<(), W::Error> {
-        let (whole, fraction) = (self.0 / 10_000, self.0 % 10_000);
-        ufmt::uwrite!(f, "{}.", whole)?;
-        let digits = if fraction % 100 == 0 {
-            2
-        } else if fraction % 10 == 0 {
-            3
-        } else {
-            4
-        };
-        let mut place = 1000;
-        for _ in 0..digits {
-            f.write_char(char::from(b'0' + ((fraction / place) % 10) as u8))?;
-            place /= 10;
+        // Gains are at most `Gains::MAX` (10⁸): they fit an `i32`.
+        // Trailing zeros dropped down to two decimals (`div_rem_10` is
+        // linked anyway; no division here).
+        let (mut mantissa, mut digits) = (self.0, 4);
+        while digits > 2 {
+            let (tenth, last) = crate::gcode::number::div_rem_10(mantissa);
+            if last != 0 {
+                break;
+            }
+            mantissa = tenth;
+            digits -= 1;
         }
-        Ok(())
+        crate::reply::write_fixed(f, mantissa as i32, digits)
     }
 }
 
@@ -201,7 +205,6 @@ impl PidState {
     /// Every sample: the derivative on the measurement (no kick when the
     /// target changes), a rate, so it may be sampled faster than the law
     /// runs.
-    #[inline(never)]
     pub fn observe(&mut self, gains: &Gains, derivative_filter_shift: u8, sample_period_ms: u16, measured: Celsius, previous: Celsius) {
         let period = i32::from(sample_period_ms.max(1));
         // Temperatures are table values (−30..420 °C): no overflow.
@@ -220,13 +223,12 @@ impl PidState {
     /// temperatures on the stack, where it reads them one byte off on the
     /// ATmega2560 (a 3-byte return address; `tests/scripts/size-check.sh`
     /// refuses such code).
-    #[inline(never)]
     pub fn control(&mut self, gains: &Gains, law: &Law) -> u8 {
         let Law { functional_range_c, control_period_ms, max_power, target, measured } = *law;
         let period = i32::from(control_period_ms.max(1));
         let max = i32::from(max_power) * MICRO;
         let error = target.0 - measured.0;
-        let range = i32::from(functional_range_c) * 100;
+        let range = i32::from(u16::from(functional_range_c) * 100);
         if range > 0 && error > range {
             self.integral = 0;
             return max_power;
@@ -252,13 +254,14 @@ impl PidState {
 
 /// Terms of the law are kept within ±2²⁹ micro-counts (±536 counts, twice
 /// any output), so that sums of three of them cannot overflow.
+#[inline(never)]
 fn bounded(value: i32) -> i32 {
     value.clamp(-(1 << 29), 1 << 29)
 }
 
 /// Bang-bang with hysteresis: `on` is the heater's state before this sample.
 pub fn bang_bang(hysteresis_tenths: u8, max_power: u8, target: Celsius, measured: Celsius, on: bool) -> u8 {
-    let band = i32::from(hysteresis_tenths) * 10;
+    let band = i32::from(u16::from(hysteresis_tenths) * 10);
     let on = if measured.0 <= target.0.saturating_sub(band) {
         true
     } else if measured.0 >= target.0.saturating_add(band) {
@@ -431,6 +434,30 @@ mod tests {
         Gains::MARLIN_HOTEND.write_m301(&mut out).unwrap();
         assert_eq!(out.0, "M301 P22.20 I1.08 D114.00");
         assert_eq!(shown(Gains::THESIS_BARREL), " Kp: 6.12 Ki: 0.0204 Kd: 0.00");
+    }
+
+    /// The previous digit-by-digit formatting, as the reference.
+    fn reference_gain(value: u32) -> std::string::String {
+        let (whole, fraction) = (value / 10_000, value % 10_000);
+        let digits = if fraction % 100 == 0 {
+            2
+        } else if fraction % 10 == 0 {
+            3
+        } else {
+            4
+        };
+        let text = std::format!("{fraction:04}");
+        std::format!("{whole}.{}", &text[..digits])
+    }
+
+    #[test]
+    fn gains_print_as_before_over_their_whole_range() {
+        let mut values: std::vec::Vec<u32> = (0..200_000).collect();
+        values.extend((0..100_000u32).map(|i| i.wrapping_mul(2_654_435_761) % (Gains::MAX + 1)));
+        values.extend([Gains::MAX, Gains::MAX - 1, Gains::MAX - 10, 99_999_999, 12_345_670]);
+        for value in values {
+            assert_eq!(shown(Gain(value)), reference_gain(value), "{value}");
+        }
     }
 
     #[test]

@@ -8,6 +8,14 @@ use super::Celsius;
 /// `M105` report; `@:` is the duty halved (0–127). Without a bed, `B:…`
 /// and `B@:…` are left out.
 pub fn write_temperatures<W: ufmt::uWrite + ?Sized>(hotend: &HeaterChannel, bed: Option<&HeaterChannel>, out: &mut W) -> Result<(), W::Error> {
+    write_temperature_fields(hotend, bed, out)?;
+    out.write_str("\n")
+}
+
+/// The `M105` report without its newline (`M109`'s keep-alive line adds
+/// ` W:…` to it).
+#[inline(never)]
+pub fn write_temperature_fields<W: ufmt::uWrite + ?Sized>(hotend: &HeaterChannel, bed: Option<&HeaterChannel>, out: &mut W) -> Result<(), W::Error> {
     ufmt::uwrite!(out, "T:{} /{}", hotend.measured(), hotend.target())?;
     if let Some(bed) = bed {
         ufmt::uwrite!(out, " B:{} /{}", bed.measured(), bed.target())?;
@@ -16,7 +24,7 @@ pub fn write_temperatures<W: ufmt::uWrite + ?Sized>(hotend: &HeaterChannel, bed:
     if let Some(bed) = bed {
         ufmt::uwrite!(out, " B@:{}", bed.power_report())?;
     }
-    out.write_str("\n")
+    Ok(())
 }
 
 /// `M155 S<seconds>`: when the next automatic temperature report is due.
@@ -43,7 +51,7 @@ impl AutoReport {
     /// comes one interval later.
     pub fn set_interval(&mut self, seconds: u8, now_ms: u32) {
         self.interval_s = seconds.min(Self::MAX_INTERVAL_S);
-        self.next_ms = now_ms.wrapping_add(u32::from(self.interval_s) * 1000);
+        self.next_ms = now_ms.wrapping_add(super::millis(u16::from(self.interval_s)));
     }
 
     /// Whether a report is due at `now_ms`; if so the next one is
@@ -53,7 +61,7 @@ impl AutoReport {
         if self.interval_s == 0 || (now_ms.wrapping_sub(self.next_ms) as i32) < 0 {
             return false;
         }
-        let interval = u32::from(self.interval_s) * 1000;
+        let interval = super::millis(u16::from(self.interval_s));
         self.next_ms = self.next_ms.wrapping_add(interval);
         if (now_ms.wrapping_sub(self.next_ms) as i32) >= 0 {
             self.next_ms = now_ms.wrapping_add(interval);
@@ -139,7 +147,7 @@ impl TemperatureWait {
         if self.target.0 <= 0 || (wants_to_cool && !self.cooling) {
             return WaitStatus::Reached;
         }
-        if self.config.timeout_s > 0 && now_ms.wrapping_sub(self.started_ms) >= u32::from(self.config.timeout_s) * 1000 {
+        if self.config.timeout_s > 0 && now_ms.wrapping_sub(self.started_ms) >= super::millis(self.config.timeout_s) {
             return WaitStatus::TimedOut;
         }
         let distance = measured.0.abs_diff(self.target.0);
@@ -150,14 +158,14 @@ impl TemperatureWait {
         }
         if let Some(since) = self.residency_since {
             let held = now_ms.wrapping_sub(since);
-            let residency = u32::from(self.config.residency_s) * 1000;
+            let residency = super::millis(u16::from(self.config.residency_s));
             if held >= residency {
                 return WaitStatus::Reached;
             }
             return WaitStatus::Waiting(Some(((residency - held) / 1000) as u8));
         }
         if wants_to_cool {
-            let period = u32::from(self.config.cooling_check_s) * 1000;
+            let period = super::millis(u16::from(self.config.cooling_check_s));
             match self.cool_check {
                 None => self.cool_check = Some((measured, now_ms)),
                 Some((previous, at)) if now_ms.wrapping_sub(at) >= period => {
@@ -199,6 +207,26 @@ mod tests {
         let mut out = Text::default();
         write_temperatures(&hotend, None, &mut out).unwrap();
         assert!(out.0.ends_with(" /210.00 @:127\n"), "{}", out.0);
+    }
+
+    #[test]
+    fn the_m109_keep_alive_line_is_the_report_fields_with_w() {
+        let mut hotend = HeaterChannel::new(&HOTEND_0, Gains::MARLIN_HOTEND);
+        let mut bed = HeaterChannel::new(&BED, Gains::MARLIN_BED);
+        hotend.on_sample(Oversampled::from_count(300));
+        bed.on_sample(Oversampled::from_count(900));
+        hotend.set_target(Celsius(21_050)).unwrap();
+        bed.set_target(Celsius(6_000)).unwrap();
+        hotend.on_sample(Oversampled::from_count(301));
+        bed.on_sample(Oversampled::from_count(901));
+        // What the executor printed before it shared the fields.
+        let mut expected = Text::default();
+        ufmt::uwrite!(expected, " T:{} /{} B:{} /{} @:{} B@:{} W:", hotend.measured(), hotend.target(), bed.measured(), bed.target(), hotend.power_report(), bed.power_report()).unwrap();
+        let mut out = Text::default();
+        out.0.push(' ');
+        write_temperature_fields(&hotend, Some(&bed), &mut out).unwrap();
+        out.0.push_str(" W:");
+        assert_eq!(out.0, expected.0);
     }
 
     #[test]

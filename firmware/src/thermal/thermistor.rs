@@ -8,7 +8,7 @@
 //! one as linear interpolation allows while staying within **0.1 °C of the
 //! β equation from 0 to 300 °C** (1 °C from 300 to 420 °C and from −30 to
 //! 0 °C), checked at every 1/16 count with the firmware's own integer
-//! arithmetic. That takes 54 rows (324 bytes of flash) per table instead of
+//! arithmetic. That takes 54 rows (216 bytes of flash) per table instead of
 //! 254 rows every 4 counts. The achieved error is exported as
 //! `<TABLE>_ERROR_CENTI` and tested.
 //!
@@ -27,11 +27,42 @@
 //! averaging noisy conversions matters).
 
 use super::Celsius;
+use crate::progmem::Flash;
 
 include!(concat!(env!("OUT_DIR"), "/thermistor_tables.rs"));
 
-/// A table of (ADC count ascending, hundredths of °C descending), in flash.
-pub type Table<const N: usize> = &'static crate::progmem::Flash<[(u16, i32); N]>;
+/// A table of (ADC count ascending, hundredths of °C descending), in flash;
+/// each temperature is kept as a `u16` (plus `STORED_OFFSET`): 4 bytes a row.
+pub struct ThermistorTable<const N: usize>(Flash<[(u16, u16); N]>);
+
+impl<const N: usize> ThermistorTable<N> {
+    const fn new(rows: [(u16, u16); N]) -> Self {
+        Self(Flash::new(rows))
+    }
+
+    /// Number of rows.
+    pub const fn len(&self) -> usize {
+        N
+    }
+
+    pub const fn is_empty(&self) -> bool {
+        N == 0
+    }
+
+    /// Row `index`: (ADC count, hundredths of °C); `None` past the end.
+    pub fn get(&self, index: usize) -> Option<(u16, i32)> {
+        let (adc, stored) = self.0.get(index)?;
+        Some((adc, celsius_of(stored)))
+    }
+}
+
+/// A stored temperature in hundredths of °C.
+fn celsius_of(stored: u16) -> i32 {
+    i32::from(stored) - STORED_OFFSET
+}
+
+/// A table in flash, as the conversions take it.
+pub type Table<const N: usize> = &'static ThermistorTable<N>;
 
 /// Why an ADC reading is not a temperature.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -54,23 +85,44 @@ impl Oversampled {
     }
 }
 
-/// The thermistor circuits the firmware has tables for: a pointer-free
-/// name that configurations can hold (and that can live in flash).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Thermistor {
-    /// 100 k NTC, β 3950, 4.7 kΩ pull-up (stock RAMPS 1.4).
-    Ntc100kB3950Pullup4k7,
-    /// 100 k NTC, β 3950, 4.8 kΩ pull-up (SPEC §4's extrusion line).
-    Ntc100kB3950Pullup4k8,
-}
+/// A thermistor circuit the firmware has a table for: a reference to the
+/// table in flash, which configurations can hold (and that can live in
+/// flash itself: the address is that of the table in program memory, and
+/// [`Flash`] reads it from there). Only the tables a configuration names
+/// are linked.
+#[derive(Clone, Copy)]
+pub struct Thermistor(Table<ROWS>);
 
+#[allow(non_upper_case_globals)]
 impl Thermistor {
+    /// 100 k NTC, β 3950, 4.7 kΩ pull-up (stock RAMPS 1.4).
+    pub const Ntc100kB3950Pullup4k7: Thermistor = Thermistor(&NTC100K_B3950_4K7);
+    /// 100 k NTC, β 3950, 4.8 kΩ pull-up (SPEC §4's extrusion line).
+    pub const Ntc100kB3950Pullup4k8: Thermistor = Thermistor(&NTC100K_B3950_4K8);
+
     /// Temperature of an (oversampled) reading.
     pub fn celsius(self, reading: Oversampled) -> Result<Celsius, SensorFault> {
-        match self {
-            Self::Ntc100kB3950Pullup4k7 => celsius_from_oversampled(&NTC100K_B3950_4K7, reading),
-            Self::Ntc100kB3950Pullup4k8 => celsius_from_oversampled(&NTC100K_B3950_4K8, reading),
-        }
+        celsius_from_oversampled(self.0, reading)
+    }
+}
+
+impl PartialEq for Thermistor {
+    fn eq(&self, other: &Self) -> bool {
+        core::ptr::eq(self.0, other.0)
+    }
+}
+
+impl Eq for Thermistor {}
+
+impl core::fmt::Debug for Thermistor {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(if *self == Self::Ntc100kB3950Pullup4k7 {
+            "Ntc100kB3950Pullup4k7"
+        } else if *self == Self::Ntc100kB3950Pullup4k8 {
+            "Ntc100kB3950Pullup4k8"
+        } else {
+            "Thermistor"
+        })
     }
 }
 
@@ -81,47 +133,57 @@ pub fn celsius_from_adc<const N: usize>(table: Table<N>, adc: u16) -> Result<Cel
 
 /// Convert a reading in 1/16 counts with `table` (binary search for the
 /// row pair, then linear interpolation rounded half away from zero).
-#[inline(never)]
 pub fn celsius_from_oversampled<const N: usize>(table: Table<N>, reading: Oversampled) -> Result<Celsius, SensorFault> {
     let row = |index: usize| row(table, index);
-    let x16 = i32::from(reading.0);
-    let sixteenths = |(adc, _): (u16, i32)| i32::from(adc) * 16;
-    if N < 2 || x16 < sixteenths(row(0)) {
+    let x16 = reading.0;
+    if N < 2 || x16 < row(0).0 {
         return Err(SensorFault::Shorted);
     }
-    if x16 > sixteenths(row(N - 1)) {
+    if x16 > row(N - 1).0 {
         return Err(SensorFault::Open);
     }
     // Invariant: row(low) ≤ x16 ≤ row(high).
     let (mut low, mut high) = (0, N - 1);
     while high - low > 1 {
         let middle = (low + high) / 2;
-        if sixteenths(row(middle)) <= x16 {
+        if row(middle).0 <= x16 {
             low = middle;
         } else {
             high = middle;
         }
     }
-    Ok(Celsius(interpolate(x16, row(low), row(high))))
+    Ok(Celsius(celsius_of(interpolate(x16, row(low), row(high)))))
 }
 
-/// One row out of flash (one copy of the copying loop, not one per use).
+/// One stored row out of flash with its ADC count in sixteenths (counts
+/// are at most 1023: × 16 fits a u16); one copy of the copying loop, not
+/// one per use.
 #[inline(never)]
-fn row<const N: usize>(table: Table<N>, index: usize) -> (u16, i32) {
-    table.get(index).unwrap_or((0, 0))
+fn row<const N: usize>(table: Table<N>, index: usize) -> (u16, u16) {
+    let (adc, stored) = table.0.get(index).unwrap_or((0, 0));
+    (adc.wrapping_mul(16), stored)
 }
 
-/// Hundredths of °C at `x16` between two rows. `build.rs` evaluates the
-/// table's error with the same arithmetic. The product stays below 2³¹:
-/// |t1 − t0| < 80 000 and the offset < 16 400.
-fn interpolate(x16: i32, (adc0, t0): (u16, i32), (adc1, t1): (u16, i32)) -> i32 {
-    let numerator = (t1 - t0) * (x16 - i32::from(adc0) * 16);
-    let denominator = (i32::from(adc1) - i32::from(adc0)) * 16;
-    if denominator <= 0 {
+/// The stored temperature at `x16` (with `row0 ≤ x16 ≤ row1`, ADC counts
+/// in sixteenths) between two rows: `t0 + (t1 − t0)·(x16 − x0)/(x1 − x0)`,
+/// the quotient rounded half away from zero. `build.rs` evaluates the
+/// table's error with the same arithmetic. The product stays below 2³²:
+/// |t1 − t0| < 2¹⁶ and the offset < 2¹⁴.
+fn interpolate(x16: u16, (x0, t0): (u16, u16), (x1, t1): (u16, u16)) -> u16 {
+    let offset = x16.wrapping_sub(x0);
+    let span = x1.wrapping_sub(x0);
+    if span == 0 || x1 < x0 {
         return t0;
     }
-    let magnitude = (numerator.abs() + denominator / 2) / denominator;
-    t0 + if numerator < 0 { -magnitude } else { magnitude }
+    let falling = t1 < t0;
+    let difference = if falling { t0 - t1 } else { t1 - t0 };
+    // ≤ difference, as offset ≤ span.
+    let magnitude = ((u32::from(difference) * u32::from(offset) + u32::from(span / 2)) / u32::from(span)) as u16;
+    if falling {
+        t0.wrapping_sub(magnitude)
+    } else {
+        t0.wrapping_add(magnitude)
+    }
 }
 
 /// Averages `samples` conversions into one [`Oversampled`] reading.
@@ -257,6 +319,42 @@ mod tests {
         let next = at(&NTC100K_B3950_4K8, 119);
         let half = celsius_from_oversampled(&NTC100K_B3950_4K8, Oversampled(118 * 16 + 8)).unwrap().0;
         assert!(next < half && half < whole, "{next} < {half} < {whole}");
+    }
+
+    /// The previous conversion (i32 rows, signed arithmetic), as the reference.
+    fn reference(table: Table<54>, x16: u16) -> Result<Celsius, SensorFault> {
+        let rows: std::vec::Vec<(u16, i32)> = (0..table.len()).map(|i| table.get(i).unwrap()).collect();
+        let x16 = i32::from(x16);
+        let sixteenths = |(adc, _): (u16, i32)| i32::from(adc) * 16;
+        if x16 < sixteenths(rows[0]) {
+            return Err(SensorFault::Shorted);
+        }
+        if x16 > sixteenths(rows[rows.len() - 1]) {
+            return Err(SensorFault::Open);
+        }
+        let (mut low, mut high) = (0, rows.len() - 1);
+        while high - low > 1 {
+            let middle = (low + high) / 2;
+            if sixteenths(rows[middle]) <= x16 {
+                low = middle;
+            } else {
+                high = middle;
+            }
+        }
+        let ((adc0, t0), (adc1, t1)) = (rows[low], rows[high]);
+        let numerator = (t1 - t0) * (x16 - i32::from(adc0) * 16);
+        let denominator = (i32::from(adc1) - i32::from(adc0)) * 16;
+        let magnitude = (numerator.abs() + denominator / 2) / denominator;
+        Ok(Celsius(t0 + if numerator < 0 { -magnitude } else { magnitude }))
+    }
+
+    #[test]
+    fn conversion_matches_the_signed_reference_at_every_sixteenth() {
+        for table in [&NTC100K_B3950_4K7, &NTC100K_B3950_4K8] {
+            for x16 in 0..=1023 * 16 {
+                assert_eq!(celsius_from_oversampled(table, Oversampled(x16)), reference(table, x16), "{x16}");
+            }
+        }
     }
 
     #[test]
