@@ -162,7 +162,7 @@ pub fn read(_dp: &Peripherals, pin: Pin) -> bool {
 /// Drive every stepper driver's enable (active low).
 #[cfg_attr(any(feature = "machine-extrusion-line", feature = "machine-powder-bed"), allow(dead_code))]
 pub fn set_steppers_enabled(dp: &Peripherals, enabled: bool) {
-    for enable in STEPPER_ENABLES {
+    for &enable in &STEPPER_ENABLES {
         make_output(dp, enable, !enabled);
     }
 }
@@ -178,10 +178,10 @@ pub fn all_outputs_safe(dp: &Peripherals) {
     // A pin driven by a PWM compare unit ignores its PORT bit: cut the
     // timers loose first.
     crate::pwm::disconnect_all(dp);
-    for heater in HEATER_OUTPUTS {
+    for &heater in &HEATER_OUTPUTS {
         make_output(dp, heater, false);
     }
-    for enable in STEPPER_ENABLES {
+    for &enable in &STEPPER_ENABLES {
         make_output(dp, enable, true);
     }
 }
