@@ -56,6 +56,13 @@ impl Fixed {
         Self { mantissa, digits: 2 }
     }
 
+    /// A whole number, as `ufmt` prints an `i32` (`-12` → `-12`): with
+    /// every integer printed this way, `ufmt`'s own `i32` formatting is
+    /// not in the firmware.
+    pub const fn whole(mantissa: i32) -> Self {
+        Self { mantissa, digits: 0 }
+    }
+
     /// Thousandths (`1234` → `1.234`).
     pub const fn thousandths(mantissa: i32) -> Self {
         Self { mantissa, digits: 3 }
@@ -121,6 +128,13 @@ mod tests {
         assert_eq!(shown(Fixed { mantissa: -7, digits: 9 }), "-0.000000007");
         assert_eq!(shown(Fixed { mantissa: i32::MIN, digits: 9 }), "-2.147483648");
         assert_eq!(shown(Fixed { mantissa: 100, digits: 2 }), "1.00");
+    }
+
+    #[test]
+    fn a_whole_fixed_prints_as_ufmt_prints_the_i32() {
+        for n in [0, 1, -1, 9, 10, -10, 99, 100, 12345, -70000, i32::MAX, i32::MIN, i32::MIN + 1] {
+            assert_eq!(shown(Fixed::whole(n)), shown(n), "{n}");
+        }
     }
 
     #[test]
