@@ -124,7 +124,12 @@ impl HostProtocol {
         rejection.message().write_to(out)?;
         // The `ok` joined to the last piece: one call fewer.
         if self.numbered {
-            ufmt::uwrite!(out, ", Last Line: {}\nResend: {}\nok\n", self.last_line, self.last_line.wrapping_add(1))
+            ufmt::uwrite!(
+                out,
+                ", Last Line: {}\nResend: {}\nok\n",
+                crate::reply::Fixed::whole(self.last_line),
+                crate::reply::Fixed::whole(self.last_line.wrapping_add(1))
+            )
         } else {
             out.write_str("\nok\n")
         }

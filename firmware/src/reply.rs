@@ -14,33 +14,43 @@ use ufmt::{uWrite, Formatter};
 /// ten, then written in order: smaller on the AVR than printing the whole
 /// part with `ufmt` and the decimals with three 32-bit divisions each.
 pub fn write_fixed<W: uWrite + ?Sized>(f: &mut Formatter<'_, W>, mantissa: i32, digits: u8) -> Result<(), W::Error> {
-    // Sign, ten digits, a point, and the zeros before the first digit.
-    let mut text = [0u8; 24];
-    let mut len = 0;
+    // Sign, ten digits, a point, and the zeros before the first digit,
+    // made from the end and written in one piece.
+    const LEN: u8 = 24;
+    let mut text = [core::mem::MaybeUninit::<u8>::uninit(); LEN as usize];
+    let mut start = LEN;
+    let mut put = |start: &mut u8, byte: u8| {
+        *start -= 1;
+        // SAFETY: an iteration of the loop below starts with `start` ≥ 3
+        // (it stops at ≤ 2) and takes at most two places, the sign one
+        // more: `start` stays within `text`.
+        unsafe { text.get_unchecked_mut(usize::from(*start)).write(byte) };
+    };
     let mut rest = mantissa.unsigned_abs();
     let mut made = 0u8;
     loop {
         let (quotient, digit) = crate::gcode::number::div_rem_10(rest);
         rest = quotient;
-        text[len] = b'0' + digit as u8;
-        len += 1;
+        put(&mut start, b'0' + digit as u8);
         made += 1;
         if made == digits {
-            text[len] = b'.';
-            len += 1;
+            put(&mut start, b'.');
         }
-        if (rest == 0 && made > digits) || len + 2 >= text.len() {
+        if (rest == 0 && made > digits) || start <= 2 {
             break;
         }
     }
     if mantissa < 0 {
-        text[len] = b'-';
-        len += 1;
+        put(&mut start, b'-');
     }
-    for &byte in text[..len].iter().rev() {
-        f.write_char(char::from(byte))?;
-    }
-    Ok(())
+    // SAFETY: `text[start..]` has been written, with digits, '.' and '-'
+    // only: ASCII, valid UTF-8.
+    f.write_str(unsafe {
+        core::str::from_utf8_unchecked(core::slice::from_raw_parts(
+            text.as_ptr().add(usize::from(start)).cast::<u8>(),
+            usize::from(LEN - start),
+        ))
+    })
 }
 
 /// A fixed-point number printed with a set number of decimals.
@@ -54,6 +64,13 @@ impl Fixed {
     /// Hundredths (`1234` → `12.34`), Marlin's usual precision.
     pub const fn hundredths(mantissa: i32) -> Self {
         Self { mantissa, digits: 2 }
+    }
+
+    /// A whole number, as `ufmt` prints an `i32` (`-12` → `-12`): with
+    /// every integer printed this way, `ufmt`'s own `i32` formatting is
+    /// not in the firmware.
+    pub const fn whole(mantissa: i32) -> Self {
+        Self { mantissa, digits: 0 }
     }
 
     /// Thousandths (`1234` → `1.234`).
@@ -121,6 +138,13 @@ mod tests {
         assert_eq!(shown(Fixed { mantissa: -7, digits: 9 }), "-0.000000007");
         assert_eq!(shown(Fixed { mantissa: i32::MIN, digits: 9 }), "-2.147483648");
         assert_eq!(shown(Fixed { mantissa: 100, digits: 2 }), "1.00");
+    }
+
+    #[test]
+    fn a_whole_fixed_prints_as_ufmt_prints_the_i32() {
+        for n in [0, 1, -1, 9, 10, -10, 99, 100, 12345, -70000, i32::MAX, i32::MIN, i32::MIN + 1] {
+            assert_eq!(shown(Fixed::whole(n)), shown(n), "{n}");
+        }
     }
 
     #[test]

@@ -208,9 +208,17 @@ impl<T: Copy, const N: usize> Consumer<'_, T, N> {
 
     /// Take the oldest item.
     pub fn dequeue(&mut self) -> Option<T> {
-        let item = *self.front()?;
-        self.release();
-        Some(item)
+        let head = self.ring.head();
+        if head == self.ring.tail() {
+            return None;
+        }
+        // SAFETY: as in `front`: head != tail, so the slot holds a published
+        // item, copied out straight into the result before `head` moves
+        // past it (only the consumer moves `head`, so `release`'s second
+        // check would be redundant).
+        let item = Some(unsafe { *(*self.ring.slot(head)).assume_init_ref() });
+        self.ring.head.store(head.wrapping_add(1) & Ring::<T, N>::MASK);
+        item
     }
 }
 

@@ -212,6 +212,7 @@ impl Settings {
 
     /// [`M503_SCRIPT`] from byte `at` to the next NUL, with every field
     /// marker replaced by its value; returns where the next part starts.
+    #[inline(never)]
     fn write_script<W: uWrite + ?Sized>(
         &self,
         mut at: usize,
@@ -221,6 +222,11 @@ impl Settings {
             at += 1;
             match byte {
                 0 => break,
+                // Stored without the `echo:` that follows it.
+                b'\n' => {
+                    out.write_char('\n')?;
+                    crate::flash_str!(LINE_START).write_to(out)?;
+                }
                 1..=0x7F => out.write_char(char::from(byte))?,
                 _ => {
                     let value = self.value(usize::from(byte & FIELD_MASK));
@@ -257,17 +263,44 @@ const HOTEND_PID: usize = 21;
 const BED_PID: usize = 24;
 
 /// `M503`'s text with markers for the values (see [`FIELD_MASK`]), in two
-/// parts ended by NUL: up to the hot end's gains, up to the bed's.
+/// parts ended by NUL: up to the hot end's gains, up to the bed's. Every
+/// line after the first starts with `echo:`: stored without it, and
+/// [`Settings::write_script`] writes it after each newline.
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static M503_SCRIPT: crate::progmem::Flash<[u8; M503_TEXT.len()]> =
-    crate::progmem::Flash::new(script_bytes());
+static M503_SCRIPT: crate::progmem::Flash<[u8; SCRIPT_LEN]> = crate::progmem::Flash::new(script_bytes());
 
-const fn script_bytes() -> [u8; M503_TEXT.len()] {
-    let mut bytes = [0; M503_TEXT.len()];
+/// What every newline of [`M503_TEXT`] is followed by.
+const LINE_START: &str = "echo:";
+
+/// [`M503_TEXT`]'s length without the `echo:` after each newline.
+const SCRIPT_LEN: usize = {
+    let mut newlines = 0;
     let mut i = 0;
-    while i < bytes.len() {
-        bytes[i] = M503_TEXT[i];
+    while i < M503_TEXT.len() {
+        if M503_TEXT[i] == b'\n' {
+            newlines += 1;
+        }
         i += 1;
+    }
+    M503_TEXT.len() - newlines * LINE_START.len()
+};
+
+const fn script_bytes() -> [u8; SCRIPT_LEN] {
+    let mut bytes = [0; SCRIPT_LEN];
+    let (mut from, mut to) = (0, 0);
+    while from < M503_TEXT.len() {
+        bytes[to] = M503_TEXT[from];
+        to += 1;
+        if M503_TEXT[from] == b'\n' {
+            // Each newline is followed by `echo:` (checked here).
+            let mut k = 0;
+            while k < LINE_START.len() {
+                assert!(M503_TEXT[from + 1 + k] == LINE_START.as_bytes()[k]);
+                k += 1;
+            }
+            from += LINE_START.len();
+        }
+        from += 1;
     }
     bytes
 }

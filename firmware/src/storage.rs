@@ -119,13 +119,17 @@ pub fn load(storage: &mut (impl NonVolatile + ?Sized)) -> Result<(Settings, Stor
     if storage.capacity() < STORAGE_NEEDED {
         return Err(LoadError::TooSmall);
     }
+    let mut image = [0u8; SLOT_LEN];
     match newest(storage) {
         Some((slot, _)) => {
-            let image = read_slot(storage, slot);
+            read_slot_into(storage, slot, &mut image);
             Ok((decode(&image), Stored { bytes: SLOT_LEN, crc: u16::from_le_bytes([image[7], image[8]]) }))
         }
         // Say why nothing loaded: the first slot's problem is as good as any.
-        None => Err(check(&read_slot(storage, 0)).err().unwrap_or(LoadError::NoImage)),
+        None => {
+            read_slot_into(storage, 0, &mut image);
+            Err(check(&image).err().unwrap_or(LoadError::NoImage))
+        }
     }
 }
 
@@ -133,8 +137,9 @@ pub fn load(storage: &mut (impl NonVolatile + ?Sized)) -> Result<(Settings, Stor
 #[inline(never)]
 fn newest(storage: &mut (impl NonVolatile + ?Sized)) -> Option<(usize, u16)> {
     let mut best: Option<(usize, u16)> = None;
+    let mut image = [0u8; SLOT_LEN];
     for slot in 0..2 {
-        let image = read_slot(storage, slot);
+        read_slot_into(storage, slot, &mut image);
         if let Ok(sequence) = check(&image) {
             best = match best {
                 // Sequence numbers wrap: newer means "ahead by less than half".
@@ -146,13 +151,20 @@ fn newest(storage: &mut (impl NonVolatile + ?Sized)) -> Option<(usize, u16)> {
     best
 }
 
-#[inline(never)]
+#[cfg(test)]
 fn read_slot(storage: &mut (impl NonVolatile + ?Sized), slot: usize) -> [u8; SLOT_LEN] {
     let mut image = [0u8; SLOT_LEN];
+    read_slot_into(storage, slot, &mut image);
+    image
+}
+
+/// Slot `slot`'s bytes into `image` (by reference: an array returned by
+/// value is a stack copy on the AVR).
+#[inline(never)]
+fn read_slot_into(storage: &mut (impl NonVolatile + ?Sized), slot: usize, image: &mut [u8; SLOT_LEN]) {
     for (index, byte) in image.iter_mut().enumerate() {
         *byte = storage.read(slot * SLOT_LEN + index);
     }
-    image
 }
 
 /// The sequence number of a valid image.

@@ -12,22 +12,41 @@
 
 use avr_device::atmega2560::Peripherals;
 
-/// One bit of an I/O port, named by its register addresses' owner.
+/// One bit of an I/O port, named by its register addresses' owner. The
+/// discriminant is the low byte of the port's PINx address (DDRx and PORTx
+/// follow it): ports A–G sit at 0x20–0x34, H–L at 0x100–0x10B
+/// (avr-device's `PORTx::PTR`). One address computation instead of a match
+/// with eleven arms per access.
 #[derive(Clone, Copy)]
+#[repr(u8)]
 pub enum Port {
-    A,
-    B,
-    C,
-    D,
-    E,
-    F,
+    A = 0x20,
+    B = 0x23,
+    C = 0x26,
+    D = 0x29,
+    E = 0x2C,
+    F = 0x2F,
     #[cfg_attr(not(feature = "machine-powder-bed"), allow(dead_code))]
-    G,
-    H,
-    J,
-    K,
-    L,
+    G = 0x32,
+    H = 0x00,
+    J = 0x03,
+    K = 0x06,
+    L = 0x09,
 }
+
+impl Port {
+    /// The data-space address of the port's PINx register; DDRx is at
+    /// +1 and PORTx at +2.
+    #[inline(always)]
+    fn pin_register(self) -> *mut u8 {
+        let low = self as u8;
+        let address = if low < 0x20 { 0x100 + u16::from(low) } else { u16::from(low) };
+        address as usize as *mut u8
+    }
+}
+
+const DDR: usize = 1;
+const PORT: usize = 2;
 
 #[derive(Clone, Copy)]
 pub struct Pin {
@@ -104,78 +123,46 @@ pub fn make_output_in(dp: &Peripherals, _cs: avr_device::interrupt::CriticalSect
     make_output_unguarded(dp, pin, high);
 }
 
-fn make_output_unguarded(dp: &Peripherals, pin: Pin, high: bool) {
+fn make_output_unguarded(_dp: &Peripherals, pin: Pin, high: bool) {
     let mask = 1u8 << pin.bit;
-    macro_rules! drive {
-        ($port:ident, $out:ident, $ddr:ident) => {{
-            // SAFETY: every bit pattern is valid for PORTx and DDRx.
-            dp.$port.$out.modify(|r, w| unsafe { w.bits(if high { r.bits() | mask } else { r.bits() & !mask }) });
-            dp.$port.$ddr.modify(|r, w| unsafe { w.bits(r.bits() | mask) });
-        }};
-    }
-    match pin.port {
-        Port::A => drive!(PORTA, porta, ddra),
-        Port::B => drive!(PORTB, portb, ddrb),
-        Port::C => drive!(PORTC, portc, ddrc),
-        Port::D => drive!(PORTD, portd, ddrd),
-        Port::E => drive!(PORTE, porte, ddre),
-        Port::F => drive!(PORTF, portf, ddrf),
-        Port::G => drive!(PORTG, portg, ddrg),
-        Port::H => drive!(PORTH, porth, ddrh),
-        Port::J => drive!(PORTJ, portj, ddrj),
-        Port::K => drive!(PORTK, portk, ddrk),
-        Port::L => drive!(PORTL, portl, ddrl),
+    let base = pin.port.pin_register();
+    // SAFETY: `base` is a port's PINx; PORTx and DDRx follow it, and every
+    // bit pattern is valid for them (the same accesses as the PAC's
+    // `modify`).
+    unsafe {
+        let out = base.add(PORT);
+        let value = out.read_volatile();
+        out.write_volatile(if high { value | mask } else { value & !mask });
+        let ddr = base.add(DDR);
+        ddr.write_volatile(ddr.read_volatile() | mask);
     }
 }
 
 /// Make `pin` an input with its pull-up on (endstops switch to ground or
 /// are open-collector; an open wire then reads high).
-pub fn make_input_pulled_up(dp: &Peripherals, pin: Pin) {
+pub fn make_input_pulled_up(_dp: &Peripherals, pin: Pin) {
     let mask = 1u8 << pin.bit;
-    macro_rules! input {
-        ($port:ident, $out:ident, $ddr:ident) => {{
-            // SAFETY: every bit pattern is valid for DDRx and PORTx.
-            dp.$port.$ddr.modify(|r, w| unsafe { w.bits(r.bits() & !mask) });
-            dp.$port.$out.modify(|r, w| unsafe { w.bits(r.bits() | mask) });
-        }};
-    }
-    match pin.port {
-        Port::A => input!(PORTA, porta, ddra),
-        Port::B => input!(PORTB, portb, ddrb),
-        Port::C => input!(PORTC, portc, ddrc),
-        Port::D => input!(PORTD, portd, ddrd),
-        Port::E => input!(PORTE, porte, ddre),
-        Port::F => input!(PORTF, portf, ddrf),
-        Port::G => input!(PORTG, portg, ddrg),
-        Port::H => input!(PORTH, porth, ddrh),
-        Port::J => input!(PORTJ, portj, ddrj),
-        Port::K => input!(PORTK, portk, ddrk),
-        Port::L => input!(PORTL, portl, ddrl),
+    let base = pin.port.pin_register();
+    // SAFETY: as in `make_output_unguarded`: DDRx, then PORTx.
+    unsafe {
+        let ddr = base.add(DDR);
+        ddr.write_volatile(ddr.read_volatile() & !mask);
+        let out = base.add(PORT);
+        out.write_volatile(out.read_volatile() | mask);
     }
 }
 
 /// The level of an input pin.
-pub fn read(dp: &Peripherals, pin: Pin) -> bool {
-    let bits = match pin.port {
-        Port::A => dp.PORTA.pina.read().bits(),
-        Port::B => dp.PORTB.pinb.read().bits(),
-        Port::C => dp.PORTC.pinc.read().bits(),
-        Port::D => dp.PORTD.pind.read().bits(),
-        Port::E => dp.PORTE.pine.read().bits(),
-        Port::F => dp.PORTF.pinf.read().bits(),
-        Port::G => dp.PORTG.ping.read().bits(),
-        Port::H => dp.PORTH.pinh.read().bits(),
-        Port::J => dp.PORTJ.pinj.read().bits(),
-        Port::K => dp.PORTK.pink.read().bits(),
-        Port::L => dp.PORTL.pinl.read().bits(),
-    };
+pub fn read(_dp: &Peripherals, pin: Pin) -> bool {
+    // SAFETY: `pin_register` is the port's PINx, readable at any time.
+    let bits = unsafe { pin.port.pin_register().read_volatile() };
     bits & (1 << pin.bit) != 0
 }
 
 /// Drive every stepper driver's enable (active low).
 #[cfg_attr(any(feature = "machine-extrusion-line", feature = "machine-powder-bed"), allow(dead_code))]
 pub fn set_steppers_enabled(dp: &Peripherals, enabled: bool) {
-    for enable in STEPPER_ENABLES {
+    for &enable in &STEPPER_ENABLES {
         make_output(dp, enable, !enabled);
     }
 }
@@ -191,10 +178,10 @@ pub fn all_outputs_safe(dp: &Peripherals) {
     // A pin driven by a PWM compare unit ignores its PORT bit: cut the
     // timers loose first.
     crate::pwm::disconnect_all(dp);
-    for heater in HEATER_OUTPUTS {
+    for &heater in &HEATER_OUTPUTS {
         make_output(dp, heater, false);
     }
-    for enable in STEPPER_ENABLES {
+    for &enable in &STEPPER_ENABLES {
         make_output(dp, enable, true);
     }
 }

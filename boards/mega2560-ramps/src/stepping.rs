@@ -76,7 +76,7 @@ pub fn init(dp: &Peripherals, config: StepperConfig) -> StepFeeder<'static> {
     let (feeder, generator) = queues.split(config);
     // SAFETY: interrupts are still disabled (see above).
     unsafe { *addr_of_mut!(GENERATOR) = Some(generator) };
-    for pin in crate::pins::STEP_DIR {
+    for &pin in &crate::pins::STEP_DIR {
         crate::pins::make_output(dp, pin, false);
     }
     let timer = &dp.TC1;

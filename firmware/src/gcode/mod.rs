@@ -190,10 +190,7 @@ pub fn parse_into(text: &[u8], command: &mut Command) -> Result<(), ParseError> 
     let code = match first.letter {
         b'G' | b'M' | b'T' => {
             let value = first.value.ok_or(ParseError::WordWithoutValue(first.letter))?;
-            if value.fraction_digits() != 0 || value.is_negative() {
-                return Err(ParseError::BadCommandNumber);
-            }
-            let number = u16::try_from(value.mantissa()).map_err(|_| ParseError::BadCommandNumber)?;
+            let number = code_number(value).ok_or(ParseError::BadCommandNumber)?;
             match first.letter {
                 b'G' => Code::G(number),
                 b'M' => Code::M(number),
@@ -222,13 +219,17 @@ pub fn parse_into(text: &[u8], command: &mut Command) -> Result<(), ParseError> 
     Ok(())
 }
 
-/// A `G`/`M` word that names a code (whole, non-negative).
-fn command_code(word: Word) -> Option<Code> {
-    let value = word.value?;
+/// A code's number: whole, non-negative and within `u16`.
+fn code_number(value: Decimal) -> Option<u16> {
     if value.fraction_digits() != 0 || value.is_negative() {
         return None;
     }
-    let number = u16::try_from(value.mantissa()).ok()?;
+    u16::try_from(value.mantissa()).ok()
+}
+
+/// A `G`/`M` word that names a code (whole, non-negative).
+fn command_code(word: Word) -> Option<Code> {
+    let number = code_number(word.value?)?;
     match word.letter {
         b'G' => Some(Code::G(number)),
         b'M' => Some(Code::M(number)),

@@ -896,7 +896,7 @@ impl<'q> Machine<'q> {
             ufmt::uwrite!(out, "{}:{} ", char::from(*letter), micrometres_as_mm(self.modal.logical(axis)))?;
         }
         let [x, y, z, _] = self.motion.motor_steps();
-        ufmt::uwrite!(out, "Count X:{} Y:{} Z:{}\n", x, y, z)
+        ufmt::uwrite!(out, "Count X:{} Y:{} Z:{}\n", Fixed::whole(x), Fixed::whole(y), Fixed::whole(z))
     }
 
     /// `M118 [E1] <text>`: print the text (with `echo:` when `E1`).
