@@ -228,11 +228,11 @@ impl Delta {
         let nominal = self.homed_height
             + self.effector_offset
             + sqrt(self.rod_length * self.rod_length - self.radius * self.radius);
-        [
-            nominal + self.endstop_trim[0],
-            nominal + self.endstop_trim[1],
-            nominal + self.endstop_trim[2],
-        ]
+        // nominal + trim, through the trilateration's helper (trim·1 is
+        // the trim, bit for bit).
+        let mut heights = [nominal; 3];
+        add_scaled3(&mut heights, &self.endstop_trim, 1.0);
+        heights
     }
 }
 
