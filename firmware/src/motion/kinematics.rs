@@ -14,6 +14,7 @@
 //! the step interrupt never sees a float.
 
 use super::math::{self, atan2, round_to_i32, sin_cos, sqrt};
+use crate::progmem::Flash;
 
 /// Cartesian axes (X, Y, Z) and the motors that position them.
 pub const LINEAR_AXES: usize = 3;
@@ -211,17 +212,6 @@ impl Delta {
         }
     }
 
-    /// The carriage pivot of one tower (tower x, tower y, h − OF), out
-    /// of line (filling an array of them in a loop compiled to a zeroing
-    /// loop and a memcpy per element).
-    #[inline(never)]
-    fn pivot(&self, heights: &Vector3, tower: usize) -> Vector3 {
-        match (self.towers.get(tower), heights.get(tower)) {
-            (Some(&[x, y]), Some(height)) => [x, y, height - self.effector_offset],
-            _ => [0.0; 3],
-        }
-    }
-
     /// Carriage height of every tower when all sit at their top endstops:
     /// the nozzle is then at (0, 0, homed_height), trims aside.
     pub fn homed_carriage_heights(&self) -> Vector3 {
@@ -263,62 +253,32 @@ impl Kinematics for Delta {
     }
 
     /// Trilateration: the nozzle (less OF) lies at distance L from each
-    /// carriage pivot (tower x, tower y, h_i); of the two intersections of
-    /// the three spheres, the one below the carriages.
+    /// carriage pivot (tower x, tower y, h_i − OF); of the two
+    /// intersections of the three spheres, the one below the carriages.
     ///
-    /// Written for the soft-float AVR, where each operation is a call:
-    /// out-of-line vector helpers working in place (a − b is a + b·(−1),
-    /// bit for bit), and few vectors alive at once, so the frame stays
-    /// small. Spelled out per component this was 2 KB.
+    /// Written for the soft-float AVR, where each operation spelled out is
+    /// a call with its operands loaded and its result stored (2 KB
+    /// inline, 1.4 KB through vector helpers): the steps are
+    /// [`TRILATERATION`], a table in flash of 3 bytes each, run by
+    /// [`run_float_program`]. The same operations in the same order as the
+    /// formulas, so the same bits (a test keeps them so).
     #[inline(never)]
     fn forward(&self, heights: Vector3) -> Result<Vector3, KinematicsError> {
-        // p1, then p2 − p1 (becomes ex) and p3 − p1.
-        let mut v = [
-            self.pivot(&heights, 0),
-            self.pivot(&heights, 1),
-            self.pivot(&heights, 2),
-        ];
-        let [p1, ex, p31] = &mut v;
-        add_scaled3(ex, p1, -1.0);
-        add_scaled3(p31, p1, -1.0);
-        let d = length3(ex);
-        if !(d > 0.0) {
-            return Err(KinematicsError::NoSolution);
+        let mut regs = [0.0; REGISTERS];
+        // Whole arrays into constant chunks: no bounds checks.
+        if let Some((pivots, rest)) = regs.split_first_chunk_mut::<H0>() {
+            *pivots = [self.towers[0][0], self.towers[0][1], self.towers[1][0], self.towers[1][1], self.towers[2][0], self.towers[2][1]];
+            if let Some(h) = rest.first_chunk_mut::<3>() {
+                *h = heights;
+            }
         }
-        scale3(ex, 1.0 / d);
-        let i = dot3(ex, p31);
-        // p1 is computed again at the end: it becomes ey meanwhile.
-        *p1 = *p31;
-        let ey = p1;
-        add_scaled3(ey, ex, -i);
-        let ey_len = length3(ey);
-        if !(ey_len > 0.0) {
-            return Err(KinematicsError::NoSolution);
-        }
-        scale3(ey, 1.0 / ey_len);
-        let j = dot3(ey, p31);
-        // All three radii are L, so the r₁² − r₂² terms vanish.
-        let x = d / 2.0;
-        let y = (i * i + j * j) / (2.0 * j) - i * x / j;
-        let z_sqr = self.rod_length * self.rod_length - x * x - y * y;
-        if !(z_sqr >= 0.0) {
-            return Err(KinematicsError::NoSolution);
-        }
-        let z = sqrt(z_sqr);
-        // The base point p1 + ex·x + ey·y where p3 − p1 was; ez in ex.
-        let base = p31;
-        *base = self.pivot(&heights, 0);
-        add_scaled3(base, ex, x);
-        add_scaled3(base, ey, y);
-        let ez = cross3(ex, ey);
-        // Of base ± ez·z, the lower (base − ez·z when neither is).
-        let z = if base[2] + ez[2] * z < base[2] - ez[2] * z {
-            z
-        } else {
-            -z
-        };
-        add_scaled3(base, &ez, z);
-        Ok(*base)
+        regs[BELOW_ZERO] = -f32::from_bits(1);
+        regs[OF] = self.effector_offset;
+        regs[ROD] = self.rod_length;
+        regs[ONE] = 1.0;
+        regs[HALF] = 0.5;
+        run_float_program(&mut regs, &TRILATERATION)?;
+        Ok([regs[TX0], regs[TY0], regs[H0]])
     }
 
     fn segment_mm(&self) -> Option<f32> {
@@ -330,20 +290,202 @@ impl Kinematics for Delta {
     }
 }
 
+/// Float registers of [`run_float_program`] (a power of two: indices are
+/// masked into range, no bounds checks).
+const REGISTERS: usize = 32;
+
+// The trilateration's registers: the inputs (the towers' x and y, the
+// carriage heights, which become the pivots' z = h − OF; p1's x, y, z
+// then become the result) and constants (−(smallest subnormal): x ≥ 0 is
+// x > it; a zero, never written), the vectors ex, p3 − p1 (which becomes
+// ez), ey, then scalars. The inputs first: the caller's stack offsets
+// stay below 64.
+const TX0: usize = 0;
+const TY0: usize = 1;
+const TX1: usize = 2;
+const TY1: usize = 3;
+const TX2: usize = 4;
+const TY2: usize = 5;
+const H0: usize = 6;
+const H1: usize = 7;
+const H2: usize = 8;
+const OF: usize = 9;
+const ROD: usize = 10;
+const ONE: usize = 11;
+const HALF: usize = 12;
+const BELOW_ZERO: usize = 13;
+const ZERO: usize = 14;
+const EX: usize = 16;
+const P31: usize = 19;
+const EZ: usize = P31;
+const EY: usize = 22;
+const D: usize = 25;
+const X: usize = D;
+const I: usize = 26;
+const J: usize = 27;
+const Y: usize = 28;
+const Z: usize = 29;
+const T: usize = 30;
+const T2: usize = 31;
+
+/// Operations of a float program step: `dst ← a op b`.
+const ADD: u8 = 0;
+const SUB: u8 = 1;
+const MUL: u8 = 2;
+const DIV: u8 = 3;
+/// `dst ← √a` ([`math::sqrt`]).
+const SQRT: u8 = 4;
+/// `dst ← dst + a·b` (the product rounded, then the sum).
+const MUL_ADD: u8 = 5;
+/// Fail (no solution) unless `a > b`.
+const REQUIRE: u8 = 6;
+/// `dst ← −dst` unless `a < b`.
+const NEGATE_UNLESS_LESS: u8 = 7;
+
+/// One step: the operation in the top 3 bits of the first byte, `dst` in
+/// the low 5, then `a` and `b`.
+const fn step(op: u8, dst: usize, a: usize, b: usize) -> [u8; 3] {
+    [op << 5 | dst as u8, a as u8, b as u8]
+}
+
+/// Steps of the trilateration, [`Delta::forward`]'s formulas one operation
+/// at a time, in their order (a dot product summed left to right).
+const TRILATERATION_STEPS: [[u8; 3]; 77] = [
+    // The pivots' heights h_i − OF.
+    step(SUB, H0, H0, OF),
+    step(SUB, H1, H1, OF),
+    step(SUB, H2, H2, OF),
+    // p2 − p1 (to become ex) and p3 − p1.
+    step(SUB, EX, TX1, TX0),
+    step(SUB, EX + 1, TY1, TY0),
+    step(SUB, EX + 2, H1, H0),
+    step(SUB, P31, TX2, TX0),
+    step(SUB, P31 + 1, TY2, TY0),
+    step(SUB, P31 + 2, H2, H0),
+    // d = |p2 − p1| > 0; ex = (p2 − p1)·(1/d).
+    step(MUL, D, EX, EX),
+    step(MUL_ADD, D, EX + 1, EX + 1),
+    step(MUL_ADD, D, EX + 2, EX + 2),
+    step(SQRT, D, D, 0),
+    step(REQUIRE, 0, D, ZERO),
+    step(DIV, T, ONE, D),
+    step(MUL, EX, EX, T),
+    step(MUL, EX + 1, EX + 1, T),
+    step(MUL, EX + 2, EX + 2, T),
+    // i = ex·(p3 − p1); ey = p3 − p1 − ex·i, normalised.
+    step(MUL, I, EX, P31),
+    step(MUL_ADD, I, EX + 1, P31 + 1),
+    step(MUL_ADD, I, EX + 2, P31 + 2),
+    step(MUL, T, EX, I),
+    step(SUB, EY, P31, T),
+    step(MUL, T, EX + 1, I),
+    step(SUB, EY + 1, P31 + 1, T),
+    step(MUL, T, EX + 2, I),
+    step(SUB, EY + 2, P31 + 2, T),
+    step(MUL, T, EY, EY),
+    step(MUL_ADD, T, EY + 1, EY + 1),
+    step(MUL_ADD, T, EY + 2, EY + 2),
+    step(SQRT, T, T, 0),
+    step(REQUIRE, 0, T, ZERO),
+    step(DIV, T, ONE, T),
+    step(MUL, EY, EY, T),
+    step(MUL, EY + 1, EY + 1, T),
+    step(MUL, EY + 2, EY + 2, T),
+    // j = ey·(p3 − p1). All three radii are L, so the r₁² − r₂² terms
+    // vanish: x = d/2, y = (i² + j²)/(2j) − i·x/j.
+    step(MUL, J, EY, P31),
+    step(MUL_ADD, J, EY + 1, P31 + 1),
+    step(MUL_ADD, J, EY + 2, P31 + 2),
+    step(MUL, X, D, HALF),
+    step(MUL, T, I, I),
+    step(MUL, T2, J, J),
+    step(ADD, T, T, T2),
+    step(ADD, T2, J, J),
+    step(DIV, T, T, T2),
+    step(MUL, T2, I, X),
+    step(DIV, T2, T2, J),
+    step(SUB, Y, T, T2),
+    // z = √(L² − x² − y²), L² − x² − y² ≥ 0.
+    step(MUL, T, ROD, ROD),
+    step(MUL, T2, X, X),
+    step(SUB, T, T, T2),
+    step(MUL, T2, Y, Y),
+    step(SUB, T, T, T2),
+    step(REQUIRE, 0, T, BELOW_ZERO),
+    step(SQRT, Z, T, 0),
+    // The base point p1 + ex·x + ey·y, in p1.
+    step(MUL_ADD, TX0, EX, X),
+    step(MUL_ADD, TY0, EX + 1, X),
+    step(MUL_ADD, H0, EX + 2, X),
+    step(MUL_ADD, TX0, EY, Y),
+    step(MUL_ADD, TY0, EY + 1, Y),
+    step(MUL_ADD, H0, EY + 2, Y),
+    // ez = ex × ey.
+    step(MUL, T, EX + 1, EY + 2),
+    step(MUL, T2, EX + 2, EY + 1),
+    step(SUB, EZ, T, T2),
+    step(MUL, T, EX + 2, EY),
+    step(MUL, T2, EX, EY + 2),
+    step(SUB, EZ + 1, T, T2),
+    step(MUL, T, EX, EY + 1),
+    step(MUL, T2, EX + 1, EY),
+    step(SUB, EZ + 2, T, T2),
+    // Of base ± ez·z, the lower (base − ez·z when neither is).
+    step(MUL, T, EZ + 2, Z),
+    step(ADD, T2, H0, T),
+    step(SUB, I, H0, T),
+    step(NEGATE_UNLESS_LESS, Z, T2, I),
+    step(MUL_ADD, TX0, EZ, Z),
+    step(MUL_ADD, TY0, EZ + 1, Z),
+    step(MUL_ADD, H0, EZ + 2, Z),
+];
+
+/// [`TRILATERATION_STEPS`] in flash.
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static TRILATERATION: Flash<[[u8; 3]; TRILATERATION_STEPS.len()]> = Flash::new(TRILATERATION_STEPS);
+
+/// Run a float program's steps over `regs`; `Err` when a `REQUIRE` fails.
+#[inline(always)]
+fn run_float_program<const N: usize>(
+    regs: &mut [f32; REGISTERS],
+    program: &Flash<[[u8; 3]; N]>,
+) -> Result<(), KinematicsError> {
+    let mut index = 0;
+    while let Some([head, a, b]) = program.get(index) {
+        index += 1;
+        let dst = (head & 31) as usize;
+        let (a, b) = (a as usize & 31, b as usize & 31);
+        let (x, y) = (regs[a], regs[b]);
+        regs[dst] = match head >> 5 {
+            ADD => x + y,
+            SUB => x - y,
+            MUL => x * y,
+            DIV => x / y,
+            SQRT => sqrt(x),
+            MUL_ADD => regs[dst] + x * y,
+            REQUIRE => {
+                if x > y {
+                    continue;
+                }
+                return Err(KinematicsError::NoSolution);
+            }
+            _ => {
+                if x < y {
+                    continue;
+                }
+                -regs[dst]
+            }
+        };
+    }
+    Ok(())
+}
+
 /// a ← a + v·k. The vector helpers are out of line and work in place:
 /// the delta's trilateration calls each several times.
 #[inline(never)]
 fn add_scaled3(a: &mut Vector3, v: &Vector3, k: f32) {
     for axis in 0..3 {
         a[axis] += v[axis] * k;
-    }
-}
-
-/// a ← a·k.
-#[inline(never)]
-fn scale3(a: &mut Vector3, k: f32) {
-    for axis in 0..3 {
-        a[axis] *= k;
     }
 }
 
@@ -357,15 +499,6 @@ fn dot3(a: &Vector3, b: &Vector3) -> f32 {
 #[inline(never)]
 pub(crate) fn length3(a: &Vector3) -> f32 {
     sqrt(dot3(a, a))
-}
-
-/// a × b.
-fn cross3(a: &Vector3, b: &Vector3) -> Vector3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 /// SPEC §3: the planar RR arm in the Y–Z plane with a lead-screw X.
@@ -607,6 +740,98 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The trilateration as it was written before the float program,
+    /// operation by operation (the f32 operations are IEEE's, on the AVR
+    /// as here): the program must give the same bits.
+    fn forward_reference(delta: &Delta, h: Vector3) -> Option<Vector3> {
+        let of = delta.effector_offset;
+        let t = delta.towers;
+        let p1 = [t[0][0], t[0][1], h[0] - of];
+        let mut ex = [t[1][0], t[1][1], h[1] - of];
+        let mut p31 = [t[2][0], t[2][1], h[2] - of];
+        add_scaled3(&mut ex, &p1, -1.0);
+        add_scaled3(&mut p31, &p1, -1.0);
+        let d = length3(&ex);
+        if !(d > 0.0) {
+            return None;
+        }
+        let inv = 1.0 / d;
+        ex = [ex[0] * inv, ex[1] * inv, ex[2] * inv];
+        let i = dot3(&ex, &p31);
+        let mut ey = p31;
+        add_scaled3(&mut ey, &ex, -i);
+        let ey_len = length3(&ey);
+        if !(ey_len > 0.0) {
+            return None;
+        }
+        let inv = 1.0 / ey_len;
+        ey = [ey[0] * inv, ey[1] * inv, ey[2] * inv];
+        let j = dot3(&ey, &p31);
+        let x = d / 2.0;
+        let y = (i * i + j * j) / (2.0 * j) - i * x / j;
+        let z_sqr = delta.rod_length * delta.rod_length - x * x - y * y;
+        if !(z_sqr >= 0.0) {
+            return None;
+        }
+        let z = sqrt(z_sqr);
+        let mut base = p1;
+        add_scaled3(&mut base, &ex, x);
+        add_scaled3(&mut base, &ey, y);
+        let ez = [
+            ex[1] * ey[2] - ex[2] * ey[1],
+            ex[2] * ey[0] - ex[0] * ey[2],
+            ex[0] * ey[1] - ex[1] * ey[0],
+        ];
+        let z = if base[2] + ez[2] * z < base[2] - ez[2] * z {
+            z
+        } else {
+            -z
+        };
+        add_scaled3(&mut base, &ez, z);
+        Some(base)
+    }
+
+    #[test]
+    fn delta_forward_program_keeps_the_bits() {
+        for repetier in [false, true] {
+            let delta = Delta::spec_printer(repetier);
+            let mut checked = 0;
+            for xi in -14..=14 {
+                for yi in -14..=14 {
+                    for z in [0.0, 0.25, 7.5, 123.4] {
+                        let (x, y) = (xi as f32 * 9.7, yi as f32 * 9.3);
+                        let Ok(h) = delta.inverse([x, y, z]) else {
+                            continue;
+                        };
+                        // Off the exact heights too (trims, rounded steps).
+                        for dh in [0.0, 0.0125, -3.0] {
+                            let h = [h[0] + dh, h[1], h[2] - dh];
+                            let want = forward_reference(&delta, h);
+                            let got = delta.forward(h).ok();
+                            assert_eq!(
+                                got.map(|p| p.map(f32::to_bits)),
+                                want.map(|p| p.map(f32::to_bits)),
+                                "{h:?}"
+                            );
+                            checked += 1;
+                        }
+                    }
+                }
+            }
+            assert!(checked > 5000, "{checked}");
+        }
+        // No solution: carriages too far apart, or two pivots the same.
+        let delta = Delta::spec_printer(false);
+        for h in [[0.0, 0.0, 900.0], [0.0, 900.0, 0.0]] {
+            assert_eq!(forward_reference(&delta, h), None);
+        }
+        assert_eq!(delta.forward([0.0, 0.0, 900.0]), Err(KinematicsError::NoSolution));
+        let mut same = delta;
+        same.towers[1] = same.towers[0];
+        assert_eq!(forward_reference(&same, [300.0; 3]), None);
+        assert_eq!(same.forward([300.0; 3]), Err(KinematicsError::NoSolution));
     }
 
     #[test]
