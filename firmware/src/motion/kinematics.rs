@@ -218,10 +218,11 @@ impl Delta {
         let nominal = self.homed_height
             + self.effector_offset
             + sqrt(self.rod_length * self.rod_length - self.radius * self.radius);
-        // nominal + trim, through the trilateration's helper (trim·1 is
-        // the trim, bit for bit).
-        let mut heights = [nominal; 3];
-        add_scaled3(&mut heights, &self.endstop_trim, 1.0);
+        // trim + nominal: the same sum, the trims copied as a whole.
+        let mut heights = self.endstop_trim;
+        for height in &mut heights {
+            *height += nominal;
+        }
         heights
     }
 }
@@ -480,15 +481,6 @@ fn run_float_program<const N: usize>(
     Ok(())
 }
 
-/// a ← a + v·k. The vector helpers are out of line and work in place:
-/// the delta's trilateration calls each several times.
-#[inline(never)]
-fn add_scaled3(a: &mut Vector3, v: &Vector3, k: f32) {
-    for axis in 0..3 {
-        a[axis] += v[axis] * k;
-    }
-}
-
 /// a · b, summed left to right.
 #[inline(never)]
 fn dot3(a: &Vector3, b: &Vector3) -> f32 {
@@ -739,6 +731,13 @@ mod tests {
                     "{x},{y}: {p:?}"
                 );
             }
+        }
+    }
+
+    /// a ← a + v·k, as the former trilateration had it.
+    fn add_scaled3(a: &mut Vector3, v: &Vector3, k: f32) {
+        for axis in 0..3 {
+            a[axis] += v[axis] * k;
         }
     }
 
