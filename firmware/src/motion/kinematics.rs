@@ -441,19 +441,31 @@ const TRILATERATION_STEPS: [[u8; 3]; 77] = [
     step(MUL_ADD, H0, EZ + 2, Z),
 ];
 
-/// [`TRILATERATION_STEPS`] in flash.
+/// [`TRILATERATION_STEPS`] in flash, byte by byte (read as bytes, a step
+/// needs no buffer in the frame).
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static TRILATERATION: Flash<[[u8; 3]; TRILATERATION_STEPS.len()]> = Flash::new(TRILATERATION_STEPS);
+static TRILATERATION: Flash<[u8; 3 * TRILATERATION_STEPS.len()]> = Flash::new(flatten(TRILATERATION_STEPS));
+
+/// The steps' bytes one after the other.
+const fn flatten<const N: usize, const M: usize>(steps: [[u8; 3]; N]) -> [u8; M] {
+    let mut bytes = [0; M];
+    let mut i = 0;
+    while i < M {
+        bytes[i] = steps[i / 3][i % 3];
+        i += 1;
+    }
+    bytes
+}
 
 /// Run a float program's steps over `regs`; `Err` when a `REQUIRE` fails.
 #[inline(always)]
-fn run_float_program<const N: usize>(
+fn run_float_program<const M: usize>(
     regs: &mut [f32; REGISTERS],
-    program: &Flash<[[u8; 3]; N]>,
+    program: &Flash<[u8; M]>,
 ) -> Result<(), KinematicsError> {
     let mut index = 0;
-    while let Some([head, a, b]) = program.get(index) {
-        index += 1;
+    while let (Some(head), Some(a), Some(b)) = (program.get(index), program.get(index + 1), program.get(index + 2)) {
+        index += 3;
         let dst = (head & 31) as usize;
         let (a, b) = (a as usize & 31, b as usize & 31);
         let (x, y) = (regs[a], regs[b]);
