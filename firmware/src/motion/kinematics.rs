@@ -212,6 +212,40 @@ impl Delta {
         }
     }
 
+    /// Run the float program in [`STEPS`] from byte `first` to `end` on
+    /// the delta's registers, `input` the carriage heights or the point;
+    /// the result is in `OUT`. Shared by both directions: the registers
+    /// are filled in one place.
+    #[inline(never)]
+    fn run(&self, first: usize, end: usize, input: &Vector3) -> Result<Vector3, KinematicsError> {
+        let mut regs = [0.0; REGISTERS];
+        // Whole arrays into constant chunks: no bounds checks.
+        if let Some((pivots, rest)) = regs.split_first_chunk_mut::<IN>() {
+            *pivots = [self.towers[0][0], self.towers[0][1], self.towers[1][0], self.towers[1][1], self.towers[2][0], self.towers[2][1]];
+            if let Some((inputs, rest)) = rest.split_first_chunk_mut::<3>() {
+                *inputs = *input;
+                if let Some(constants) = rest.first_chunk_mut::<{ OUT - OF }>() {
+                    *constants = [
+                        self.effector_offset,
+                        self.rod_length,
+                        1.0,
+                        0.5,
+                        -f32::from_bits(1),
+                        0.0,
+                        self.printable_radius,
+                        // No tilt check: nothing is more than infinitely tilted.
+                        match self.max_tilt_sin_sqr {
+                            Some(limit) => limit,
+                            None => f32::INFINITY,
+                        },
+                    ];
+                }
+            }
+        }
+        run_float_program(&mut regs, first, end)?;
+        Ok([regs[OUT], regs[OUT + 1], regs[OUT + 2]])
+    }
+
     /// Carriage height of every tower when all sit at their top endstops:
     /// the nozzle is then at (0, 0, homed_height), trims aside.
     pub fn homed_carriage_heights(&self) -> Vector3 {
@@ -228,29 +262,12 @@ impl Delta {
 }
 
 impl Kinematics for Delta {
+    /// h_i = z + OF + √(L² − d_i²) for each tower, d_i the horizontal
+    /// distance from the tower's pivot; refused outside the printable
+    /// radius, where L² − d_i² ≤ 0, or where d_i > L·sin(tilt limit).
+    /// Run as [`INVERSE_STEPS`] (see [`Self::forward`]).
     fn inverse(&self, p: Vector3) -> Result<Vector3, KinematicsError> {
-        if p[0] * p[0] + p[1] * p[1] > self.printable_radius * self.printable_radius {
-            return Err(KinematicsError::OutsidePrintable);
-        }
-        let rod_sqr = self.rod_length * self.rod_length;
-        let mut heights = [0.0; 3];
-        for (height, tower) in heights.iter_mut().zip(&self.towers) {
-            let dx = tower[0] - p[0];
-            let dy = tower[1] - p[1];
-            let horizontal_sqr = dx * dx + dy * dy;
-            let vertical_sqr = rod_sqr - horizontal_sqr;
-            if !(vertical_sqr > 0.0) {
-                return Err(KinematicsError::OutOfReach);
-            }
-            if let Some(limit) = self.max_tilt_sin_sqr {
-                // sin(tilt) = d / L
-                if horizontal_sqr > limit * rod_sqr {
-                    return Err(KinematicsError::TooTilted);
-                }
-            }
-            *height = p[2] + self.effector_offset + sqrt(vertical_sqr);
-        }
-        Ok(heights)
+        self.run(INVERSE, STEP_BYTES, &p)
     }
 
     /// Trilateration: the nozzle (less OF) lies at distance L from each
@@ -260,26 +277,11 @@ impl Kinematics for Delta {
     /// Written for the soft-float AVR, where each operation spelled out is
     /// a call with its operands loaded and its result stored (2 KB
     /// inline, 1.4 KB through vector helpers): the steps are
-    /// [`TRILATERATION`], a table in flash of 3 bytes each, run by
-    /// [`run_float_program`]. The same operations in the same order as the
+    /// [`TRILATERATION_STEPS`], in flash 3 bytes each, run by
+    /// [`Delta::run`]. The same operations in the same order as the
     /// formulas, so the same bits (a test keeps them so).
-    #[inline(never)]
     fn forward(&self, heights: Vector3) -> Result<Vector3, KinematicsError> {
-        let mut regs = [0.0; REGISTERS];
-        // Whole arrays into constant chunks: no bounds checks.
-        if let Some((pivots, rest)) = regs.split_first_chunk_mut::<H0>() {
-            *pivots = [self.towers[0][0], self.towers[0][1], self.towers[1][0], self.towers[1][1], self.towers[2][0], self.towers[2][1]];
-            if let Some(h) = rest.first_chunk_mut::<3>() {
-                *h = heights;
-            }
-        }
-        regs[BELOW_ZERO] = -f32::from_bits(1);
-        regs[OF] = self.effector_offset;
-        regs[ROD] = self.rod_length;
-        regs[ONE] = 1.0;
-        regs[HALF] = 0.5;
-        run_float_program(&mut regs, &TRILATERATION)?;
-        Ok([regs[TX0], regs[TY0], regs[H0]])
+        self.run(0, INVERSE, &heights)
     }
 
     fn segment_mm(&self) -> Option<f32> {
@@ -295,39 +297,61 @@ impl Kinematics for Delta {
 /// masked into range, no bounds checks).
 const REGISTERS: usize = 32;
 
-// The trilateration's registers: the inputs (the towers' x and y, the
-// carriage heights, which become the pivots' z = h − OF; p1's x, y, z
-// then become the result) and constants (−(smallest subnormal): x ≥ 0 is
-// x > it; a zero, never written), the vectors ex, p3 − p1 (which becomes
-// ez), ey, then scalars. The inputs first: the caller's stack offsets
-// stay below 64.
+// The registers of both programs: the towers' x and y, the input (the
+// carriage heights, or the point), constants and limits (−(smallest
+// subnormal): x ≥ 0 is x > it; the tilt limit as sin², infinite when
+// none), the result, then the programs' own. The inputs first: the
+// caller's stack offsets stay below 64.
 const TX0: usize = 0;
 const TY0: usize = 1;
 const TX1: usize = 2;
 const TY1: usize = 3;
 const TX2: usize = 4;
 const TY2: usize = 5;
-const H0: usize = 6;
-const H1: usize = 7;
-const H2: usize = 8;
+const IN: usize = 6;
 const OF: usize = 9;
 const ROD: usize = 10;
 const ONE: usize = 11;
 const HALF: usize = 12;
 const BELOW_ZERO: usize = 13;
 const ZERO: usize = 14;
-const EX: usize = 16;
-const P31: usize = 19;
+const PRINTABLE: usize = 15;
+const TILT: usize = 16;
+const OUT: usize = 17;
+
+// The trilateration's: the heights become the pivots' z = h − OF, then
+// h1 and h2 scalars; ex = (p2 − p1)/d; p3 − p1, which becomes ez; ey; the
+// scalars (x in d), temporaries where the limits were.
+const H0: usize = IN;
+const H1: usize = IN + 1;
+const H2: usize = IN + 2;
+const I: usize = H1;
+const J: usize = H2;
+const EX: usize = 20;
+const P31: usize = 23;
 const EZ: usize = P31;
-const EY: usize = 22;
-const D: usize = 25;
+const EY: usize = 26;
+const D: usize = 29;
 const X: usize = D;
-const I: usize = 26;
-const J: usize = 27;
-const Y: usize = 28;
-const Z: usize = 29;
-const T: usize = 30;
-const T2: usize = 31;
+const Y: usize = 30;
+const Z: usize = 31;
+const T: usize = PRINTABLE;
+const T2: usize = TILT;
+
+// The inverse's: the point, L², L²·sin²(tilt limit), z + OF, then per
+// tower dx, dy (squared in place), d², L² − d².
+const PX: usize = IN;
+const PY: usize = IN + 1;
+const PZ: usize = IN + 2;
+const RS: usize = 20;
+const LR: usize = 21;
+const ZOF: usize = 22;
+const DX: usize = 23;
+const DY: usize = 24;
+const HS: usize = 25;
+const VS: usize = 26;
+const R: usize = 27;
+const R2: usize = 28;
 
 /// Operations of a float program step: `dst ← a op b`.
 const ADD: u8 = 0;
@@ -338,10 +362,20 @@ const DIV: u8 = 3;
 const SQRT: u8 = 4;
 /// `dst ← dst + a·b` (the product rounded, then the sum).
 const MUL_ADD: u8 = 5;
-/// Fail (no solution) unless `a > b`.
+/// Fail unless `a > b`, or (`dst` | [`UNLESS`]) if `a > b`, with the
+/// error numbered `dst` & 3 (`OUT_OF_REACH`…).
 const REQUIRE: u8 = 6;
 /// `dst ← −dst` unless `a < b`.
 const NEGATE_UNLESS_LESS: u8 = 7;
+
+/// `REQUIRE`'s `dst` flag: fail if `a > b`.
+const UNLESS: usize = 4;
+
+/// `REQUIRE`'s errors (`dst` & 3).
+const OUT_OF_REACH: usize = 0;
+const OUTSIDE_PRINTABLE: usize = 1;
+const TOO_TILTED: usize = 2;
+const NO_SOLUTION: usize = 3;
 
 /// One step: the operation in the top 3 bits of the first byte, `dst` in
 /// the low 5, then `a` and `b`.
@@ -351,7 +385,7 @@ const fn step(op: u8, dst: usize, a: usize, b: usize) -> [u8; 3] {
 
 /// Steps of the trilateration, [`Delta::forward`]'s formulas one operation
 /// at a time, in their order (a dot product summed left to right).
-const TRILATERATION_STEPS: [[u8; 3]; 77] = [
+const TRILATERATION_STEPS: [[u8; 3]; 80] = [
     // The pivots' heights h_i − OF.
     step(SUB, H0, H0, OF),
     step(SUB, H1, H1, OF),
@@ -368,7 +402,7 @@ const TRILATERATION_STEPS: [[u8; 3]; 77] = [
     step(MUL_ADD, D, EX + 1, EX + 1),
     step(MUL_ADD, D, EX + 2, EX + 2),
     step(SQRT, D, D, 0),
-    step(REQUIRE, 0, D, ZERO),
+    step(REQUIRE, NO_SOLUTION, D, ZERO),
     step(DIV, T, ONE, D),
     step(MUL, EX, EX, T),
     step(MUL, EX + 1, EX + 1, T),
@@ -387,7 +421,7 @@ const TRILATERATION_STEPS: [[u8; 3]; 77] = [
     step(MUL_ADD, T, EY + 1, EY + 1),
     step(MUL_ADD, T, EY + 2, EY + 2),
     step(SQRT, T, T, 0),
-    step(REQUIRE, 0, T, ZERO),
+    step(REQUIRE, NO_SOLUTION, T, ZERO),
     step(DIV, T, ONE, T),
     step(MUL, EY, EY, T),
     step(MUL, EY + 1, EY + 1, T),
@@ -412,15 +446,18 @@ const TRILATERATION_STEPS: [[u8; 3]; 77] = [
     step(SUB, T, T, T2),
     step(MUL, T2, Y, Y),
     step(SUB, T, T, T2),
-    step(REQUIRE, 0, T, BELOW_ZERO),
+    step(REQUIRE, NO_SOLUTION, T, BELOW_ZERO),
     step(SQRT, Z, T, 0),
-    // The base point p1 + ex·x + ey·y, in p1.
-    step(MUL_ADD, TX0, EX, X),
-    step(MUL_ADD, TY0, EX + 1, X),
-    step(MUL_ADD, H0, EX + 2, X),
-    step(MUL_ADD, TX0, EY, Y),
-    step(MUL_ADD, TY0, EY + 1, Y),
-    step(MUL_ADD, H0, EY + 2, Y),
+    // The base point p1 + ex·x + ey·y.
+    step(MUL, T, EX, X),
+    step(ADD, OUT, TX0, T),
+    step(MUL, T, EX + 1, X),
+    step(ADD, OUT + 1, TY0, T),
+    step(MUL, T, EX + 2, X),
+    step(ADD, OUT + 2, H0, T),
+    step(MUL_ADD, OUT, EY, Y),
+    step(MUL_ADD, OUT + 1, EY + 1, Y),
+    step(MUL_ADD, OUT + 2, EY + 2, Y),
     // ez = ex × ey.
     step(MUL, T, EX + 1, EY + 2),
     step(MUL, T2, EX + 2, EY + 1),
@@ -433,38 +470,91 @@ const TRILATERATION_STEPS: [[u8; 3]; 77] = [
     step(SUB, EZ + 2, T, T2),
     // Of base ± ez·z, the lower (base − ez·z when neither is).
     step(MUL, T, EZ + 2, Z),
-    step(ADD, T2, H0, T),
-    step(SUB, I, H0, T),
+    step(ADD, T2, OUT + 2, T),
+    step(SUB, I, OUT + 2, T),
     step(NEGATE_UNLESS_LESS, Z, T2, I),
-    step(MUL_ADD, TX0, EZ, Z),
-    step(MUL_ADD, TY0, EZ + 1, Z),
-    step(MUL_ADD, H0, EZ + 2, Z),
+    step(MUL_ADD, OUT, EZ, Z),
+    step(MUL_ADD, OUT + 1, EZ + 1, Z),
+    step(MUL_ADD, OUT + 2, EZ + 2, Z),
 ];
 
-/// [`TRILATERATION_STEPS`] in flash, byte by byte (read as bytes, a step
-/// needs no buffer in the frame).
+/// Steps of the inverse, [`Delta::inverse`]'s formulas one operation at a
+/// time, in their order.
+const INVERSE_STEPS: [[u8; 3]; 38] = [
+    // x² + y² > R_printable²: outside.
+    step(MUL, R, PX, PX),
+    step(MUL, R2, PY, PY),
+    step(ADD, R, R, R2),
+    step(MUL, R2, PRINTABLE, PRINTABLE),
+    step(REQUIRE, OUTSIDE_PRINTABLE | UNLESS, R, R2),
+    step(MUL, RS, ROD, ROD),
+    step(MUL, LR, TILT, RS),
+    step(ADD, ZOF, PZ, OF),
+    // Tower 1.
+    step(SUB, DX, TX0, PX),
+    step(SUB, DY, TY0, PY),
+    step(MUL, DX, DX, DX),
+    step(MUL, DY, DY, DY),
+    step(ADD, HS, DX, DY),
+    step(SUB, VS, RS, HS),
+    // L² − d² > 0, else out of reach; d² > L²·sin²: too tilted.
+    step(REQUIRE, OUT_OF_REACH, VS, ZERO),
+    step(REQUIRE, TOO_TILTED | UNLESS, HS, LR),
+    step(SQRT, VS, VS, 0),
+    step(ADD, OUT, ZOF, VS),
+    // Tower 2.
+    step(SUB, DX, TX1, PX),
+    step(SUB, DY, TY1, PY),
+    step(MUL, DX, DX, DX),
+    step(MUL, DY, DY, DY),
+    step(ADD, HS, DX, DY),
+    step(SUB, VS, RS, HS),
+    step(REQUIRE, OUT_OF_REACH, VS, ZERO),
+    step(REQUIRE, TOO_TILTED | UNLESS, HS, LR),
+    step(SQRT, VS, VS, 0),
+    step(ADD, OUT + 1, ZOF, VS),
+    // Tower 3.
+    step(SUB, DX, TX2, PX),
+    step(SUB, DY, TY2, PY),
+    step(MUL, DX, DX, DX),
+    step(MUL, DY, DY, DY),
+    step(ADD, HS, DX, DY),
+    step(SUB, VS, RS, HS),
+    step(REQUIRE, OUT_OF_REACH, VS, ZERO),
+    step(REQUIRE, TOO_TILTED | UNLESS, HS, LR),
+    step(SQRT, VS, VS, 0),
+    step(ADD, OUT + 2, ZOF, VS),
+];
+
+/// Byte offsets in [`STEPS`]: the inverse's steps follow the
+/// trilateration's; the end.
+const INVERSE: usize = 3 * TRILATERATION_STEPS.len();
+const STEP_BYTES: usize = INVERSE + 3 * INVERSE_STEPS.len();
+
+/// Both programs in flash, byte by byte (read as bytes, a step needs no
+/// buffer in the frame).
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static TRILATERATION: Flash<[u8; 3 * TRILATERATION_STEPS.len()]> = Flash::new(flatten(TRILATERATION_STEPS));
+static STEPS: Flash<[u8; STEP_BYTES]> = Flash::new(flatten(TRILATERATION_STEPS, INVERSE_STEPS));
 
 /// The steps' bytes one after the other.
-const fn flatten<const N: usize, const M: usize>(steps: [[u8; 3]; N]) -> [u8; M] {
+const fn flatten<const A: usize, const B: usize, const M: usize>(a: [[u8; 3]; A], b: [[u8; 3]; B]) -> [u8; M] {
     let mut bytes = [0; M];
     let mut i = 0;
     while i < M {
-        bytes[i] = steps[i / 3][i % 3];
+        bytes[i] = if i < 3 * A { a[i / 3][i % 3] } else { b[i / 3 - A][i % 3] };
         i += 1;
     }
     bytes
 }
 
-/// Run a float program's steps over `regs`; `Err` when a `REQUIRE` fails.
+/// Run the steps of [`STEPS`] from byte `index` to `end` over `regs`;
+/// `Err` when a `REQUIRE` fails.
 #[inline(always)]
-fn run_float_program<const M: usize>(
-    regs: &mut [f32; REGISTERS],
-    program: &Flash<[u8; M]>,
-) -> Result<(), KinematicsError> {
-    let mut index = 0;
-    while let (Some(head), Some(a), Some(b)) = (program.get(index), program.get(index + 1), program.get(index + 2)) {
+fn run_float_program(regs: &mut [f32; REGISTERS], mut index: usize, end: usize) -> Result<(), KinematicsError> {
+    while index < end {
+        let (Some(head), Some(a), Some(b)) = (STEPS.get(index), STEPS.get(index + 1), STEPS.get(index + 2)) else {
+            break;
+        };
         index += 3;
         let dst = (head & 31) as usize;
         let (a, b) = (a as usize & 31, b as usize & 31);
@@ -477,10 +567,17 @@ fn run_float_program<const M: usize>(
             SQRT => sqrt(x),
             MUL_ADD => regs[dst] + x * y,
             REQUIRE => {
-                if x > y {
+                if (x > y) != (dst & UNLESS != 0) {
                     continue;
                 }
-                return Err(KinematicsError::NoSolution);
+                // (Numbered in the enum's order: no table, which would be
+                // copied to RAM.)
+                return Err(match dst & 3 {
+                    OUT_OF_REACH => KinematicsError::OutOfReach,
+                    OUTSIDE_PRINTABLE => KinematicsError::OutsidePrintable,
+                    TOO_TILTED => KinematicsError::TooTilted,
+                    _ => KinematicsError::NoSolution,
+                });
             }
             _ => {
                 if x < y {
@@ -802,6 +899,66 @@ mod tests {
         };
         add_scaled3(&mut base, &ez, z);
         Some(base)
+    }
+
+    /// The inverse as it was written before the float program.
+    fn inverse_reference(delta: &Delta, p: Vector3) -> Result<Vector3, KinematicsError> {
+        if p[0] * p[0] + p[1] * p[1] > delta.printable_radius * delta.printable_radius {
+            return Err(KinematicsError::OutsidePrintable);
+        }
+        let rod_sqr = delta.rod_length * delta.rod_length;
+        let mut heights = [0.0; 3];
+        for (height, tower) in heights.iter_mut().zip(&delta.towers) {
+            let dx = tower[0] - p[0];
+            let dy = tower[1] - p[1];
+            let horizontal_sqr = dx * dx + dy * dy;
+            let vertical_sqr = rod_sqr - horizontal_sqr;
+            if !(vertical_sqr > 0.0) {
+                return Err(KinematicsError::OutOfReach);
+            }
+            if let Some(limit) = delta.max_tilt_sin_sqr {
+                if horizontal_sqr > limit * rod_sqr {
+                    return Err(KinematicsError::TooTilted);
+                }
+            }
+            *height = p[2] + delta.effector_offset + sqrt(vertical_sqr);
+        }
+        Ok(heights)
+    }
+
+    #[test]
+    fn delta_inverse_program_keeps_the_bits() {
+        let sin40 = sin_cos(math::radians(40.0)).0;
+        let mut errors = [0; 3];
+        for repetier in [false, true] {
+            for (printable, tilt) in [(130.0, None), (1000.0, None), (1000.0, Some(sin40 * sin40))] {
+                let mut delta = Delta::spec_printer(repetier);
+                delta.printable_radius = printable;
+                delta.max_tilt_sin_sqr = tilt;
+                for xi in -30..=30 {
+                    for yi in -30..=30 {
+                        for z in [0.0, 0.25, -7.5, 123.4] {
+                            let p = [xi as f32 * 4.9 + 0.013, yi as f32 * 4.7, z];
+                            let want = inverse_reference(&delta, p);
+                            let got = delta.inverse(p);
+                            assert_eq!(
+                                got.map(|h| h.map(f32::to_bits)),
+                                want.map(|h| h.map(f32::to_bits)),
+                                "{p:?}"
+                            );
+                            match want {
+                                Err(KinematicsError::OutsidePrintable) => errors[0] += 1,
+                                Err(KinematicsError::OutOfReach) => errors[1] += 1,
+                                Err(KinematicsError::TooTilted) => errors[2] += 1,
+                                _ => {}
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // Every refusal was met.
+        assert!(errors.iter().all(|&n| n > 0), "{errors:?}");
     }
 
     #[test]
