@@ -219,22 +219,27 @@ impl Delta {
     #[inline(never)]
     fn run(&self, first: usize, end: usize, input: &Vector3) -> Result<Vector3, KinematicsError> {
         let mut regs = [0.0; REGISTERS];
-        // Whole arrays into constant chunks: no bounds checks.
-        if let Some((pivots, rest)) = regs.split_first_chunk_mut::<IN>() {
-            *pivots = [self.towers[0][0], self.towers[0][1], self.towers[1][0], self.towers[1][1], self.towers[2][0], self.towers[2][1]];
+        // The delta through a pointer the compiler does not follow: the
+        // AVR build knows where the machine's delta is, and copied its
+        // figures with a 4-byte absolute load per 2 bytes, not a memcpy
+        // call. Whole arrays into constant chunks: no bounds checks.
+        let delta = core::hint::black_box(self);
+        let towers = delta.towers.as_flattened().first_chunk::<IN>();
+        if let (Some((pivots, rest)), Some(towers)) = (regs.split_first_chunk_mut::<IN>(), towers) {
+            *pivots = *towers;
             if let Some((inputs, rest)) = rest.split_first_chunk_mut::<3>() {
                 *inputs = *input;
                 if let Some(constants) = rest.first_chunk_mut::<{ OUT - OF }>() {
                     *constants = [
-                        self.effector_offset,
-                        self.rod_length,
+                        delta.effector_offset,
+                        delta.rod_length,
                         1.0,
                         0.5,
                         -f32::from_bits(1),
                         0.0,
-                        self.printable_radius,
+                        delta.printable_radius,
                         // No tilt check: nothing is more than infinitely tilted.
-                        match self.max_tilt_sin_sqr {
+                        match delta.max_tilt_sin_sqr {
                             Some(limit) => limit,
                             None => f32::INFINITY,
                         },
