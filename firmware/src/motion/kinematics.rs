@@ -213,7 +213,8 @@ impl Delta {
     }
 
     /// Run the float program in [`STEPS`] from byte `first` to `end` on
-    /// the delta's registers, `input` the carriage heights or the point;
+    /// the delta's registers, `input` the carriage heights, the point or
+    /// the trims;
     /// the result is in `OUT`. Shared by both directions: the registers
     /// are filled in one place.
     #[inline(never)]
@@ -224,26 +225,28 @@ impl Delta {
         // figures with a 4-byte absolute load per 2 bytes, not a memcpy
         // call. Whole arrays into constant chunks: no bounds checks.
         let delta = core::hint::black_box(self);
-        let towers = delta.towers.as_flattened().first_chunk::<IN>();
-        if let (Some((pivots, rest)), Some(towers)) = (regs.split_first_chunk_mut::<IN>(), towers) {
-            *pivots = *towers;
-            if let Some((inputs, rest)) = rest.split_first_chunk_mut::<3>() {
-                *inputs = *input;
-                if let Some(constants) = rest.first_chunk_mut::<{ OUT - OF }>() {
-                    *constants = [
-                        delta.effector_offset,
-                        delta.rod_length,
-                        1.0,
-                        0.5,
-                        -f32::from_bits(1),
-                        0.0,
-                        delta.printable_radius,
-                        // No tilt check: nothing is more than infinitely tilted.
-                        match delta.max_tilt_sin_sqr {
-                            Some(limit) => limit,
-                            None => f32::INFINITY,
-                        },
-                    ];
+        let towers = delta.towers.as_flattened().first_chunk::<6>();
+        if let Some((constants, rest)) = regs.split_first_chunk_mut::<{ OUT - OF }>() {
+            *constants = [
+                delta.effector_offset,
+                delta.rod_length,
+                1.0,
+                0.5,
+                -f32::from_bits(1),
+                0.0,
+                delta.printable_radius,
+                // No tilt check: nothing is more than infinitely tilted.
+                match delta.max_tilt_sin_sqr {
+                    Some(limit) => limit,
+                    None => f32::INFINITY,
+                },
+                delta.radius,
+                delta.homed_height,
+            ];
+            if let (Some((pivots, rest)), Some(towers)) = (rest[3..].split_first_chunk_mut::<6>(), towers) {
+                *pivots = *towers;
+                if let Some(inputs) = rest.first_chunk_mut::<3>() {
+                    *inputs = *input;
                 }
             }
         }
@@ -252,17 +255,11 @@ impl Delta {
     }
 
     /// Carriage height of every tower when all sit at their top endstops:
-    /// the nozzle is then at (0, 0, homed_height), trims aside.
+    /// the nozzle is then at (0, 0, homed_height), trims aside:
+    /// trim + (H + OF + √(L² − R²)). Run as [`HOMED_STEPS`] (see [`Self::forward`]).
     pub fn homed_carriage_heights(&self) -> Vector3 {
-        let nominal = self.homed_height
-            + self.effector_offset
-            + sqrt(self.rod_length * self.rod_length - self.radius * self.radius);
-        // trim + nominal: the same sum, the trims copied as a whole.
-        let mut heights = self.endstop_trim;
-        for height in &mut heights {
-            *height += nominal;
-        }
-        heights
+        // (The steps refuse nothing.)
+        self.run(HOMED, STEP_BYTES, &self.endstop_trim).unwrap_or([0.0; 3])
     }
 }
 
@@ -272,7 +269,7 @@ impl Kinematics for Delta {
     /// radius, where L² − d_i² ≤ 0, or where d_i > L·sin(tilt limit).
     /// Run as [`INVERSE_STEPS`] (see [`Self::forward`]).
     fn inverse(&self, p: Vector3) -> Result<Vector3, KinematicsError> {
-        self.run(INVERSE, STEP_BYTES, &p)
+        self.run(INVERSE, HOMED, &p)
     }
 
     /// Trilateration: the nozzle (less OF) lies at distance L from each
@@ -302,44 +299,47 @@ impl Kinematics for Delta {
 /// masked into range, no bounds checks).
 const REGISTERS: usize = 32;
 
-// The registers of both programs: the towers' x and y, the input (the
-// carriage heights, or the point), constants and limits (−(smallest
-// subnormal): x ≥ 0 is x > it; the tilt limit as sin², infinite when
-// none), the result, then the programs' own. The inputs first: the
-// caller's stack offsets stay below 64.
-const TX0: usize = 0;
-const TY0: usize = 1;
-const TX1: usize = 2;
-const TY1: usize = 3;
-const TX2: usize = 4;
-const TY2: usize = 5;
-const IN: usize = 6;
-const OF: usize = 9;
-const ROD: usize = 10;
-const ONE: usize = 11;
-const HALF: usize = 12;
-const BELOW_ZERO: usize = 13;
-const ZERO: usize = 14;
-const PRINTABLE: usize = 15;
-const TILT: usize = 16;
-const OUT: usize = 17;
+// The registers of the programs: constants and the delta's figures
+// (−(smallest subnormal): x ≥ 0 is x > it; the tilt limit as sin²,
+// infinite when none), the result (these first: the caller's stack
+// offsets stay below 64), the towers' x and y, the input (the carriage
+// heights, the point or the trims), then the programs' own. The programs
+// may overwrite what they do not need: every run fills them again.
+const OF: usize = 0;
+const ROD: usize = 1;
+const ONE: usize = 2;
+const HALF: usize = 3;
+const BELOW_ZERO: usize = 4;
+const ZERO: usize = 5;
+const PRINTABLE: usize = 6;
+const TILT: usize = 7;
+const RADIUS: usize = 8;
+const HOMED_HEIGHT: usize = 9;
+const OUT: usize = 10;
+const TX0: usize = 13;
+const TY0: usize = 14;
+const TX1: usize = 15;
+const TY1: usize = 16;
+const TX2: usize = 17;
+const TY2: usize = 18;
+const IN: usize = 19;
 
 // The trilateration's: the heights become the pivots' z = h − OF, then
 // h1 and h2 scalars; ex = (p2 − p1)/d; p3 − p1, which becomes ez; ey; the
-// scalars (x in d), temporaries where the limits were.
+// scalars (x in d), in place of figures it does not need.
 const H0: usize = IN;
 const H1: usize = IN + 1;
 const H2: usize = IN + 2;
 const I: usize = H1;
 const J: usize = H2;
-const EX: usize = 20;
-const P31: usize = 23;
+const EX: usize = 22;
+const P31: usize = 25;
 const EZ: usize = P31;
-const EY: usize = 26;
-const D: usize = 29;
+const EY: usize = 28;
+const D: usize = 31;
 const X: usize = D;
-const Y: usize = 30;
-const Z: usize = 31;
+const Y: usize = RADIUS;
+const Z: usize = HOMED_HEIGHT;
 const T: usize = PRINTABLE;
 const T2: usize = TILT;
 
@@ -348,15 +348,15 @@ const T2: usize = TILT;
 const PX: usize = IN;
 const PY: usize = IN + 1;
 const PZ: usize = IN + 2;
-const RS: usize = 20;
-const LR: usize = 21;
-const ZOF: usize = 22;
-const DX: usize = 23;
-const DY: usize = 24;
-const HS: usize = 25;
-const VS: usize = 26;
-const R: usize = 27;
-const R2: usize = 28;
+const RS: usize = 22;
+const LR: usize = 23;
+const ZOF: usize = 24;
+const DX: usize = 25;
+const DY: usize = 26;
+const HS: usize = 27;
+const VS: usize = 28;
+const R: usize = 29;
+const R2: usize = 30;
 
 /// Operations of a float program step: `dst ← a op b`.
 const ADD: u8 = 0;
@@ -531,22 +531,47 @@ const INVERSE_STEPS: [[u8; 3]; 38] = [
     step(ADD, OUT + 2, ZOF, VS),
 ];
 
+/// Steps of [`Delta::homed_carriage_heights`]: trim + (H + OF + √(L² − R²)).
+const HOMED_STEPS: [[u8; 3]; 9] = [
+    step(MUL, T, ROD, ROD),
+    step(MUL, T2, RADIUS, RADIUS),
+    step(SUB, T, T, T2),
+    step(SQRT, T, T, 0),
+    step(ADD, T2, HOMED_HEIGHT, OF),
+    step(ADD, T, T2, T),
+    step(ADD, OUT, IN, T),
+    step(ADD, OUT + 1, IN + 1, T),
+    step(ADD, OUT + 2, IN + 2, T),
+];
+
 /// Byte offsets in [`STEPS`]: the inverse's steps follow the
-/// trilateration's; the end.
+/// trilateration's, the homed heights' the inverse's; the end.
 const INVERSE: usize = 3 * TRILATERATION_STEPS.len();
-const STEP_BYTES: usize = INVERSE + 3 * INVERSE_STEPS.len();
+const HOMED: usize = INVERSE + 3 * INVERSE_STEPS.len();
+const STEP_BYTES: usize = HOMED + 3 * HOMED_STEPS.len();
 
 /// Both programs in flash, byte by byte (read as bytes, a step needs no
 /// buffer in the frame).
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static STEPS: Flash<[u8; STEP_BYTES]> = Flash::new(flatten(TRILATERATION_STEPS, INVERSE_STEPS));
+static STEPS: Flash<[u8; STEP_BYTES]> = Flash::new(flatten(TRILATERATION_STEPS, INVERSE_STEPS, HOMED_STEPS));
 
 /// The steps' bytes one after the other.
-const fn flatten<const A: usize, const B: usize, const M: usize>(a: [[u8; 3]; A], b: [[u8; 3]; B]) -> [u8; M] {
+const fn flatten<const A: usize, const B: usize, const C: usize, const M: usize>(
+    a: [[u8; 3]; A],
+    b: [[u8; 3]; B],
+    c: [[u8; 3]; C],
+) -> [u8; M] {
     let mut bytes = [0; M];
     let mut i = 0;
     while i < M {
-        bytes[i] = if i < 3 * A { a[i / 3][i % 3] } else { b[i / 3 - A][i % 3] };
+        let n = i / 3;
+        bytes[i] = if n < A {
+            a[n][i % 3]
+        } else if n < A + B {
+            b[n - A][i % 3]
+        } else {
+            c[n - A - B][i % 3]
+        };
         i += 1;
     }
     bytes
@@ -964,6 +989,19 @@ mod tests {
         }
         // Every refusal was met.
         assert!(errors.iter().all(|&n| n > 0), "{errors:?}");
+    }
+
+    #[test]
+    fn delta_homed_heights_program_keeps_the_bits() {
+        for (rod, radius, height, trim) in [(361.0, 227.0, 300.0, [0.0, -3.0, 0.0]), (250.5, 101.25, 287.3, [0.013, -0.4, 19.9])] {
+            let mut delta = Delta::spec_printer(false);
+            delta.set_geometry(rod, radius);
+            delta.homed_height = height;
+            delta.endstop_trim = trim;
+            let nominal = height + delta.effector_offset + sqrt(rod * rod - radius * radius);
+            let want = [nominal + trim[0], nominal + trim[1], nominal + trim[2]];
+            assert_eq!(delta.homed_carriage_heights().map(f32::to_bits), want.map(f32::to_bits));
+        }
     }
 
     #[test]
