@@ -620,16 +620,10 @@ fn run_float_program(regs: &mut [f32; REGISTERS], mut index: usize, end: usize) 
     Ok(())
 }
 
-/// a · b, summed left to right.
-#[inline(never)]
-fn dot3(a: &Vector3, b: &Vector3) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-/// |a|.
+/// |a|, the squares summed left to right.
 #[inline(never)]
 pub(crate) fn length3(a: &Vector3) -> f32 {
-    sqrt(dot3(a, a))
+    sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
 }
 
 /// SPEC §3: the planar RR arm in the Y–Z plane with a lead-screw X.
@@ -871,6 +865,11 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// a · b, summed left to right, as the former trilateration had it.
+    fn dot3(a: &Vector3, b: &Vector3) -> f32 {
+        a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
     }
 
     /// a ← a + v·k, as the former trilateration had it.
