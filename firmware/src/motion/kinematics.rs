@@ -243,7 +243,9 @@ impl Delta {
                 delta.radius,
                 delta.homed_height,
             ];
-            if let (Some((pivots, rest)), Some(towers)) = (rest[3..].split_first_chunk_mut::<6>(), towers) {
+            if let (Some((pivots, rest)), Some(towers)) =
+                (rest[3..].split_first_chunk_mut::<6>(), towers)
+            {
                 *pivots = *towers;
                 if let Some(inputs) = rest.first_chunk_mut::<3>() {
                     *inputs = *input;
@@ -259,7 +261,8 @@ impl Delta {
     /// trim + (H + OF + √(L² − R²)). Run as [`HOMED_STEPS`] (see [`Self::forward`]).
     pub fn homed_carriage_heights(&self) -> Vector3 {
         // (The steps refuse nothing.)
-        self.run(HOMED, STEP_COUNT, &self.endstop_trim).unwrap_or([0.0; 3])
+        self.run(HOMED, STEP_COUNT, &self.endstop_trim)
+            .unwrap_or([0.0; 3])
     }
 }
 
@@ -554,7 +557,8 @@ const STEP_COUNT: usize = HOMED + HOMED_STEPS.len();
 /// byte at a time, three calls per step, was 36 bytes smaller but slowed
 /// the delta's 1 mm segment streams from 61 to 54 lines/s).
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static STEPS: Flash<[[u8; 3]; STEP_COUNT]> = Flash::new(flatten(TRILATERATION_STEPS, INVERSE_STEPS, HOMED_STEPS));
+static STEPS: Flash<[[u8; 3]; STEP_COUNT]> =
+    Flash::new(flatten(TRILATERATION_STEPS, INVERSE_STEPS, HOMED_STEPS));
 
 /// The programs' steps one after the other.
 const fn flatten<const A: usize, const B: usize, const C: usize, const M: usize>(
@@ -580,7 +584,11 @@ const fn flatten<const A: usize, const B: usize, const C: usize, const M: usize>
 /// Run the steps of [`STEPS`] from `index` to `end` over `regs`;
 /// `Err` when a `REQUIRE` fails.
 #[inline(always)]
-fn run_float_program(regs: &mut [f32; REGISTERS], mut index: usize, end: usize) -> Result<(), KinematicsError> {
+fn run_float_program(
+    regs: &mut [f32; REGISTERS],
+    mut index: usize,
+    end: usize,
+) -> Result<(), KinematicsError> {
     while index < end {
         let Some([head, a, b]) = STEPS.get(index) else {
             break;
@@ -960,7 +968,8 @@ mod tests {
         let sin40 = sin_cos(math::radians(40.0)).0;
         let mut errors = [0; 3];
         for repetier in [false, true] {
-            for (printable, tilt) in [(130.0, None), (1000.0, None), (1000.0, Some(sin40 * sin40))] {
+            for (printable, tilt) in [(130.0, None), (1000.0, None), (1000.0, Some(sin40 * sin40))]
+            {
                 let mut delta = Delta::spec_printer(repetier);
                 delta.printable_radius = printable;
                 delta.max_tilt_sin_sqr = tilt;
@@ -992,14 +1001,20 @@ mod tests {
 
     #[test]
     fn delta_homed_heights_program_keeps_the_bits() {
-        for (rod, radius, height, trim) in [(361.0, 227.0, 300.0, [0.0, -3.0, 0.0]), (250.5, 101.25, 287.3, [0.013, -0.4, 19.9])] {
+        for (rod, radius, height, trim) in [
+            (361.0, 227.0, 300.0, [0.0, -3.0, 0.0]),
+            (250.5, 101.25, 287.3, [0.013, -0.4, 19.9]),
+        ] {
             let mut delta = Delta::spec_printer(false);
             delta.set_geometry(rod, radius);
             delta.homed_height = height;
             delta.endstop_trim = trim;
             let nominal = height + delta.effector_offset + sqrt(rod * rod - radius * radius);
             let want = [nominal + trim[0], nominal + trim[1], nominal + trim[2]];
-            assert_eq!(delta.homed_carriage_heights().map(f32::to_bits), want.map(f32::to_bits));
+            assert_eq!(
+                delta.homed_carriage_heights().map(f32::to_bits),
+                want.map(f32::to_bits)
+            );
         }
     }
 
@@ -1037,7 +1052,10 @@ mod tests {
         for h in [[0.0, 0.0, 900.0], [0.0, 900.0, 0.0]] {
             assert_eq!(forward_reference(&delta, h), None);
         }
-        assert_eq!(delta.forward([0.0, 0.0, 900.0]), Err(KinematicsError::NoSolution));
+        assert_eq!(
+            delta.forward([0.0, 0.0, 900.0]),
+            Err(KinematicsError::NoSolution)
+        );
         let mut same = delta;
         same.towers[1] = same.towers[0];
         assert_eq!(forward_reference(&same, [300.0; 3]), None);
