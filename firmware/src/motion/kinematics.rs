@@ -260,9 +260,13 @@ impl Delta {
     /// the nozzle is then at (0, 0, homed_height), trims aside:
     /// trim + (H + OF + √(L² − R²)). Run as [`HOMED_STEPS`] (see [`Self::forward`]).
     pub fn homed_carriage_heights(&self) -> Vector3 {
-        // (The steps refuse nothing.)
+        self.homed_heights().unwrap_or([0.0; 3])
+    }
+
+    /// [`Self::homed_carriage_heights`] as the steps return it (they
+    /// refuse nothing): the homing takes the `Result` as it is.
+    pub(crate) fn homed_heights(&self) -> Result<Vector3, KinematicsError> {
         self.run(HOMED, STEP_COUNT, &self.endstop_trim)
-            .unwrap_or([0.0; 3])
     }
 }
 
