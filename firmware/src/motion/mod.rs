@@ -425,8 +425,7 @@ impl LineCut {
         // length; a Cartesian line needs no square root here (this runs
         // for every G1 of a slicer stream).
         let mut pieces = match config.kinematics.segment_mm() {
-            // (`length3`: the same sum, out of line; the kinematics that
-            // cut by length have it already.)
+            // (`length3`: the same sum, out of line.)
             Some(segment) if segment > 0.0 => match delta.first_chunk::<LINEAR_AXES>() {
                 Some(xyz) => kinematics::length3(xyz) / segment,
                 None => 0.0,
