@@ -398,10 +398,14 @@ impl<'q> Machine<'q> {
         let MachineKinematics::Delta(delta) = &self.motion.config.kinematics else {
             return Err(CommandError::NotThisMachine);
         };
-        let (code, letters, mut values) = if trim {
-            (666, b"XYZ", delta.endstop_trim)
+        // One branch, the values copied in it (chosen value by value, the
+        // copies cost 200 bytes).
+        let mut values = delta.endstop_trim;
+        let (code, letters) = if trim {
+            (666, b"XYZ")
         } else {
-            (665, b"LRH", [delta.rod_length(), delta.radius(), delta.homed_height])
+            values = [delta.rod_length(), delta.radius(), delta.homed_height];
+            (665, b"LRH")
         };
         let mut any = false;
         for (value, &letter) in values.iter_mut().zip(letters) {

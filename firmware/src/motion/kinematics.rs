@@ -14,6 +14,7 @@
 //! the step interrupt never sees a float.
 
 use super::math::{self, atan2, round_to_i32, sin_cos, sqrt};
+use crate::progmem::Flash;
 
 /// Cartesian axes (X, Y, Z) and the motors that position them.
 pub const LINEAR_AXES: usize = 3;
@@ -211,114 +212,86 @@ impl Delta {
         }
     }
 
-    /// The carriage pivot of one tower (tower x, tower y, h − OF), out
-    /// of line (filling an array of them in a loop compiled to a zeroing
-    /// loop and a memcpy per element).
+    /// Run the float program in [`STEPS`] from step `first` to `end` on
+    /// the delta's registers, `input` the carriage heights, the point or
+    /// the trims; the result is in `OUT`. Shared by the three programs:
+    /// the registers are filled in one place. (Slower than the formulas
+    /// in line: on the AVR bench, the delta's 1 mm segment streams went
+    /// from 67 to 61 lines/s.)
     #[inline(never)]
-    fn pivot(&self, heights: &Vector3, tower: usize) -> Vector3 {
-        match (self.towers.get(tower), heights.get(tower)) {
-            (Some(&[x, y]), Some(height)) => [x, y, height - self.effector_offset],
-            _ => [0.0; 3],
+    fn run(&self, first: usize, end: usize, input: &Vector3) -> Result<Vector3, KinematicsError> {
+        let mut regs = [0.0; REGISTERS];
+        // The delta through a pointer the compiler does not follow: the
+        // AVR build knows where the machine's delta is, and copied its
+        // figures with a 4-byte absolute load per 2 bytes, not a memcpy
+        // call. Whole arrays into constant chunks: no bounds checks.
+        let delta = core::hint::black_box(self);
+        let towers = delta.towers.as_flattened().first_chunk::<6>();
+        if let Some((constants, rest)) = regs.split_first_chunk_mut::<{ OUT - OF }>() {
+            *constants = [
+                delta.effector_offset,
+                delta.rod_length,
+                1.0,
+                0.5,
+                -f32::from_bits(1),
+                0.0,
+                delta.printable_radius,
+                // No tilt check: nothing is more than infinitely tilted.
+                match delta.max_tilt_sin_sqr {
+                    Some(limit) => limit,
+                    None => f32::INFINITY,
+                },
+                delta.radius,
+                delta.homed_height,
+            ];
+            if let (Some((pivots, rest)), Some(towers)) =
+                (rest[3..].split_first_chunk_mut::<6>(), towers)
+            {
+                *pivots = *towers;
+                if let Some(inputs) = rest.first_chunk_mut::<3>() {
+                    *inputs = *input;
+                }
+            }
         }
+        run_float_program(&mut regs, first, end)?;
+        Ok([regs[OUT], regs[OUT + 1], regs[OUT + 2]])
     }
 
     /// Carriage height of every tower when all sit at their top endstops:
-    /// the nozzle is then at (0, 0, homed_height), trims aside.
+    /// the nozzle is then at (0, 0, homed_height), trims aside:
+    /// trim + (H + OF + √(L² − R²)). Run as [`HOMED_STEPS`] (see [`Self::forward`]).
     pub fn homed_carriage_heights(&self) -> Vector3 {
-        let nominal = self.homed_height
-            + self.effector_offset
-            + sqrt(self.rod_length * self.rod_length - self.radius * self.radius);
-        [
-            nominal + self.endstop_trim[0],
-            nominal + self.endstop_trim[1],
-            nominal + self.endstop_trim[2],
-        ]
+        self.homed_heights().unwrap_or([0.0; 3])
+    }
+
+    /// [`Self::homed_carriage_heights`] as the steps return it (they
+    /// refuse nothing): the homing takes the `Result` as it is.
+    pub(crate) fn homed_heights(&self) -> Result<Vector3, KinematicsError> {
+        self.run(HOMED, STEP_COUNT, &self.endstop_trim)
     }
 }
 
 impl Kinematics for Delta {
+    /// h_i = z + OF + √(L² − d_i²) for each tower, d_i the horizontal
+    /// distance from the tower's pivot; refused outside the printable
+    /// radius, where L² − d_i² ≤ 0, or where d_i > L·sin(tilt limit).
+    /// Run as [`INVERSE_STEPS`] (see [`Self::forward`]).
     fn inverse(&self, p: Vector3) -> Result<Vector3, KinematicsError> {
-        if p[0] * p[0] + p[1] * p[1] > self.printable_radius * self.printable_radius {
-            return Err(KinematicsError::OutsidePrintable);
-        }
-        let rod_sqr = self.rod_length * self.rod_length;
-        let mut heights = [0.0; 3];
-        for (height, tower) in heights.iter_mut().zip(&self.towers) {
-            let dx = tower[0] - p[0];
-            let dy = tower[1] - p[1];
-            let horizontal_sqr = dx * dx + dy * dy;
-            let vertical_sqr = rod_sqr - horizontal_sqr;
-            if !(vertical_sqr > 0.0) {
-                return Err(KinematicsError::OutOfReach);
-            }
-            if let Some(limit) = self.max_tilt_sin_sqr {
-                // sin(tilt) = d / L
-                if horizontal_sqr > limit * rod_sqr {
-                    return Err(KinematicsError::TooTilted);
-                }
-            }
-            *height = p[2] + self.effector_offset + sqrt(vertical_sqr);
-        }
-        Ok(heights)
+        self.run(INVERSE, HOMED, &p)
     }
 
     /// Trilateration: the nozzle (less OF) lies at distance L from each
-    /// carriage pivot (tower x, tower y, h_i); of the two intersections of
-    /// the three spheres, the one below the carriages.
+    /// carriage pivot (tower x, tower y, h_i − OF); of the two
+    /// intersections of the three spheres, the one below the carriages.
     ///
-    /// Written for the soft-float AVR, where each operation is a call:
-    /// out-of-line vector helpers working in place (a − b is a + b·(−1),
-    /// bit for bit), and few vectors alive at once, so the frame stays
-    /// small. Spelled out per component this was 2 KB.
-    #[inline(never)]
+    /// Written for the soft-float AVR, where each operation spelled out is
+    /// a call with its operands loaded and its result stored (2 KB
+    /// inline, 1.4 KB through vector helpers): the steps are
+    /// [`TRILATERATION_STEPS`], in flash 3 bytes each, run by
+    /// [`Delta::run`]. The same operations in the same order as the
+    /// formulas, so the same bits (a test keeps them so).
     fn forward(&self, heights: Vector3) -> Result<Vector3, KinematicsError> {
-        // p1, then p2 − p1 (becomes ex) and p3 − p1.
-        let mut v = [
-            self.pivot(&heights, 0),
-            self.pivot(&heights, 1),
-            self.pivot(&heights, 2),
-        ];
-        let [p1, ex, p31] = &mut v;
-        add_scaled3(ex, p1, -1.0);
-        add_scaled3(p31, p1, -1.0);
-        let d = length3(ex);
-        if !(d > 0.0) {
-            return Err(KinematicsError::NoSolution);
-        }
-        scale3(ex, 1.0 / d);
-        let i = dot3(ex, p31);
-        // p1 is computed again at the end: it becomes ey meanwhile.
-        *p1 = *p31;
-        let ey = p1;
-        add_scaled3(ey, ex, -i);
-        let ey_len = length3(ey);
-        if !(ey_len > 0.0) {
-            return Err(KinematicsError::NoSolution);
-        }
-        scale3(ey, 1.0 / ey_len);
-        let j = dot3(ey, p31);
-        // All three radii are L, so the r₁² − r₂² terms vanish.
-        let x = d / 2.0;
-        let y = (i * i + j * j) / (2.0 * j) - i * x / j;
-        let z_sqr = self.rod_length * self.rod_length - x * x - y * y;
-        if !(z_sqr >= 0.0) {
-            return Err(KinematicsError::NoSolution);
-        }
-        let z = sqrt(z_sqr);
-        // The base point p1 + ex·x + ey·y where p3 − p1 was; ez in ex.
-        let base = p31;
-        *base = self.pivot(&heights, 0);
-        add_scaled3(base, ex, x);
-        add_scaled3(base, ey, y);
-        let ez = cross3(ex, ey);
-        // Of base ± ez·z, the lower (base − ez·z when neither is).
-        let z = if base[2] + ez[2] * z < base[2] - ez[2] * z {
-            z
-        } else {
-            -z
-        };
-        add_scaled3(base, &ez, z);
-        Ok(*base)
+        self.run(0, INVERSE, &heights)
     }
 
     fn segment_mm(&self) -> Option<f32> {
@@ -330,42 +303,340 @@ impl Kinematics for Delta {
     }
 }
 
-/// a ← a + v·k. The vector helpers are out of line and work in place:
-/// the delta's trilateration calls each several times.
-#[inline(never)]
-fn add_scaled3(a: &mut Vector3, v: &Vector3, k: f32) {
-    for axis in 0..3 {
-        a[axis] += v[axis] * k;
+/// Float registers of [`run_float_program`] (a power of two: indices are
+/// masked into range, no bounds checks).
+const REGISTERS: usize = 32;
+
+// The registers of the programs: constants and the delta's figures
+// (−(smallest subnormal): x ≥ 0 is x > it; the tilt limit as sin²,
+// infinite when none), the result (these first: the caller's stack
+// offsets stay below 64), the towers' x and y, the input (the carriage
+// heights, the point or the trims), then the programs' own. The programs
+// may overwrite what they do not need: every run fills them again.
+const OF: usize = 0;
+const ROD: usize = 1;
+const ONE: usize = 2;
+const HALF: usize = 3;
+const BELOW_ZERO: usize = 4;
+const ZERO: usize = 5;
+const PRINTABLE: usize = 6;
+const TILT: usize = 7;
+const RADIUS: usize = 8;
+const HOMED_HEIGHT: usize = 9;
+const OUT: usize = 10;
+const TX0: usize = 13;
+const TY0: usize = 14;
+const TX1: usize = 15;
+const TY1: usize = 16;
+const TX2: usize = 17;
+const TY2: usize = 18;
+const IN: usize = 19;
+
+// The trilateration's: the heights become the pivots' z = h − OF, then
+// h1 and h2 scalars; ex = (p2 − p1)/d; p3 − p1, which becomes ez; ey; the
+// scalars (x in d), in place of figures it does not need.
+const H0: usize = IN;
+const H1: usize = IN + 1;
+const H2: usize = IN + 2;
+const I: usize = H1;
+const J: usize = H2;
+const EX: usize = 22;
+const P31: usize = 25;
+const EZ: usize = P31;
+const EY: usize = 28;
+const D: usize = 31;
+const X: usize = D;
+const Y: usize = RADIUS;
+const Z: usize = HOMED_HEIGHT;
+const T: usize = PRINTABLE;
+const T2: usize = TILT;
+
+// The inverse's: the point, L², L²·sin²(tilt limit), z + OF, then per
+// tower dx, dy (squared in place), d², L² − d².
+const PX: usize = IN;
+const PY: usize = IN + 1;
+const PZ: usize = IN + 2;
+const RS: usize = 22;
+const LR: usize = 23;
+const ZOF: usize = 24;
+const DX: usize = 25;
+const DY: usize = 26;
+const HS: usize = 27;
+const VS: usize = 28;
+const R: usize = 29;
+const R2: usize = 30;
+
+/// Operations of a float program step: `dst ← a op b`.
+const ADD: u8 = 0;
+const SUB: u8 = 1;
+const MUL: u8 = 2;
+const DIV: u8 = 3;
+/// `dst ← √a` ([`math::sqrt`]).
+const SQRT: u8 = 4;
+/// `dst ← dst + a·b` (the product rounded, then the sum).
+const MUL_ADD: u8 = 5;
+/// Fail unless `a > b`, or (`dst` | [`UNLESS`]) if `a > b`, with the
+/// error numbered `dst` & 3 (`OUT_OF_REACH`…).
+const REQUIRE: u8 = 6;
+/// `dst ← −dst` unless `a < b`.
+const NEGATE_UNLESS_LESS: u8 = 7;
+
+/// `REQUIRE`'s `dst` flag: fail if `a > b`.
+const UNLESS: usize = 4;
+
+/// `REQUIRE`'s errors (`dst` & 3).
+const OUT_OF_REACH: usize = 0;
+const OUTSIDE_PRINTABLE: usize = 1;
+const TOO_TILTED: usize = 2;
+const NO_SOLUTION: usize = 3;
+
+/// One step: the operation in the top 3 bits of the first byte, `dst` in
+/// the low 5, then `a` and `b`.
+const fn step(op: u8, dst: usize, a: usize, b: usize) -> [u8; 3] {
+    [op << 5 | dst as u8, a as u8, b as u8]
+}
+
+/// Steps of the trilateration, [`Delta::forward`]'s formulas one operation
+/// at a time, in their order (a dot product summed left to right).
+const TRILATERATION_STEPS: [[u8; 3]; 80] = [
+    // The pivots' heights h_i − OF.
+    step(SUB, H0, H0, OF),
+    step(SUB, H1, H1, OF),
+    step(SUB, H2, H2, OF),
+    // p2 − p1 (to become ex) and p3 − p1.
+    step(SUB, EX, TX1, TX0),
+    step(SUB, EX + 1, TY1, TY0),
+    step(SUB, EX + 2, H1, H0),
+    step(SUB, P31, TX2, TX0),
+    step(SUB, P31 + 1, TY2, TY0),
+    step(SUB, P31 + 2, H2, H0),
+    // d = |p2 − p1| > 0; ex = (p2 − p1)·(1/d).
+    step(MUL, D, EX, EX),
+    step(MUL_ADD, D, EX + 1, EX + 1),
+    step(MUL_ADD, D, EX + 2, EX + 2),
+    step(SQRT, D, D, 0),
+    step(REQUIRE, NO_SOLUTION, D, ZERO),
+    step(DIV, T, ONE, D),
+    step(MUL, EX, EX, T),
+    step(MUL, EX + 1, EX + 1, T),
+    step(MUL, EX + 2, EX + 2, T),
+    // i = ex·(p3 − p1); ey = p3 − p1 − ex·i, normalised.
+    step(MUL, I, EX, P31),
+    step(MUL_ADD, I, EX + 1, P31 + 1),
+    step(MUL_ADD, I, EX + 2, P31 + 2),
+    step(MUL, T, EX, I),
+    step(SUB, EY, P31, T),
+    step(MUL, T, EX + 1, I),
+    step(SUB, EY + 1, P31 + 1, T),
+    step(MUL, T, EX + 2, I),
+    step(SUB, EY + 2, P31 + 2, T),
+    step(MUL, T, EY, EY),
+    step(MUL_ADD, T, EY + 1, EY + 1),
+    step(MUL_ADD, T, EY + 2, EY + 2),
+    step(SQRT, T, T, 0),
+    step(REQUIRE, NO_SOLUTION, T, ZERO),
+    step(DIV, T, ONE, T),
+    step(MUL, EY, EY, T),
+    step(MUL, EY + 1, EY + 1, T),
+    step(MUL, EY + 2, EY + 2, T),
+    // j = ey·(p3 − p1). All three radii are L, so the r₁² − r₂² terms
+    // vanish: x = d/2, y = (i² + j²)/(2j) − i·x/j.
+    step(MUL, J, EY, P31),
+    step(MUL_ADD, J, EY + 1, P31 + 1),
+    step(MUL_ADD, J, EY + 2, P31 + 2),
+    step(MUL, X, D, HALF),
+    step(MUL, T, I, I),
+    step(MUL, T2, J, J),
+    step(ADD, T, T, T2),
+    step(ADD, T2, J, J),
+    step(DIV, T, T, T2),
+    step(MUL, T2, I, X),
+    step(DIV, T2, T2, J),
+    step(SUB, Y, T, T2),
+    // z = √(L² − x² − y²), L² − x² − y² ≥ 0.
+    step(MUL, T, ROD, ROD),
+    step(MUL, T2, X, X),
+    step(SUB, T, T, T2),
+    step(MUL, T2, Y, Y),
+    step(SUB, T, T, T2),
+    step(REQUIRE, NO_SOLUTION, T, BELOW_ZERO),
+    step(SQRT, Z, T, 0),
+    // The base point p1 + ex·x + ey·y.
+    step(MUL, T, EX, X),
+    step(ADD, OUT, TX0, T),
+    step(MUL, T, EX + 1, X),
+    step(ADD, OUT + 1, TY0, T),
+    step(MUL, T, EX + 2, X),
+    step(ADD, OUT + 2, H0, T),
+    step(MUL_ADD, OUT, EY, Y),
+    step(MUL_ADD, OUT + 1, EY + 1, Y),
+    step(MUL_ADD, OUT + 2, EY + 2, Y),
+    // ez = ex × ey.
+    step(MUL, T, EX + 1, EY + 2),
+    step(MUL, T2, EX + 2, EY + 1),
+    step(SUB, EZ, T, T2),
+    step(MUL, T, EX + 2, EY),
+    step(MUL, T2, EX, EY + 2),
+    step(SUB, EZ + 1, T, T2),
+    step(MUL, T, EX, EY + 1),
+    step(MUL, T2, EX + 1, EY),
+    step(SUB, EZ + 2, T, T2),
+    // Of base ± ez·z, the lower (base − ez·z when neither is).
+    step(MUL, T, EZ + 2, Z),
+    step(ADD, T2, OUT + 2, T),
+    step(SUB, I, OUT + 2, T),
+    step(NEGATE_UNLESS_LESS, Z, T2, I),
+    step(MUL_ADD, OUT, EZ, Z),
+    step(MUL_ADD, OUT + 1, EZ + 1, Z),
+    step(MUL_ADD, OUT + 2, EZ + 2, Z),
+];
+
+/// Steps of the inverse, [`Delta::inverse`]'s formulas one operation at a
+/// time, in their order.
+const INVERSE_STEPS: [[u8; 3]; 38] = [
+    // x² + y² > R_printable²: outside.
+    step(MUL, R, PX, PX),
+    step(MUL, R2, PY, PY),
+    step(ADD, R, R, R2),
+    step(MUL, R2, PRINTABLE, PRINTABLE),
+    step(REQUIRE, OUTSIDE_PRINTABLE | UNLESS, R, R2),
+    step(MUL, RS, ROD, ROD),
+    step(MUL, LR, TILT, RS),
+    step(ADD, ZOF, PZ, OF),
+    // Tower 1.
+    step(SUB, DX, TX0, PX),
+    step(SUB, DY, TY0, PY),
+    step(MUL, DX, DX, DX),
+    step(MUL, DY, DY, DY),
+    step(ADD, HS, DX, DY),
+    step(SUB, VS, RS, HS),
+    // L² − d² > 0, else out of reach; d² > L²·sin²: too tilted.
+    step(REQUIRE, OUT_OF_REACH, VS, ZERO),
+    step(REQUIRE, TOO_TILTED | UNLESS, HS, LR),
+    step(SQRT, VS, VS, 0),
+    step(ADD, OUT, ZOF, VS),
+    // Tower 2.
+    step(SUB, DX, TX1, PX),
+    step(SUB, DY, TY1, PY),
+    step(MUL, DX, DX, DX),
+    step(MUL, DY, DY, DY),
+    step(ADD, HS, DX, DY),
+    step(SUB, VS, RS, HS),
+    step(REQUIRE, OUT_OF_REACH, VS, ZERO),
+    step(REQUIRE, TOO_TILTED | UNLESS, HS, LR),
+    step(SQRT, VS, VS, 0),
+    step(ADD, OUT + 1, ZOF, VS),
+    // Tower 3.
+    step(SUB, DX, TX2, PX),
+    step(SUB, DY, TY2, PY),
+    step(MUL, DX, DX, DX),
+    step(MUL, DY, DY, DY),
+    step(ADD, HS, DX, DY),
+    step(SUB, VS, RS, HS),
+    step(REQUIRE, OUT_OF_REACH, VS, ZERO),
+    step(REQUIRE, TOO_TILTED | UNLESS, HS, LR),
+    step(SQRT, VS, VS, 0),
+    step(ADD, OUT + 2, ZOF, VS),
+];
+
+/// Steps of [`Delta::homed_carriage_heights`]: trim + (H + OF + √(L² − R²)).
+const HOMED_STEPS: [[u8; 3]; 9] = [
+    step(MUL, T, ROD, ROD),
+    step(MUL, T2, RADIUS, RADIUS),
+    step(SUB, T, T, T2),
+    step(SQRT, T, T, 0),
+    step(ADD, T2, HOMED_HEIGHT, OF),
+    step(ADD, T, T2, T),
+    step(ADD, OUT, IN, T),
+    step(ADD, OUT + 1, IN + 1, T),
+    step(ADD, OUT + 2, IN + 2, T),
+];
+
+/// Step offsets in [`STEPS`]: the inverse's steps follow the
+/// trilateration's, the homed heights' the inverse's; the end.
+const INVERSE: usize = TRILATERATION_STEPS.len();
+const HOMED: usize = INVERSE + INVERSE_STEPS.len();
+const STEP_COUNT: usize = HOMED + HOMED_STEPS.len();
+
+/// The programs in flash, one after the other, read a step at a time (a
+/// byte at a time, three calls per step, was 36 bytes smaller but slowed
+/// the delta's 1 mm segment streams from 61 to 54 lines/s).
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+static STEPS: Flash<[[u8; 3]; STEP_COUNT]> =
+    Flash::new(flatten(TRILATERATION_STEPS, INVERSE_STEPS, HOMED_STEPS));
+
+/// The programs' steps one after the other.
+const fn flatten<const A: usize, const B: usize, const C: usize, const M: usize>(
+    a: [[u8; 3]; A],
+    b: [[u8; 3]; B],
+    c: [[u8; 3]; C],
+) -> [[u8; 3]; M] {
+    let mut steps = [[0; 3]; M];
+    let mut n = 0;
+    while n < M {
+        steps[n] = if n < A {
+            a[n]
+        } else if n < A + B {
+            b[n - A]
+        } else {
+            c[n - A - B]
+        };
+        n += 1;
     }
+    steps
 }
 
-/// a ← a·k.
-#[inline(never)]
-fn scale3(a: &mut Vector3, k: f32) {
-    for axis in 0..3 {
-        a[axis] *= k;
+/// Run the steps of [`STEPS`] from `index` to `end` over `regs`;
+/// `Err` when a `REQUIRE` fails.
+#[inline(always)]
+fn run_float_program(
+    regs: &mut [f32; REGISTERS],
+    mut index: usize,
+    end: usize,
+) -> Result<(), KinematicsError> {
+    while index < end {
+        let Some([head, a, b]) = STEPS.get(index) else {
+            break;
+        };
+        index += 1;
+        let dst = (head & 31) as usize;
+        let (a, b) = (a as usize & 31, b as usize & 31);
+        let (x, y) = (regs[a], regs[b]);
+        regs[dst] = match head >> 5 {
+            ADD => x + y,
+            SUB => x - y,
+            MUL => x * y,
+            DIV => x / y,
+            SQRT => sqrt(x),
+            MUL_ADD => regs[dst] + x * y,
+            REQUIRE => {
+                if (x > y) != (dst & UNLESS != 0) {
+                    continue;
+                }
+                // (Numbered in the enum's order: no table, which would be
+                // copied to RAM.)
+                return Err(match dst & 3 {
+                    OUT_OF_REACH => KinematicsError::OutOfReach,
+                    OUTSIDE_PRINTABLE => KinematicsError::OutsidePrintable,
+                    TOO_TILTED => KinematicsError::TooTilted,
+                    _ => KinematicsError::NoSolution,
+                });
+            }
+            _ => {
+                if x < y {
+                    continue;
+                }
+                -regs[dst]
+            }
+        };
     }
+    Ok(())
 }
 
-/// a · b, summed left to right.
-#[inline(never)]
-fn dot3(a: &Vector3, b: &Vector3) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-/// |a|.
+/// |a|, the squares summed left to right.
 #[inline(never)]
 pub(crate) fn length3(a: &Vector3) -> f32 {
-    sqrt(dot3(a, a))
-}
-
-/// a × b.
-fn cross3(a: &Vector3, b: &Vector3) -> Vector3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
 }
 
 /// SPEC §3: the planar RR arm in the Y–Z plane with a lead-screw X.
@@ -607,6 +878,193 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// a · b, summed left to right, as the former trilateration had it.
+    fn dot3(a: &Vector3, b: &Vector3) -> f32 {
+        a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    }
+
+    /// a ← a + v·k, as the former trilateration had it.
+    fn add_scaled3(a: &mut Vector3, v: &Vector3, k: f32) {
+        for axis in 0..3 {
+            a[axis] += v[axis] * k;
+        }
+    }
+
+    /// The trilateration as it was written before the float program,
+    /// operation by operation (the f32 operations are IEEE's, on the AVR
+    /// as here): the program must give the same bits.
+    fn forward_reference(delta: &Delta, h: Vector3) -> Option<Vector3> {
+        let of = delta.effector_offset;
+        let t = delta.towers;
+        let p1 = [t[0][0], t[0][1], h[0] - of];
+        let mut ex = [t[1][0], t[1][1], h[1] - of];
+        let mut p31 = [t[2][0], t[2][1], h[2] - of];
+        add_scaled3(&mut ex, &p1, -1.0);
+        add_scaled3(&mut p31, &p1, -1.0);
+        let d = length3(&ex);
+        if !(d > 0.0) {
+            return None;
+        }
+        let inv = 1.0 / d;
+        ex = [ex[0] * inv, ex[1] * inv, ex[2] * inv];
+        let i = dot3(&ex, &p31);
+        let mut ey = p31;
+        add_scaled3(&mut ey, &ex, -i);
+        let ey_len = length3(&ey);
+        if !(ey_len > 0.0) {
+            return None;
+        }
+        let inv = 1.0 / ey_len;
+        ey = [ey[0] * inv, ey[1] * inv, ey[2] * inv];
+        let j = dot3(&ey, &p31);
+        let x = d / 2.0;
+        let y = (i * i + j * j) / (2.0 * j) - i * x / j;
+        let z_sqr = delta.rod_length * delta.rod_length - x * x - y * y;
+        if !(z_sqr >= 0.0) {
+            return None;
+        }
+        let z = sqrt(z_sqr);
+        let mut base = p1;
+        add_scaled3(&mut base, &ex, x);
+        add_scaled3(&mut base, &ey, y);
+        let ez = [
+            ex[1] * ey[2] - ex[2] * ey[1],
+            ex[2] * ey[0] - ex[0] * ey[2],
+            ex[0] * ey[1] - ex[1] * ey[0],
+        ];
+        let z = if base[2] + ez[2] * z < base[2] - ez[2] * z {
+            z
+        } else {
+            -z
+        };
+        add_scaled3(&mut base, &ez, z);
+        Some(base)
+    }
+
+    /// The inverse as it was written before the float program.
+    fn inverse_reference(delta: &Delta, p: Vector3) -> Result<Vector3, KinematicsError> {
+        if p[0] * p[0] + p[1] * p[1] > delta.printable_radius * delta.printable_radius {
+            return Err(KinematicsError::OutsidePrintable);
+        }
+        let rod_sqr = delta.rod_length * delta.rod_length;
+        let mut heights = [0.0; 3];
+        for (height, tower) in heights.iter_mut().zip(&delta.towers) {
+            let dx = tower[0] - p[0];
+            let dy = tower[1] - p[1];
+            let horizontal_sqr = dx * dx + dy * dy;
+            let vertical_sqr = rod_sqr - horizontal_sqr;
+            if !(vertical_sqr > 0.0) {
+                return Err(KinematicsError::OutOfReach);
+            }
+            if let Some(limit) = delta.max_tilt_sin_sqr {
+                if horizontal_sqr > limit * rod_sqr {
+                    return Err(KinematicsError::TooTilted);
+                }
+            }
+            *height = p[2] + delta.effector_offset + sqrt(vertical_sqr);
+        }
+        Ok(heights)
+    }
+
+    #[test]
+    fn delta_inverse_program_keeps_the_bits() {
+        let sin40 = sin_cos(math::radians(40.0)).0;
+        let mut errors = [0; 3];
+        for repetier in [false, true] {
+            for (printable, tilt) in [(130.0, None), (1000.0, None), (1000.0, Some(sin40 * sin40))]
+            {
+                let mut delta = Delta::spec_printer(repetier);
+                delta.printable_radius = printable;
+                delta.max_tilt_sin_sqr = tilt;
+                for xi in -30..=30 {
+                    for yi in -30..=30 {
+                        for z in [0.0, 0.25, -7.5, 123.4] {
+                            let p = [xi as f32 * 4.9 + 0.013, yi as f32 * 4.7, z];
+                            let want = inverse_reference(&delta, p);
+                            let got = delta.inverse(p);
+                            assert_eq!(
+                                got.map(|h| h.map(f32::to_bits)),
+                                want.map(|h| h.map(f32::to_bits)),
+                                "{p:?}"
+                            );
+                            match want {
+                                Err(KinematicsError::OutsidePrintable) => errors[0] += 1,
+                                Err(KinematicsError::OutOfReach) => errors[1] += 1,
+                                Err(KinematicsError::TooTilted) => errors[2] += 1,
+                                _ => {}
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // Every refusal was met.
+        assert!(errors.iter().all(|&n| n > 0), "{errors:?}");
+    }
+
+    #[test]
+    fn delta_homed_heights_program_keeps_the_bits() {
+        for (rod, radius, height, trim) in [
+            (361.0, 227.0, 300.0, [0.0, -3.0, 0.0]),
+            (250.5, 101.25, 287.3, [0.013, -0.4, 19.9]),
+        ] {
+            let mut delta = Delta::spec_printer(false);
+            delta.set_geometry(rod, radius);
+            delta.homed_height = height;
+            delta.endstop_trim = trim;
+            let nominal = height + delta.effector_offset + sqrt(rod * rod - radius * radius);
+            let want = [nominal + trim[0], nominal + trim[1], nominal + trim[2]];
+            assert_eq!(
+                delta.homed_carriage_heights().map(f32::to_bits),
+                want.map(f32::to_bits)
+            );
+        }
+    }
+
+    #[test]
+    fn delta_forward_program_keeps_the_bits() {
+        for repetier in [false, true] {
+            let delta = Delta::spec_printer(repetier);
+            let mut checked = 0;
+            for xi in -14..=14 {
+                for yi in -14..=14 {
+                    for z in [0.0, 0.25, 7.5, 123.4] {
+                        let (x, y) = (xi as f32 * 9.7, yi as f32 * 9.3);
+                        let Ok(h) = delta.inverse([x, y, z]) else {
+                            continue;
+                        };
+                        // Off the exact heights too (trims, rounded steps).
+                        for dh in [0.0, 0.0125, -3.0] {
+                            let h = [h[0] + dh, h[1], h[2] - dh];
+                            let want = forward_reference(&delta, h);
+                            let got = delta.forward(h).ok();
+                            assert_eq!(
+                                got.map(|p| p.map(f32::to_bits)),
+                                want.map(|p| p.map(f32::to_bits)),
+                                "{h:?}"
+                            );
+                            checked += 1;
+                        }
+                    }
+                }
+            }
+            assert!(checked > 5000, "{checked}");
+        }
+        // No solution: carriages too far apart, or two pivots the same.
+        let delta = Delta::spec_printer(false);
+        for h in [[0.0, 0.0, 900.0], [0.0, 900.0, 0.0]] {
+            assert_eq!(forward_reference(&delta, h), None);
+        }
+        assert_eq!(
+            delta.forward([0.0, 0.0, 900.0]),
+            Err(KinematicsError::NoSolution)
+        );
+        let mut same = delta;
+        same.towers[1] = same.towers[0];
+        assert_eq!(forward_reference(&same, [300.0; 3]), None);
+        assert_eq!(same.forward([300.0; 3]), Err(KinematicsError::NoSolution));
     }
 
     #[test]

@@ -425,8 +425,7 @@ impl LineCut {
         // length; a Cartesian line needs no square root here (this runs
         // for every G1 of a slicer stream).
         let mut pieces = match config.kinematics.segment_mm() {
-            // (`length3`: the same sum, out of line; the kinematics that
-            // cut by length have it already.)
+            // (`length3`: the same sum, out of line.)
             Some(segment) if segment > 0.0 => match delta.first_chunk::<LINEAR_AXES>() {
                 Some(xyz) => kinematics::length3(xyz) / segment,
                 None => 0.0,
@@ -1044,7 +1043,7 @@ impl<'q> Motion<'q> {
         // By reference: copies of the configuration's parts cost flash.
         let home = match (&self.config.home, &self.config.kinematics) {
             #[cfg(feature = "delta")]
-            (HomePosition::DeltaTop, MachineKinematics::Delta(delta)) => Ok(delta.homed_carriage_heights()),
+            (HomePosition::DeltaTop, MachineKinematics::Delta(delta)) => delta.homed_heights(),
             (HomePosition::Cartesian(point), kinematics) => kinematics.inverse(*point),
             (HomePosition::DeltaTop, kinematics) => kinematics.inverse([0.0; LINEAR_AXES]),
         };
