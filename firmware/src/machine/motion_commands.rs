@@ -41,7 +41,6 @@ impl<'q> Machine<'q> {
     /// interrupt's status to the planner side, refill the step queues, and
     /// report what went wrong. The board then does what the returned
     /// request says to its step generator.
-    #[inline(never)]
     pub fn poll_motion<W: uWrite + ?Sized>(
         &mut self,
         status: &StepperStatus,
@@ -65,7 +64,6 @@ impl<'q> Machine<'q> {
         self.motion.motor_steps()
     }
 
-    #[inline(never)]
     fn motion_failed<W: uWrite + ?Sized>(
         &mut self,
         error: MotionError,
@@ -114,7 +112,6 @@ impl<'q> Machine<'q> {
 
     /// Does a running command finish now? Moves the `G4` from "wait for
     /// motion" to "wait for the time".
-    #[inline(never)]
     pub(super) fn running_done<W: uWrite + ?Sized>(
         &mut self,
         now_ms: u32,
@@ -166,7 +163,6 @@ impl<'q> Machine<'q> {
 
     #[cfg(feature = "printer")]
     /// `G0`/`G1` (or bare axis words): validate fully, then hand over.
-    #[inline(never)]
     pub(super) fn linear_move<W: uWrite + ?Sized>(
         &mut self,
         command: &Command,
@@ -352,7 +348,6 @@ impl<'q> Machine<'q> {
     /// Homing ended (successfully: a failure halted the machine). The homed
     /// axes' logical positions restart from the home position: their `G92`
     /// offsets are cleared, as in Marlin.
-    #[inline(never)]
     fn homing_finished<W: uWrite + ?Sized>(&mut self, _out: &mut W) -> Result<(), W::Error> {
         let homed = self.motion.homed();
         #[cfg(feature = "encoders")]

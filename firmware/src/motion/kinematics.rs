@@ -634,7 +634,6 @@ fn run_float_program(
 }
 
 /// |a|, the squares summed left to right.
-#[inline(never)]
 pub(crate) fn length3(a: &Vector3) -> f32 {
     sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
 }

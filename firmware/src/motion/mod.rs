@@ -515,9 +515,8 @@ impl<'q> Motion<'q> {
 
     /// The motion state built directly in `slot` (inside the board's
     /// `static` machine): the planner ring is never a temporary on the
-    /// stack. Out of line: the temporaries of construction stay out of the
-    /// caller's frame.
-    #[inline(never)]
+    /// stack. Inlined into the board's `boot`, whose frame (and so the
+    /// temporaries of construction) is gone before the main loop starts.
     pub fn init_in<'s>(slot: &'s mut MaybeUninit<Self>, config: MotionConfig, feeder: StepFeeder<'q>) -> &'s mut Self {
         let p = slot.as_mut_ptr();
         // SAFETY: each write is to a field of the valid slot `p`, every
@@ -731,7 +730,6 @@ impl<'q> Motion<'q> {
     }
 
     /// `G0`/`G1` to a machine position (µm) at a feed rate (µm/s).
-    #[inline(never)]
     pub fn line_to(&mut self, target_um: &[i32; MOTORS], feed_um_per_s: i32) -> Result<(), MotionError> {
         let target = mm_from_um(target_um);
         self.check_accepting()?;
@@ -772,7 +770,6 @@ impl<'q> Motion<'q> {
 
     /// `G28`: home these motors (bit i: motor i; 0: all), once the queued
     /// motion has finished. Watch [`Self::is_homing`].
-    #[inline(never)]
     pub fn home(&mut self, motors: u8) -> Result<(), MotionError> {
         if !self.ready() {
             return Err(MotionError::Busy);
@@ -824,7 +821,6 @@ impl<'q> Motion<'q> {
     /// Every pass of the main loop: take in the interrupt's status, cut
     /// pending work into the planner, drive homing, and refill the step
     /// queues.
-    #[inline(never)]
     pub fn poll(&mut self, status: &StepperStatus, now_ms: u32) -> StepperRequest {
         self.stepper_busy = status.busy;
         if let Some(fault) = status.fault {
@@ -948,7 +944,6 @@ impl<'q> Motion<'q> {
 
     /// The steps of every motor from the queued position to `target`;
     /// returns the exact (unrounded) E steps, owed rounding included.
-    #[inline(never)]
     fn piece_steps(&self, target: &[f32; MOTORS], steps: &mut [i32; MOTORS]) -> Result<f32, MotionError> {
         let spu = self.config.steps_per_unit();
         let motors = self.config.kinematics.inverse([target[0], target[1], target[2]]).map_err(MotionError::Unreachable)?;
@@ -962,7 +957,6 @@ impl<'q> Motion<'q> {
     }
 
     /// Run the homing state machine as far as it goes without waiting.
-    #[inline(never)]
     fn drive_homing(&mut self, status: &StepperStatus, now_ms: u32) {
         if let Some(motors) = self.homing_requested {
             if !(self.planner.is_empty() && !self.prep.is_active() && !status.busy) {
