@@ -81,33 +81,33 @@ impl Row {
 }
 
 /// Write `value / 10^decimals` (decimals ≤ 6) into `out`; returns the length.
+/// Built from the end, digit by digit through the parser's small divider
+/// (no 32-bit library division): the longest text, `-2147483648` or a
+/// negative value with a point, is 12 bytes.
 pub fn format_fixed(value: i32, decimals: u8, out: &mut [u8; 12]) -> usize {
-    let decimals = usize::from(decimals.min(6));
+    let decimals = decimals.min(6);
     let mut magnitude = value.unsigned_abs();
-    let mut reversed = [0u8; 12];
-    let mut count = 0;
-    // at least one digit before the point: positions 0..=decimals+1 with a point
-    let last_forced = if decimals > 0 { decimals + 1 } else { 0 };
-    while count < 12 && (magnitude > 0 || count <= last_forced) {
-        if decimals > 0 && count == decimals {
-            reversed[count] = b'.';
-        } else {
-            reversed[count] = b'0' + (magnitude % 10) as u8;
-            magnitude /= 10;
+    let mut text = [0u8; 12];
+    let mut start = text.len();
+    let mut digits = 0u8;
+    // At least one digit before the point.
+    while magnitude > 0 || digits <= decimals {
+        if decimals > 0 && digits == decimals {
+            start -= 1;
+            text[start] = b'.';
         }
-        count += 1;
+        let (quotient, digit) = crate::gcode::number::div_rem_small(magnitude, 10);
+        start -= 1;
+        text[start] = b'0' + digit;
+        magnitude = quotient;
+        digits += 1;
     }
-    let mut length = 0;
-    if value < 0 && length < 12 {
-        out[0] = b'-';
-        length = 1;
+    if value < 0 {
+        start -= 1;
+        text[start] = b'-';
     }
-    for index in (0..count).rev() {
-        if length < 12 {
-            out[length] = reversed[index];
-            length += 1;
-        }
-    }
+    let length = text.len() - start;
+    out[..length].copy_from_slice(&text[start..]);
     length
 }
 
@@ -193,5 +193,11 @@ mod tests {
         assert_eq!(&out[..n], b"0");
         let n = format_fixed(i32::MIN, 0, &mut out);
         assert_eq!(&out[..n], b"-2147483648");
+        let n = format_fixed(-7, 6, &mut out);
+        assert_eq!(&out[..n], b"-0.000007");
+        let n = format_fixed(i32::MIN, 6, &mut out);
+        assert_eq!(&out[..n], b"-2147.483648");
+        let n = format_fixed(2_100, 1, &mut out);
+        assert_eq!(&out[..n], b"210.0");
     }
 }
