@@ -102,8 +102,11 @@ pub struct Host {
     wire: VecDeque<u8>,
     /// Cycle (fractional) at which the next start bit may go out.
     pub next_start: f64,
-    /// Host frame length, cycles (10 bits at `baud`).
+    /// Frame length in use, cycles: the host's own or the AVR's, whichever
+    /// is longer.
     pub frame_cycles: f64,
+    /// The host's own frame, cycles (10 bits at `baud`).
+    own_frame_cycles: f64,
     awaiting_ok: bool,
     rx_line: Vec<u8>,
     rx_line_first_cycle: u64,
@@ -128,6 +131,7 @@ impl Host {
             wire: VecDeque::new(),
             next_start: 0.0,
             frame_cycles,
+            own_frame_cycles: frame_cycles,
             awaiting_ok: false,
             rx_line: Vec::new(),
             rx_line_first_cycle: 0,
@@ -179,9 +183,15 @@ impl Host {
     }
 
     /// The AVR's frame may be longer than the host's (a slower real baud):
-    /// the host cannot send faster than the receiver takes bytes.
+    /// the host cannot send faster than the receiver takes bytes. Called on
+    /// every write to the UART's setup registers: the frame follows the
+    /// *current* setting. (Until session 8 it kept the longest frame ever
+    /// seen, and the firmware writes UBRR0 before it sets U2X0, so for an
+    /// instant the frame is twice as long: every host in the bench then
+    /// sent at half the baud rate, 58 800 instead of 115 200, and every
+    /// line-rate figure was about half what the wire allows.)
     pub fn set_min_frame(&mut self, avr_frame_cycles: f64) {
-        self.frame_cycles = self.frame_cycles.max(avr_frame_cycles);
+        self.frame_cycles = self.own_frame_cycles.max(avr_frame_cycles);
     }
 
     /// If a byte is due at `now`, return it (the board injects it).
