@@ -5,7 +5,7 @@ use super::modal::AXES;
 use crate::line::LineAssembler;
 use crate::reply::test_support::Text;
 use crate::storage::MemoryStorage;
-use crate::motion::{MotionConfig, StepQueues};
+use crate::motion::{MotionConfig, StepQueues, StepperStatus};
 use std::boxed::Box;
 use std::format;
 use std::string::String;
@@ -19,7 +19,9 @@ pub(super) fn new_machine() -> Machine<'static> {
     Machine::new(Motion::new(config, feeder))
 }
 
-/// Feed `input` byte by byte as the board does, polling at `now_ms`.
+/// Feed `input` byte by byte as the board does, polling at `now_ms`
+/// (motion first, then the executor, as in the boards' main loops: an
+/// acknowledged move is planned by the next motion poll).
 pub(super) fn converse(machine: &mut Machine, now_ms: u32, input: &str) -> String {
     let mut out = Text::default();
     let mut assembler = LineAssembler::new();
@@ -28,6 +30,7 @@ pub(super) fn converse(machine: &mut Machine, now_ms: u32, input: &str) -> Strin
         if let Some(line) = assembler.push(byte) {
             machine.receive_line(line, &mut out).unwrap();
         }
+        machine.poll_motion(&StepperStatus::default(), now_ms, &mut out).unwrap();
         machine.poll(now_ms, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     }
     out.0

@@ -464,6 +464,14 @@ impl LineCut {
 }
 
 /// Work accepted from the executor and not yet all in the planner.
+///
+/// `line_to` and `arc_to` only check the move and store it here; `poll`
+/// cuts it into the planner. The executor acknowledges the line at once
+/// and takes no further command while something is pending
+/// ([`Motion::ready`]), so commands still take effect in order and nothing
+/// acknowledged is lost, but the planning (kinematics, look-ahead) runs
+/// while the host is sending the next line instead of before the `ok`:
+/// with ok-per-line hosts this is what lets short segments stream at speed.
 #[derive(Clone, Debug, PartialEq)]
 enum Pending {
     Nothing,
@@ -739,7 +747,10 @@ impl<'q> Motion<'q> {
         if let Pending::Line { cut, .. } = &mut self.pending {
             cut.init(&self.position, &target, &self.config);
         }
-        self.feed_planner();
+        // Not planned here: the caller acknowledges the line now and the
+        // next `poll` plans it, while the host sends the next line (see
+        // `Pending`). Planning here put ≈ 25 000 cycles of the AVR between
+        // a line's last byte and its `ok`.
         Ok(())
     }
 
@@ -764,7 +775,6 @@ impl<'q> Motion<'q> {
                 return Err(MotionError::Arc(error));
             }
         }
-        self.feed_planner();
         Ok(())
     }
 

@@ -35,7 +35,7 @@
 //! the look-ahead raise the exit speed of a block already under way.
 
 use super::math::{clamp, max, min, speed_sqr_after, sqrt, to_i32, to_u32};
-use super::planner::Planner;
+use super::planner::{Planner, SpeedSqr};
 use super::stepper::{Segment, StepBlock, StepFeeder, TIMER_HZ};
 
 /// Longest segment, seconds: bounds the queued (committed) motion to
@@ -46,12 +46,32 @@ pub const MAX_SEGMENT_S: f32 = 0.005;
 pub const MAX_CRUISE_SEGMENT_S: f32 = 0.010;
 /// Largest ratio of speeds at the two ends of an accelerating segment.
 pub const SPEED_RATIO: f32 = 1.5;
-/// Most segments [`Prep::fill`] queues per call.
-const SEGMENTS_PER_FILL: usize = 16;
-/// Segments queued ahead before [`Prep::fill`] goes one per call.
-const SEGMENTS_AHEAD: usize = 4;
+/// Most segments [`Prep::fill`] queues per call when the interrupt is
+/// about to run dry. Two: each costs the AVR ≈ 0.5–1 ms, and a line that
+/// arrives meanwhile waits for them (with 16, lines of a starved stream
+/// waited up to 30 ms for their `ok`); the main loop comes straight back
+/// when it has nothing else to do.
+const SEGMENTS_PER_FILL: usize = 2;
+/// Step time [`Prep::fill`] keeps queued for the interrupt, in
+/// [`QUEUED_UNIT_TICKS`]: 25 ms. Enough to cover the longest main-loop pass
+/// of a print (a line parsed and planned, a report written: a few ms),
+/// and no more: what is queued is committed, and the look-ahead can only
+/// raise the speed of blocks not yet cut into segments. Queuing the whole
+/// segment queue (15 × 5–10 ms) committed the deceleration of the newest
+/// block before the host's next line could arrive, and a stream of short
+/// lines slowed itself down.
+const QUEUED_TARGET: u16 = 25_000 / 32;
+/// Below this much queued (10 ms), or with fewer than two segments,
+/// [`Prep::fill`] queues up to [`SEGMENTS_PER_FILL`] at once; above it one
+/// per call, so the main loop gets back to the serial port within one
+/// segment's preparation.
+const QUEUED_LOW: u16 = 10_000 / 32;
+/// The unit of queued time: 64 timer ticks (32 µs).
+const QUEUED_UNIT_TICKS: f32 = 64.0;
 /// Q24.8 ticks per second.
 const Q8_PER_S: f32 = TIMER_HZ as f32 * 256.0;
+/// Slots of the queued-time mirror (the interrupt's segment queue).
+const MIRROR_SLOTS: usize = super::stepper::SEGMENT_SLOTS;
 
 /// The preparation state.
 pub struct Prep {
@@ -71,6 +91,19 @@ pub struct Prep {
     inv_accel: f32,
     /// Speed at the end of the last queued segment, events/s.
     speed: f32,
+    /// The exit speed² last read from the planner and its speed in
+    /// events/s: the square root is taken only when look-ahead changed it,
+    /// not for every segment.
+    exit_sqr_seen: Option<SpeedSqr>,
+    exit_speed: f32,
+    /// The cruise's wait per event, 1/256 ticks (Q8_PER_S / `nominal`),
+    /// and its events per segment.
+    cruise_q8: f32,
+    cruise_events: u16,
+    /// The last cruise segment's event count and its reciprocal (a cruise
+    /// repeats the same count, so the division is done once).
+    cruise_k: u16,
+    cruise_inv_k: f32,
     /// Queued time minus ideal time, 1/256 ticks.
     time_debt_q8: f32,
     /// Shortest wait the interrupt may be given, 1/256 ticks.
@@ -78,6 +111,15 @@ pub struct Prep {
     /// Blocks handed to the interrupt so far (wrapping; compare with
     /// `StepperStatus::blocks_done`).
     blocks_started: u16,
+    /// The durations of the segments still in the interrupt's queue
+    /// (units of [`QUEUED_UNIT_TICKS`]), a ring that mirrors it: `mirror_len`
+    /// entries ending before `mirror_next`, summing to `queued_time`. The
+    /// interrupt takes segments oldest first, so the mirror drops from its
+    /// front as many as the queue lost.
+    mirror: [u16; MIRROR_SLOTS],
+    mirror_next: u8,
+    mirror_len: u8,
+    queued_time: u16,
 }
 
 impl Default for Prep {
@@ -204,9 +246,19 @@ impl Prep {
             accel: 0.0,
             inv_accel: 0.0,
             speed: 0.0,
+            exit_sqr_seen: None,
+            exit_speed: 0.0,
+            cruise_q8: 0.0,
+            cruise_events: 1,
+            cruise_k: 0,
+            cruise_inv_k: 0.0,
             time_debt_q8: 0.0,
             min_interval_q8: 8 << 8,
             blocks_started: 0,
+            mirror: [0; MIRROR_SLOTS],
+            mirror_next: 0,
+            mirror_len: 0,
+            queued_time: 0,
         }
     }
 
@@ -228,21 +280,46 @@ impl Prep {
         self.active = false;
         self.events_left = 0;
         self.time_debt_q8 = 0.0;
+        self.mirror_len = 0;
+        self.queued_time = 0;
+    }
+
+    /// Drop from the mirror the segments the interrupt has taken since the
+    /// last call (`queued`: what is left in its queue).
+    fn forget_taken(&mut self, queued: usize) {
+        while self.mirror_len as usize > queued {
+            let oldest = (self.mirror_next as usize + MIRROR_SLOTS - self.mirror_len as usize) % MIRROR_SLOTS;
+            self.queued_time = self.queued_time.saturating_sub(self.mirror[oldest]);
+            self.mirror_len -= 1;
+        }
+    }
+
+    /// A segment lasting `ticks_q8` went into the interrupt's queue.
+    fn remember_queued(&mut self, ticks_q8: f32) {
+        let units = to_u32(min(ticks_q8 * (1.0 / (256.0 * QUEUED_UNIT_TICKS)), u16::MAX as f32)) as u16;
+        if let Some(slot) = self.mirror.get_mut(self.mirror_next as usize) {
+            *slot = units;
+        }
+        self.mirror_next = ((self.mirror_next as usize + 1) % MIRROR_SLOTS) as u8;
+        self.mirror_len = (self.mirror_len + 1).min(MIRROR_SLOTS as u8);
+        self.queued_time = self.queued_time.saturating_add(units);
     }
 
     /// Queue segments while there is room and something to prepare.
     /// Returns the number of segments queued.
     pub fn fill(&mut self, planner: &mut Planner, feeder: &mut StepFeeder<'_>) -> usize {
         let mut queued = 0;
-        // At most a queue's worth per call: the main loop must come back to
-        // its other duties (and the watchdog) even if the interrupt drains
-        // the queue as fast as this fills it.
-        // With a few segments already queued (≥ 10 ms of steps), one more
-        // per pass is enough: the main loop comes back to the serial port
-        // within one segment's preparation instead of after sixteen (a
-        // host waiting for `ok` waits that long).
-        let budget = if feeder.queued_segments() >= SEGMENTS_AHEAD { 1 } else { SEGMENTS_PER_FILL };
-        while queued < budget {
+        self.forget_taken(feeder.queued_segments());
+        // Up to QUEUED_LOW as fast as possible (at most a queue's worth per
+        // call: the main loop must come back to its other duties, and the
+        // watchdog, even if the interrupt drains the queue as fast as this
+        // fills it); from there to QUEUED_TARGET one segment per pass, so a
+        // line that arrived waits for one segment's preparation at most.
+        while queued < SEGMENTS_PER_FILL {
+            let enough_segments = feeder.queued_segments() >= 2;
+            if enough_segments && (self.queued_time >= QUEUED_TARGET || (queued > 0 && self.queued_time >= QUEUED_LOW)) {
+                break;
+            }
             let starts_block = !self.active;
             if starts_block {
                 let Some(block) = planner.current() else { break };
@@ -258,11 +335,15 @@ impl Prep {
                 };
                 self.events_per_mm = block.events as f32 / block.millimetres;
                 self.mm_per_event = block.millimetres / block.events as f32;
-                self.speed = sqrt(block.entry_speed_sqr) * self.events_per_mm;
+                self.speed = sqrt(block.entry.mm2_s2()) * self.events_per_mm;
                 self.nominal = sqrt(block.nominal_speed_sqr) * self.events_per_mm;
                 self.inv_nominal = inverse(self.nominal);
                 self.accel = block.acceleration * self.events_per_mm;
                 self.inv_accel = inverse(self.accel);
+                self.cruise_q8 = Q8_PER_S * self.inv_nominal;
+                // (≥ 1: a block of few events at a slow feed.)
+                self.cruise_events = to_u32(max(self.nominal * MAX_CRUISE_SEGMENT_S, 1.0)).min(u16::MAX as u32) as u16;
+                self.exit_sqr_seen = None;
                 self.events_left = block.events;
                 self.active = true;
                 feeder.push_block(step_block);
@@ -276,8 +357,9 @@ impl Prep {
             feeder.push_segment(segment);
             queued += 1;
             block.millimetres = self.events_left as f32 * self.mm_per_event;
+            block.ramp = SpeedSqr::from_mm2_s2(2.0 * block.acceleration * block.millimetres);
             let speed_mm = self.speed * self.mm_per_event;
-            block.entry_speed_sqr = speed_mm * speed_mm;
+            block.entry = SpeedSqr::from_mm2_s2(speed_mm * speed_mm);
             if self.events_left == 0 {
                 self.active = false;
                 planner.discard_current();
@@ -289,12 +371,19 @@ impl Prep {
     // Out of line: inlined into `fill` (and so into `Motion::poll`) the
     // float code spilled more registers, 172 bytes more on the AVR.
     #[inline(never)]
-    fn next_segment(&mut self, exit_speed_sqr: f32, starts_block: bool) -> Segment {
+    fn next_segment(&mut self, exit_speed_sqr: SpeedSqr, starts_block: bool) -> Segment {
+        if self.exit_sqr_seen != Some(exit_speed_sqr) {
+            self.exit_sqr_seen = Some(exit_speed_sqr);
+            self.exit_speed = sqrt(exit_speed_sqr.mm2_s2()) * self.events_per_mm;
+        }
+        if self.speed >= self.nominal && self.exit_speed >= self.nominal {
+            return self.cruise_segment(starts_block);
+        }
         let profile = Profile::new(
             self.speed,
             self.events_left as f32,
             self.nominal,
-            sqrt(exit_speed_sqr) * self.events_per_mm,
+            self.exit_speed,
             self.accel,
             self.inv_accel,
             self.inv_nominal,
@@ -305,9 +394,31 @@ impl Prep {
         let first = if events == 1 { duration } else { profile.time_at(1.0) };
         let (interval, add, actual_q8) = self.fit(events, duration * Q8_PER_S - self.time_debt_q8, first * Q8_PER_S);
         self.time_debt_q8 += actual_q8 - duration * Q8_PER_S;
+        self.remember_queued(actual_q8);
         self.speed = end_speed;
         self.events_left -= events;
         Segment { interval, add, events, starts_block }
+    }
+
+    /// The rest of the block runs at the nominal speed (the steady state of
+    /// a slicer stream): equal waits, so neither square roots nor the
+    /// trapezoid are needed. The wait is rounded to 1/256 tick with this
+    /// segment's share of the time debt folded in, exactly as [`Self::fit`]
+    /// does for `add` = 0.
+    fn cruise_segment(&mut self, starts_block: bool) -> Segment {
+        let events = self.cruise_events.min(self.events_left);
+        if events != self.cruise_k {
+            self.cruise_k = events;
+            self.cruise_inv_k = 1.0 / events as f32;
+        }
+        let k = events as f32;
+        let ideal_q8 = k * self.cruise_q8;
+        let wait = max(round_f32((ideal_q8 - self.time_debt_q8) * self.cruise_inv_k), self.min_interval_q8 as f32);
+        self.time_debt_q8 += k * wait - ideal_q8;
+        self.remember_queued(k * wait);
+        self.speed = self.nominal;
+        self.events_left -= events;
+        Segment { interval: to_u32(wait), add: 0, events, starts_block }
     }
 
     /// Interval and add (Q24.8) for `events` events lasting `total_q8`,

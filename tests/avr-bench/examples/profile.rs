@@ -37,6 +37,18 @@ fn main() {
         println!("< {reply}");
     }
     let total = board.cycle() - start;
+    // Each line's answer time: from its last byte's start bit to the first
+    // byte of its `ok` leaving the chip.
+    let host = board.host();
+    let answers: Vec<String> = host
+        .sent
+        .iter()
+        .filter_map(|s| Some((s.text.clone(), host.replies[s.ok_reply?].first_byte_cycle - s.last_byte_start_cycle?)))
+        .map(|(text, cycles)| format!("{text}: {cycles}"))
+        .collect();
+    if answers.len() <= 12 {
+        println!("cycles from each line's last byte to its ok: {answers:?}");
+    }
     println!(
         "{} cycles ({:.2} ms) from the first byte sent to the last ok, {} in interrupt handlers",
         total,

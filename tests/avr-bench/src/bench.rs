@@ -621,8 +621,32 @@ pub fn segment_speed(elf: &Path, baud: u32, segments: usize, length_mm: f64) -> 
     let job = segments_of(segments, length_mm);
     board.send(job.iter());
     let timeout = segments as f64 * length_mm / 20.0 + 10.0;
+    if std::env::var_os("FERROSTEP_RX_TRACE").is_some() {
+        board.record_isr_intervals(true);
+    }
     if !board.run_until_host_done(timeout) {
-        return Err(format!("the stream did not finish within {timeout} s"));
+        if std::env::var_os("FERROSTEP_RX_TRACE").is_some() {
+            let mut worst: std::collections::BTreeMap<u32, (u64, usize)> = Default::default();
+            for (&(a, b), v) in board.isr_intervals().iter().zip(board.isr_vector_numbers()) {
+                let e = worst.entry(v).or_default();
+                e.0 = e.0.max(b - a);
+                e.1 += 1;
+            }
+            eprintln!("longest interrupt episode by vector (cycles, count): {worst:?}");
+            let mut locks = board.main_loop_interrupt_locks().to_vec();
+            locks.sort_by_key(|l| std::cmp::Reverse(l.1));
+            let named: Vec<_> = locks.iter().take(8).map(|&(pc, n)| (board.symbol_at(pc).map(crate::board::demangle).unwrap_or_default(), n)).collect();
+            eprintln!("longest main-loop interrupt locks: {named:?}");
+        }
+        let host = board.host();
+        let odd: Vec<_> = host.replies.iter().filter(|r| !r.text.starts_with("ok")).take(5).map(|r| r.text.clone()).collect();
+        return Err(format!(
+            "the stream did not finish within {timeout} s ({} of {} lines acknowledged, {} receive overruns, {} resends, replies besides ok: {odd:?})",
+            host.lines_acknowledged(),
+            job.len(),
+            board.rx_overruns(),
+            host.resends.len()
+        ));
     }
     board.run_for_ms(500.0);
     if let Some(error) = board.host().replies.iter().find(|r| r.text.starts_with("Error")) {
@@ -658,6 +682,27 @@ pub fn segment_speed(elf: &Path, baud: u32, segments: usize, length_mm: f64) -> 
         latencies.sort_unstable();
         let at = |q: f64| latencies[((latencies.len() - 1) as f64 * q) as usize] as f64 / 16_000.0;
         eprintln!("{length_mm} mm: last byte -> ok: median {:.2} ms, 90 % {:.2} ms, max {:.2} ms", at(0.5), at(0.9), at(1.0));
+        // Where a line's cycle goes on average: its bytes on the wire, the
+        // firmware's answer, the ok's bytes, the host's turn-around.
+        let host = board.host();
+        let (mut wire, mut answer, mut reply, mut turn, mut n) = (0u64, 0u64, 0u64, 0u64, 0u64);
+        for pair in host.sent.windows(2) {
+            let (s, next) = (&pair[0], &pair[1]);
+            let (Some(last), Some(ok)) = (s.last_byte_start_cycle, s.ok_reply) else { continue };
+            let ok = &host.replies[ok];
+            wire += last - s.start_cycle;
+            answer += ok.first_byte_cycle.saturating_sub(last);
+            reply += ok.arrived_cycle - ok.first_byte_cycle;
+            turn += next.start_cycle.saturating_sub(ok.arrived_cycle);
+            n += 1;
+        }
+        let ms = |c: u64| c as f64 / n.max(1) as f64 / 16_000.0;
+        for s in host.sent.iter().skip(20).take(3) {
+            eprintln!("{:?}: {} cycles on the wire, frame {}", s.text, s.last_byte_start_cycle.unwrap_or(0) - s.start_cycle, board.avr_frame_cycles());
+            let bytes: Vec<_> = board.rx_log().iter().filter(|(c, _)| *c >= s.start_cycle && *c <= s.last_byte_start_cycle.unwrap_or(0)).collect();
+            eprintln!("  {} bytes: {:?}", bytes.len(), bytes.windows(2).map(|w| w[1].0 - w[0].0).collect::<Vec<_>>());
+        }
+        eprintln!("{length_mm} mm: mean per line: line on the wire {:.2} ms, last byte -> ok starts {:.2} ms, ok on the wire {:.2} ms, ok -> next line {:.2} ms", ms(wire), ms(answer), ms(reply), ms(turn));
         // Where the firmware was while lines waited for their ok.
         let mut total: std::collections::BTreeMap<String, usize> = Default::default();
         let host = board.host();
