@@ -75,21 +75,19 @@ pub fn init(dp: &Peripherals, producer: RxProducer<'static>) {
     usart.ucsr0b.write(|w| w.rxen0().set_bit().txen0().set_bit().rxcie0().set_bit());
 }
 
-/// USART0 receive complete. The byte and the overrun flag are taken at once
-/// (that clears the interrupt), then the handler switches its own source
-/// off and lets every other interrupt in while it runs the ring and the
-/// emergency scanner (~250 cycles): a step is held up only by the entry
-/// and these few register reads, not by the whole handler. The UART holds
-/// two more bytes meanwhile, and the source comes back on (with interrupts
-/// off) just before returning, so a byte that arrived is handled next.
+/// USART0 receive complete. The handler switches its own source off, then
+/// for each byte the UART holds takes it and its overrun flag and lets
+/// every other interrupt in while it runs the ring and the emergency
+/// scanner (~250 cycles): a step is held up only by the entry and these
+/// few register reads, not by the whole handler. The source comes back on
+/// (with interrupts off) just before returning, so a byte that arrived
+/// after the last check is handled next.
 #[avr_device::interrupt(atmega2560)]
 fn USART0_RX() {
     // SAFETY: USART0's status and data registers are read only here; the
     // main loop only writes the transmit side; UCSR0B's receive-interrupt
     // bit is written only here, with interrupts off.
     let usart = unsafe { &*USART0::ptr() };
-    let overrun = usart.ucsr0a.read().dor0().bit_is_set();
-    let byte = usart.udr0.read().bits();
     usart.ucsr0b.modify(|_, w| w.rxcie0().clear_bit());
     // With the encoder loops the tick runs ≈ 0.5 ms with interrupts on: it
     // must not sit on top of this handler while its source is off (two
@@ -97,11 +95,23 @@ fn USART0_RX() {
     // back as it was (the main loop masks it too).
     #[cfg(feature = "encoders")]
     let tick = crate::clock::hold_tick();
-    // SAFETY: from here on only this handler's own source is off; the
-    // producer is touched by nothing that can interrupt it.
-    unsafe { avr_device::interrupt::enable() };
-    receive(byte, overrun);
-    avr_device::interrupt::disable();
+    // Every byte the UART holds, in one entry: at 250 000 baud a byte comes
+    // every 640 cycles, and bytes that piled up while other handlers ran
+    // on top of this one are taken without leaving and re-entering (the
+    // UART holds two; a third one arriving meanwhile is lost).
+    loop {
+        // The overrun flag belongs to the byte at the head: read it first.
+        let overrun = usart.ucsr0a.read().dor0().bit_is_set();
+        let byte = usart.udr0.read().bits();
+        // SAFETY: only this handler's own source is off; the producer is
+        // touched by nothing that can interrupt it.
+        unsafe { avr_device::interrupt::enable() };
+        receive(byte, overrun);
+        avr_device::interrupt::disable();
+        if usart.ucsr0a.read().rxc0().bit_is_clear() {
+            break;
+        }
+    }
     #[cfg(feature = "encoders")]
     crate::clock::release_tick(tick);
     usart.ucsr0b.modify(|_, w| w.rxcie0().set_bit());

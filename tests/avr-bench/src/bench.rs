@@ -625,19 +625,7 @@ pub fn segment_speed(elf: &Path, baud: u32, segments: usize, length_mm: f64) -> 
         board.record_isr_intervals(true);
     }
     if !board.run_until_host_done(timeout) {
-        if std::env::var_os("FERROSTEP_RX_TRACE").is_some() {
-            let mut worst: std::collections::BTreeMap<u32, (u64, usize)> = Default::default();
-            for (&(a, b), v) in board.isr_intervals().iter().zip(board.isr_vector_numbers()) {
-                let e = worst.entry(v).or_default();
-                e.0 = e.0.max(b - a);
-                e.1 += 1;
-            }
-            eprintln!("longest interrupt episode by vector (cycles, count): {worst:?}");
-            let mut locks = board.main_loop_interrupt_locks().to_vec();
-            locks.sort_by_key(|l| std::cmp::Reverse(l.1));
-            let named: Vec<_> = locks.iter().take(8).map(|&(pc, n)| (board.symbol_at(pc).map(crate::board::demangle).unwrap_or_default(), n)).collect();
-            eprintln!("longest main-loop interrupt locks: {named:?}");
-        }
+        rx_trace(&board);
         let host = board.host();
         let odd: Vec<_> = host.replies.iter().filter(|r| !r.text.starts_with("ok")).take(5).map(|r| r.text.clone()).collect();
         return Err(format!(
@@ -649,6 +637,7 @@ pub fn segment_speed(elf: &Path, baud: u32, segments: usize, length_mm: f64) -> 
         ));
     }
     board.run_for_ms(500.0);
+    rx_trace(&board);
     if let Some(error) = board.host().replies.iter().find(|r| r.text.starts_with("Error")) {
         return Err(format!("the firmware answered {:?}", error.text));
     }
@@ -721,6 +710,36 @@ pub fn segment_speed(elf: &Path, baud: u32, segments: usize, length_mm: f64) -> 
         }
     }
     Ok((ideal / seconds, lines_per_s, PhaseLog::of(&format!("{length_mm} mm segments"), &board)))
+}
+
+/// With FERROSTEP_RX_TRACE: the longest interrupt runs by vector, the
+/// longest main-loop locks, and what ran before each receive overrun.
+fn rx_trace(board: &Board) {
+    if std::env::var_os("FERROSTEP_RX_TRACE").is_some() {
+            let mut worst: std::collections::BTreeMap<u32, (u64, usize)> = Default::default();
+            for (&(a, b), v) in board.isr_intervals().iter().zip(board.isr_vector_numbers()) {
+                let e = worst.entry(v).or_default();
+                e.0 = e.0.max(b - a);
+                e.1 += 1;
+            }
+            eprintln!("longest interrupt episode by vector (cycles, count): {worst:?}");
+            let mut locks = board.main_loop_interrupt_locks().to_vec();
+            locks.sort_by_key(|l| std::cmp::Reverse(l.1));
+            let named: Vec<_> = locks.iter().take(8).map(|&(pc, n)| (board.symbol_at(pc).map(crate::board::demangle).unwrap_or_default(), n)).collect();
+            eprintln!("longest main-loop interrupt locks: {named:?}");
+            // The interrupts that ran in the 3 000 cycles before each overrun.
+            for &at in board.rx_overrun_cycles().iter().take(4) {
+                let around: Vec<_> = board
+                    .isr_intervals()
+                    .iter()
+                    .zip(board.isr_vector_numbers())
+                    .filter(|(&(a, b), _)| b + 3000 >= at && a <= at)
+                    .map(|(&(a, b), v)| format!("v{v} {}..{}", a as i64 - at as i64, b as i64 - at as i64))
+                    .collect();
+                let rx: Vec<_> = board.rx_log().iter().filter(|(c, _)| c + 3000 >= at && *c <= at).map(|(c, _)| *c as i64 - at as i64).collect();
+                eprintln!("overrun at {at}: interrupts {around:?}; bytes started {rx:?}");
+            }
+        }
 }
 
 /// Flash and static RAM from the ELF.

@@ -343,6 +343,8 @@ struct Shared {
     avr_frame_cycles: u64,
     hardware_rx_fifo: bool,
     rx_overruns: u64,
+    /// The cycle of each overrun.
+    rx_overrun_cycles: Vec<u64>,
     tx_log: Vec<(u64, u8, u64)>,
     /// Bytes injected into the receiver: (start-bit cycle, byte).
     rx_log: Vec<(u64, u8)>,
@@ -563,6 +565,7 @@ impl Board {
                 avr_frame_cycles: 0,
                 hardware_rx_fifo: config.hardware_rx_fifo,
                 rx_overruns: 0,
+                rx_overrun_cycles: Vec::new(),
                 tx_log: Vec::new(),
                 rx_log: Vec::new(),
                 record_isr_intervals: false,
@@ -1080,6 +1083,11 @@ impl Board {
         self.shared.rx_overruns
     }
 
+    /// When each receive overrun happened (cycles).
+    pub fn rx_overrun_cycles(&self) -> &[u64] {
+        &self.shared.rx_overrun_cycles
+    }
+
     /// The AVR's UART frame, cycles (from its UBRR0/U2X0/UCSR0C setting).
     pub fn avr_frame_cycles(&self) -> u64 {
         self.shared.avr_frame_cycles
@@ -1452,6 +1460,7 @@ impl Shared {
             // byte in the shift register is lost (DOR0).
             if unread >= 3 {
                 self.rx_overruns += 1;
+                self.rx_overrun_cycles.push((*self.avr).cycle);
                 *(*self.avr).data.add(usize::from(UCSR0A)) |= DOR0;
                 return;
             }
