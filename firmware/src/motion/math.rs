@@ -184,28 +184,112 @@ fn sin_cos_series(angle: f32) -> (f32, f32) {
 /// π/2 − (π/2 rounded to f32): keeps the reduction exact to a few ulp.
 const HALF_PI_LOW: f32 = -4.371_139e-8;
 
-/// Round half away from zero, saturating at the `i32` range (NaN → 0).
+/// Round half away from zero, saturating at the `i32` range (NaN → 0):
+/// `f32::round` then `as i32`, exactly (the tests compare them).
+///
+/// Integer work on the float's bits: `value ± 0.5` then a truncating cast
+/// was four soft-float calls on the AVR for every step count, and wrong
+/// for the float just below ½ (0.49999997 + 0.5 rounds to 1.0; C's
+/// `lroundf`, which Marlin uses, gives 0).
+#[inline(never)]
 pub fn round_to_i32(value: f32) -> i32 {
-    if value.is_nan() {
-        return 0;
-    }
-    let rounded = if value >= 0.0 { value + 0.5 } else { value - 0.5 };
-    // `as` saturates and truncates towards zero.
-    to_i32(rounded)
+    signed(value, magnitude(value, true))
 }
 
-/// `value as u32` (truncating, saturating, NaN → 0). Out of line: inline,
-/// each saturating conversion is four soft-float calls on the AVR.
+/// `value as u32` (truncating towards zero, saturating, NaN → 0), from the
+/// float's bits: the saturating cast was four soft-float calls on the AVR.
 #[inline(never)]
 pub fn to_u32(value: f32) -> u32 {
-    value as u32
+    if value.is_sign_negative() {
+        return 0;
+    }
+    match magnitude(value, false) {
+        Magnitude::Exact(m) => m,
+        Magnitude::Huge => u32::MAX,
+        Magnitude::NotANumber => 0,
+    }
 }
 
-/// `value as i32` (truncating, saturating, NaN → 0), out of line as
-/// [`to_u32`].
+/// `value as i32` (truncating, saturating, NaN → 0), as [`to_u32`].
 #[inline(never)]
 pub fn to_i32(value: f32) -> i32 {
-    value as i32
+    signed(value, magnitude(value, false))
+}
+
+/// |value| as an integer, truncated or rounded half away from zero.
+enum Magnitude {
+    Exact(u32),
+    /// 2³² or more (or infinite).
+    Huge,
+    NotANumber,
+}
+
+/// An f32 is `mantissa · 2^(exponent − 150)` with the implicit 24th bit:
+/// truncating is a right shift, rounding half away from zero adds half of
+/// the last bit kept first (exact: the sum fits in 25 bits).
+fn magnitude(value: f32, round: bool) -> Magnitude {
+    let bits = value.to_bits();
+    let exponent = (bits >> 23) as u8;
+    if exponent == 0xFF {
+        return if bits & 0x7F_FFFF != 0 { Magnitude::NotANumber } else { Magnitude::Huge };
+    }
+    // Below ½ everything (zero, subnormals) is 0; below 1 it truncates to 0.
+    if exponent < if round { 126 } else { 127 } {
+        return Magnitude::Exact(0);
+    }
+    let mantissa = bits & 0x7F_FFFF | 0x80_0000;
+    if exponent <= 150 {
+        let shift = 150 - exponent;
+        if round && shift > 0 {
+            // Keep one bit more, add it, drop it: + ½ of the last bit kept.
+            Magnitude::Exact((shift_right(mantissa, shift - 1) + 1) >> 1)
+        } else {
+            Magnitude::Exact(shift_right(mantissa, shift))
+        }
+    } else if exponent < 159 {
+        // (`exponent` 158: the mantissa shifted by 8, below 2³².)
+        Magnitude::Exact(mantissa << (exponent - 150))
+    } else {
+        Magnitude::Huge
+    }
+}
+
+/// `value >> shift` (shift ≤ 24): whole bytes first, which the AVR moves
+/// in one instruction each, then at most 7 single-bit shifts (a variable
+/// 32-bit shift is a loop of `shift` rounds of four instructions).
+fn shift_right(value: u32, shift: u8) -> u32 {
+    let (mut value, mut shift) = (value, shift);
+    if shift >= 16 {
+        value >>= 16;
+        shift -= 16;
+    }
+    if shift >= 8 {
+        value >>= 8;
+        shift -= 8;
+    }
+    value >> shift
+}
+
+/// Apply `value`'s sign to its magnitude, saturating at the `i32` range.
+fn signed(value: f32, magnitude: Magnitude) -> i32 {
+    let negative = value.is_sign_negative();
+    match magnitude {
+        Magnitude::Exact(m) if m <= i32::MAX as u32 => {
+            if negative {
+                -(m as i32)
+            } else {
+                m as i32
+            }
+        }
+        Magnitude::NotANumber => 0,
+        _ => {
+            if negative {
+                i32::MIN
+            } else {
+                i32::MAX
+            }
+        }
+    }
 }
 
 /// `value.clamp(min, max)` without its check that `min <= max`, whose
@@ -274,6 +358,34 @@ mod tests {
             assert_eq!((max(a, b), min(a, b)), (f32::max(a, b), f32::min(a, b)));
         }
         assert_eq!((max(f32::NAN, 0.0), min(f32::NAN, 1.0e6)), (0.0, 1.0e6));
+    }
+
+    /// Every float class, every exponent, the neighbours of every
+    /// half-integer near zero: the bit versions agree with `f32::round` and
+    /// Rust's saturating casts exactly.
+    #[test]
+    fn conversions_from_bits_agree_with_the_casts() {
+        let mut values = std::vec![0.0_f32, -0.0, 0.5, -0.5, 1.5, -2.5, 0.49999997, -0.49999997, 0.50000006,
+            8_388_607.5, 8_388_608.0, 16_777_217.0, 2_147_483_520.0, 2_147_483_648.0, -2_147_483_648.0,
+            4_294_967_040.0, 4_294_967_296.0, 1.0e20, -1.0e20, f32::MAX, f32::MIN, f32::INFINITY,
+            f32::NEG_INFINITY, f32::NAN, -f32::NAN, f32::MIN_POSITIVE, 1.0e-40];
+        for k in -40..40 {
+            let half = k as f32 + 0.5;
+            values.extend([half, f32::from_bits(half.to_bits() - 1), f32::from_bits(half.to_bits() + 1), k as f32]);
+        }
+        let mut x = 1.0e-3_f32;
+        while x < 1.0e11 {
+            values.extend([x, -x]);
+            x *= 1.37;
+        }
+        for v in values {
+            let rounded = if v.is_nan() { 0 } else { v.round() as i32 };
+            assert_eq!(round_to_i32(v), rounded, "round_to_i32({v:e})");
+            assert_eq!(to_i32(v), v as i32, "to_i32({v:e})");
+            assert_eq!(to_u32(v), v as u32, "to_u32({v:e})");
+        }
+        // The float just below ½ (which `v + 0.5` rounded up to 1).
+        assert_eq!(round_to_i32(0.49999997), 0);
     }
 
     #[test]

@@ -63,7 +63,7 @@ fn main() {
         );
     }
     println!("inclusive (with everything called; handlers count for what they interrupted):");
-    for (function, cycles) in board.inclusive_by_function().iter().take(40) {
+    for (function, cycles) in board.inclusive_by_function().iter().take(90) {
         println!("{cycles:>10} {:5.1} %  {function}", *cycles as f64 * 100.0 / total as f64);
     }
     // Who calls memcpy, how often (FERROSTEP_PROFILE_CALLS=memcpy): each
