@@ -481,6 +481,42 @@ mod tests {
         assert!((p.time_at(1000.0) - (0.05 + 0.15 + 0.05)).abs() < 1e-5);
     }
 
+    /// A long cruise: `fill` queues 10 ms segments until 25 ms are
+    /// queued, then nothing more until the interrupt takes some; the
+    /// rest of the block stays in the planner, where look-ahead can still
+    /// change it.
+    #[test]
+    fn fill_keeps_a_bounded_time_queued_and_refills_as_segments_go() {
+        use super::super::planner::{MotorLimits, PlannerMove};
+        use super::super::stepper::{StepQueues, MOTORS};
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(Default::default());
+        let mut planner = Planner::new();
+        let limits = MotorLimits { max_rate: [100_000.0; MOTORS], max_accel: [1.0e6; MOTORS] };
+        // 100 mm at 50 mm/s, 100 steps/mm: 5 000 events a second.
+        let steps = [10_000, 0, 0, 0];
+        let motion = PlannerMove { steps, millimetres: 100.0, unit: [1.0, 0.0, 0.0, 0.0], speed: 50.0, acceleration: 1.0e6, watch: 0, watch_release: false };
+        planner.push(&motion, &limits).unwrap();
+        let mut prep = Prep::new();
+        let mut calls = 0;
+        while prep.fill(&mut planner, &mut feeder) > 0 {
+            calls += 1;
+            assert!(calls < 20);
+        }
+        // The ramp's short segments, then 10 ms cruise segments: 25 ms
+        // (to within the last segment) and not a whole queue's worth.
+        let queued = feeder.queued_segments();
+        let ms = prep.queued_time as f32 * QUEUED_UNIT_TICKS / 2000.0;
+        assert!((25.0..35.0).contains(&ms) && queued >= 2 && queued < 15, "{queued} segments, {ms} ms");
+        assert_eq!(prep.fill(&mut planner, &mut feeder), 0);
+        // The interrupt runs through the first segment: room for more.
+        while feeder.queued_segments() == queued {
+            generator.on_timer();
+        }
+        assert!(prep.fill(&mut planner, &mut feeder) >= 1);
+        assert!(planner.current().is_some_and(|block| block.millimetres > 90.0));
+    }
+
     #[test]
     fn segments_cover_the_block_exactly() {
         let p = Profile::new(3000.0, 700.0, 8000.0, 1000.0, 200_000.0, 1.0 / 200_000.0, 1.0 / 8000.0);

@@ -732,6 +732,25 @@ fn limit_switch_outside_homing_stops_and_requires_rehoming() {
     assert_eq!(rig.errors, [MotionError::NotHomed]);
 }
 
+/// `line_to` checks and stores a move; the next `poll` plans it. Until
+/// then `ready()` holds back the next command, so an acknowledged move is
+/// never lost or overtaken; a target the check refuses is never stored.
+#[test]
+fn a_move_is_planned_by_the_next_poll_and_holds_back_the_next_command() {
+    let queues: &'static mut StepQueues = Box::leak(Box::new(StepQueues::new()));
+    let config = cartesian();
+    let (feeder, _generator) = queues.split(config.stepper());
+    let mut motion = Motion::new(config, feeder);
+    assert_eq!(motion.line_to(&[um(10.0), 0, 0, 0], um(50.0)), Ok(()));
+    assert!(!motion.ready() && motion.planner().is_empty() && !motion.is_idle());
+    assert_eq!(motion.line_to(&[um(20.0), 0, 0, 0], um(50.0)), Err(MotionError::Busy));
+    motion.poll(&StepperStatus::default(), 0);
+    assert!(motion.ready());
+    assert_eq!(motion.motor_steps(), [1000, 0, 0, 0]);
+    assert_eq!(motion.position_um(), [um(10.0), 0, 0, 0]);
+    assert_eq!(motion.line_to(&[um(20.0), 0, 0, 0], um(50.0)), Ok(()));
+}
+
 #[test]
 fn endstop_layout_conversion() {
     assert_eq!(pairs_to_endstop_bits(0b00_0001), 0b0000_0001);
