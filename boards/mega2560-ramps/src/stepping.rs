@@ -191,55 +191,147 @@ fn endstops(dp: &Peripherals) -> u8 {
 #[cfg(feature = "motion")]
 #[avr_device::interrupt(atmega2560)]
 fn TIMER1_COMPA() {
-    // SAFETY: interrupts are off in this handler, so it has the generator
-    // and DIR_LEVELS to itself; the main loop takes them only in critical
-    // sections. The port writes below touch STEP/DIR bits only, and the
-    // main loop writes these ports with interrupts off.
+    // SAFETY (for the accesses to GENERATOR and DIR_LEVELS below):
+    // interrupts are off in this handler, so it has them to itself; the
+    // main loop takes them only in critical sections. No reference to the
+    // generator is held across a `cold_call`, which takes its own.
     let dp = unsafe { Peripherals::steal() };
-    let Some(generator) = (unsafe { (*addr_of_mut!(GENERATOR)).as_mut() }) else { return };
-    if generator.endstop_mask() != 0 {
-        generator.on_endstops(endstops(&dp));
+    if unsafe { (*addr_of_mut!(GENERATOR)).is_none() } {
+        return;
+    }
+    // SAFETY: `Some` (just checked; only `init` writes GENERATOR).
+    let generator = || unsafe { (*addr_of_mut!(GENERATOR)).as_mut().unwrap_unchecked() };
+    if generator().endstop_mask() != 0 {
+        cold_call(COLD_ENDSTOPS);
     }
     // The pins first, the computation of the next event after: the edges
     // keep their scheduled times whatever that computation costs.
-    let (steps, dir) = generator.pins_now();
+    let (steps, dir) = generator().pins_now();
     let dir_levels = unsafe { &mut *addr_of_mut!(DIR_LEVELS) };
     if dir != *dir_levels {
         write_dirs(&dp, dir);
         *dir_levels = dir;
     }
-    let (f_steps, l_steps, a_steps) = (steps & 1 | (steps & 2) << 5, (steps & 4) << 1, (steps & 8) << 1);
-    // STEP high: X PF0, Y PF6, Z PL3, E0 PA4; only the ports that step
-    // (each read-modify-write costs 5–7 cycles, PORTL more).
+    step_high(&dp, steps);
+    let mut ticks = 0;
+    if !generator().ordinary_ready() {
+        ticks = cold_call(COLD_GENERAL);
+    }
+    if ticks == 0 {
+        ticks = generator().ordinary_event();
+    }
+    schedule_next(&dp.TC1, ticks);
+    // The computation and the scheduling took well over the pulse width;
+    // the delay only guarantees it.
+    if STEP_PULSE_MIN_EXTRA_CYCLES > 0 {
+        avr_device::asm::delay_cycles(STEP_PULSE_MIN_EXTRA_CYCLES);
+    }
+    step_low(&dp);
+}
+
+#[cfg(feature = "motion")]
+/// [`cold_path`]: read the endstops and let the generator act on them.
+const COLD_ENDSTOPS: u8 = 0;
+#[cfg(feature = "motion")]
+/// [`cold_path`]: the generator's general path (long wait, new block, end
+/// of the queue, ...).
+const COLD_GENERAL: u8 = 1;
+
+// The step interrupt's way to its cold paths. The compiler saves, in the
+// prologue of an interrupt handler that contains a call, every register a
+// call may clobber, on every run, even when the call is on a path that
+// rarely runs. So the handler makes no call the compiler sees: it calls
+// this routine from inline assembly (`cold_call`), and the routine saves
+// the call-clobbered registers of avr-gcc's convention (which LLVM's AVR
+// back end follows) other than r24/r25, which carry the argument and the
+// result: r18–r23, r26, r27, r30, r31. r0 is LLVM's scratch register
+// (never live across an instruction sequence it did not emit) and r1,
+// the zero register, stays zero across any call.
+#[cfg(feature = "motion")]
+core::arch::global_asm!(
+    ".section .text.ferrostep_step_cold,\"ax\",@progbits",
+    "ferrostep_step_cold:",
+    "push r18", "push r19", "push r20", "push r21", "push r22",
+    "push r23", "push r26", "push r27", "push r30", "push r31",
+    "call {f}",
+    "pop r31", "pop r30", "pop r27", "pop r26", "pop r23",
+    "pop r22", "pop r21", "pop r20", "pop r19", "pop r18",
+    "ret",
+    f = sym cold_path,
+);
+
+#[cfg(feature = "motion")]
+/// Runs [`cold_path`]`(what)` from the step interrupt without the
+/// compiler's register saves (see `ferrostep_step_cold` above).
+#[inline(always)]
+fn cold_call(what: u8) -> u16 {
+    let (lo, hi): (u8, u8);
+    // SAFETY: `ferrostep_step_cold` preserves every register but r24/r25
+    // (declared here as the argument and outputs); `cold_path` is an
+    // ordinary `extern "C"` function. The stack has room for the routine's
+    // ten bytes and the call as for any call. Memory is not declared
+    // untouched, so the compiler reloads the generator afterwards.
+    unsafe {
+        core::arch::asm!(
+            "call ferrostep_step_cold",
+            inout("r24") what => lo,
+            out("r25") hi,
+        );
+    }
+    u16::from(hi) << 8 | u16::from(lo)
+}
+
+#[cfg(feature = "motion")]
+/// The step interrupt's rare cases (interrupts off; the handler holds no
+/// reference to the generator across the call): [`COLD_ENDSTOPS`], or
+/// [`COLD_GENERAL`]: returns the ticks to the next compare, or 0 when the
+/// running segment's next event is still to be computed (by the handler,
+/// inline).
+extern "C" fn cold_path(what: u8) -> u16 {
+    // SAFETY: see above.
+    let Some(generator) = (unsafe { (*addr_of_mut!(GENERATOR)).as_mut() }) else { return IDLE_TICKS };
+    if what == COLD_ENDSTOPS {
+        // SAFETY: only the pin registers are read.
+        generator.on_endstops(endstops(&unsafe { Peripherals::steal() }));
+        return 0;
+    }
+    generator.on_timer_general()
+}
+
+#[cfg(feature = "motion")]
+const IDLE_TICKS: u16 = firmware::motion::stepper::IDLE_POLL_TICKS;
+
+#[cfg(feature = "motion")]
+/// STEP high for the motors in `steps`: X PF0, Y PF6, Z PL3, E0 PA4. PORTF
+/// and PORTA are in I/O space: one `sbi` each; PORTL is not (load, or,
+/// store).
+#[inline(always)]
+fn step_high(dp: &Peripherals, steps: u8) {
     // SAFETY: any bit pattern is valid for these port registers.
-    if f_steps != 0 {
-        dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | f_steps) });
+    if steps & 1 != 0 {
+        dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 0) });
     }
-    if l_steps != 0 {
-        dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() | l_steps) });
+    if steps & 2 != 0 {
+        dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 6) });
     }
-    if a_steps != 0 {
-        dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() | a_steps) });
+    if steps & 4 != 0 {
+        dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 3) });
     }
-    let action = generator.on_timer();
-    schedule_next(&dp.TC1, action.next_interval_ticks);
-    if steps != 0 {
-        // `on_timer` and the scheduling took well over the pulse width;
-        // the delay only guarantees it.
-        if STEP_PULSE_MIN_EXTRA_CYCLES > 0 {
-            avr_device::asm::delay_cycles(STEP_PULSE_MIN_EXTRA_CYCLES);
-        }
-        // SAFETY: as above.
-        if f_steps != 0 {
-            dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !f_steps) });
-        }
-        if l_steps != 0 {
-            dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() & !l_steps) });
-        }
-        if a_steps != 0 {
-            dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() & !a_steps) });
-        }
+    if steps & 8 != 0 {
+        dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 4) });
     }
+}
+
+#[cfg(feature = "motion")]
+/// Every STEP pin low (those already low stay so): no register holds the
+/// step mask across the computation.
+#[inline(always)]
+fn step_low(dp: &Peripherals) {
+    // SAFETY: any bit pattern is valid for these port registers.
+    dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 0)) });
+    dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 6)) });
+    dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 4)) });
+    dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 3)) });
 }
 
 #[cfg(feature = "motion")]

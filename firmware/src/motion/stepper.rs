@@ -412,14 +412,60 @@ impl<'a> StepGenerator<'a> {
     /// the next one.
     #[inline(always)]
     pub fn on_timer(&mut self) -> TimerAction {
+        let (step_mask, dir_mask) = self.pins_now();
+        let mut next_interval_ticks = if self.ordinary_ready() { 0 } else { self.on_timer_general() };
+        if next_interval_ticks == 0 {
+            next_interval_ticks = self.ordinary_event();
+        }
+        TimerAction { step_mask, dir_mask, next_interval_ticks }
+    }
+
+    /// The next call is an ordinary event: no long wait under way and
+    /// events left in the running segment, or the next queued segment
+    /// continues the running block and has just been taken (the common
+    /// segment change, done here so that it stays cheap). Then
+    /// [`Self::ordinary_event`] is all `on_timer` does after the pins;
+    /// otherwise [`Self::on_timer_general`]. A board whose interrupt pays
+    /// for every register a call could clobber (the AVR) calls this inline
+    /// and reaches `on_timer_general` through a call that saves registers
+    /// on that path alone.
+    #[inline(always)]
+    pub fn ordinary_ready(&mut self) -> bool {
+        !self.long_waiting && (self.events_left != 0 || self.take_next_segment_of_block())
+    }
+
+    /// STEP mask of the pending event when [`Self::ordinary_ready`]
+    /// (`pins_now().0` without the long-wait test).
+    #[inline(always)]
+    pub fn ordinary_step_mask(&self) -> u8 {
+        self.pending_mask & !self.stopped
+    }
+
+    /// What `on_timer` does after the pins when [`Self::ordinary_ready`]
+    /// is false: a piece of a long wait, or a segment change that the
+    /// ordinary path does not cover (new block, direction change, end of
+    /// the queue, discarding, fault). Returns the ticks to the next call,
+    /// or 0: "events are left in the running segment: compute the next
+    /// with [`Self::ordinary_event`]" (every wait this returns is ≥ 1).
+    /// Out of line: the per-event path keeps few registers.
+    #[inline(never)]
+    pub fn on_timer_general(&mut self) -> u16 {
         if self.long_waiting {
             return self.wait_longer();
         }
-        let step_mask = self.pending_mask & !self.stopped;
-        let dir_mask = self.pending_dir ^ self.config.dir_invert;
-        let next_interval_ticks =
-            if self.events_left != 0 || self.take_next_segment_of_block() { self.next_event() } else { self.next_segment() };
-        TimerAction { step_mask, dir_mask, next_interval_ticks }
+        if self.events_left != 0 {
+            return 0;
+        }
+        self.next_segment()
+    }
+
+    /// The ordinary event: one more event of the running segment (call
+    /// only when [`Self::ordinary_ready`], or after
+    /// [`Self::on_timer_general`] returned 0). Returns the ticks to the
+    /// next call.
+    #[inline(always)]
+    pub fn ordinary_event(&mut self) -> u16 {
+        self.next_event()
     }
 
     /// The hot path: one more event of the running segment. Always
@@ -474,24 +520,20 @@ impl<'a> StepGenerator<'a> {
     /// A wait too long for 16 bits, or the lead of a direction change: an
     /// action without steps that presents the coming event's directions.
     #[cold]
-    #[inline(never)]
-    fn wait_longer(&mut self) -> TimerAction {
+    fn wait_longer(&mut self) -> u16 {
         let piece = if self.long_wait > 0xFFFF { LONG_WAIT_PIECE } else { self.long_wait };
         self.set_long_wait(self.long_wait - piece);
-        TimerAction { step_mask: 0, dir_mask: self.pending_dir ^ self.config.dir_invert, next_interval_ticks: piece as u16 }
+        piece as u16
     }
 
     /// The common segment change, kept cheap: the next segment continues
     /// the running block (no new block, no direction change, no fault, not
     /// discarding). Copies its three fields straight from the queue slot
     /// and frees it; `false` leaves everything else to
-    /// [`Self::next_segment`]. Out of line: inlined into the step
-    /// interrupt it made every event 9 cycles dearer (more registers
-    /// saved) and the change no cheaper. On the ATmega2560 the change costs
-    /// ~150 cycles on top of the ordinary event's ~335; the general path
-    /// (dequeue into a stack copy, block start, direction lead) took up to
-    /// ~800.
-    #[inline(never)]
+    /// [`Self::next_segment`]. Inline in the ordinary path (see
+    /// [`Self::ordinary_ready`]): behind a call it would cost the AVR's
+    /// interrupt its register saves on every event.
+    #[inline(always)]
     fn take_next_segment_of_block(&mut self) -> bool {
         if !self.in_block || self.discarding || self.fault.is_some() {
             return false;
