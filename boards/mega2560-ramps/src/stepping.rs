@@ -160,14 +160,14 @@ pub fn correction_steps(dp: &Peripherals, steps: u8, positive: u8) {
         let levels = unsafe { *addr_of_mut!(DIR_LEVELS) };
         let wanted = (levels & !steps) | ((positive ^ config.dir_invert) & steps);
         let setup_cycles = u32::from(config.dir_setup_ticks.max(2)) * 8;
-        write_dirs(dp, wanted);
+        write_dirs(wanted);
         avr_device::asm::delay_cycles(setup_cycles);
         let f_steps = steps & 1 | (steps & 2) << 5;
         dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | f_steps) });
         avr_device::asm::delay_cycles(32);
         dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !f_steps) });
         avr_device::asm::delay_cycles(setup_cycles);
-        write_dirs(dp, levels);
+        write_dirs(levels);
     });
 }
 
@@ -195,7 +195,6 @@ fn TIMER1_COMPA() {
     // interrupts are off in this handler, so it has them to itself; the
     // main loop takes them only in critical sections. No reference to the
     // generator is held across a `cold_call`, which takes its own.
-    let dp = unsafe { Peripherals::steal() };
     if unsafe { (*addr_of_mut!(GENERATOR)).is_none() } {
         return;
     }
@@ -209,10 +208,10 @@ fn TIMER1_COMPA() {
     let (steps, dir) = generator().pins_now();
     let dir_levels = unsafe { &mut *addr_of_mut!(DIR_LEVELS) };
     if dir != *dir_levels {
-        write_dirs(&dp, dir);
+        write_dirs(dir);
         *dir_levels = dir;
     }
-    step_high(&dp, steps);
+    step_high(steps);
     let mut ticks = 0;
     if !generator().ordinary_ready() {
         ticks = cold_call(COLD_GENERAL);
@@ -220,13 +219,14 @@ fn TIMER1_COMPA() {
     if ticks == 0 {
         ticks = generator().ordinary_event();
     }
-    schedule_next(&dp.TC1, ticks);
+    // SAFETY: the register block of Timer1, at its fixed address.
+    schedule_next(unsafe { &*TC1::ptr() }, ticks);
     // The computation and the scheduling took well over the pulse width;
     // the delay only guarantees it.
     if STEP_PULSE_MIN_EXTRA_CYCLES > 0 {
         avr_device::asm::delay_cycles(STEP_PULSE_MIN_EXTRA_CYCLES);
     }
-    step_low(&dp);
+    step_low();
 }
 
 #[cfg(feature = "motion")]
@@ -306,19 +306,19 @@ const IDLE_TICKS: u16 = firmware::motion::stepper::IDLE_POLL_TICKS;
 /// and PORTA are in I/O space: one `sbi` each; PORTL is not (load, or,
 /// store).
 #[inline(always)]
-fn step_high(dp: &Peripherals, steps: u8) {
+fn step_high(steps: u8) {
     // SAFETY: any bit pattern is valid for these port registers.
     if steps & 1 != 0 {
-        dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 0) });
+        portf().portf.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 0) });
     }
     if steps & 2 != 0 {
-        dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 6) });
+        portf().portf.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 6) });
     }
     if steps & 4 != 0 {
-        dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 3) });
+        portl().portl.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 3) });
     }
     if steps & 8 != 0 {
-        dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 4) });
+        porta().porta.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 4) });
     }
 }
 
@@ -326,12 +326,12 @@ fn step_high(dp: &Peripherals, steps: u8) {
 /// Every STEP pin low (those already low stay so): no register holds the
 /// step mask across the computation.
 #[inline(always)]
-fn step_low(dp: &Peripherals) {
+fn step_low() {
     // SAFETY: any bit pattern is valid for these port registers.
-    dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 0)) });
-    dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 6)) });
-    dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 4)) });
-    dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 3)) });
+    portf().portf.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 0)) });
+    portf().portf.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 6)) });
+    porta().porta.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 4)) });
+    portl().portl.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 3)) });
 }
 
 #[cfg(feature = "motion")]
@@ -339,7 +339,7 @@ fn step_low(dp: &Peripherals) {
 /// Returns the counter as read (the time the STEP pins went high, within a
 /// few cycles).
 #[inline(always)]
-fn schedule_next(timer: &TC1, interval: u16) -> u16 {
+fn schedule_next(timer: &avr_device::atmega2560::tc1::RegisterBlock, interval: u16) -> u16 {
     let now = timer.tcnt1.read().bits();
     let mut next = timer.ocr1a.read().bits().wrapping_add(interval);
     if (next.wrapping_sub(now) as i16) < MIN_AHEAD_TICKS as i16 {
@@ -350,14 +350,32 @@ fn schedule_next(timer: &TC1, interval: u16) -> u16 {
 }
 
 #[cfg(feature = "motion")]
+/// The port registers the step interrupt writes, at their fixed addresses
+/// (no `Peripherals::steal`, which costs the interrupt a store).
+fn portf() -> &'static avr_device::atmega2560::portf::RegisterBlock {
+    // SAFETY: a fixed MMIO address; writers keep to the rules above.
+    unsafe { &*avr_device::atmega2560::PORTF::ptr() }
+}
+#[cfg(feature = "motion")]
+fn porta() -> &'static avr_device::atmega2560::porta::RegisterBlock {
+    // SAFETY: as for `portf`.
+    unsafe { &*avr_device::atmega2560::PORTA::ptr() }
+}
+#[cfg(feature = "motion")]
+fn portl() -> &'static avr_device::atmega2560::portl::RegisterBlock {
+    // SAFETY: as for `portf`.
+    unsafe { &*avr_device::atmega2560::PORTL::ptr() }
+}
+
+#[cfg(feature = "motion")]
 /// DIR levels: X PF1, Y PF7, Z PL1, E0 PA6.
 #[inline(always)]
-fn write_dirs(dp: &Peripherals, dir: u8) {
+fn write_dirs(dir: u8) {
     let f = (dir & 1) << 1 | (dir & 2) << 6;
     let l = (dir & 4) >> 1;
     let a = (dir & 8) << 3;
     // SAFETY: any bit pattern is valid for these port registers.
-    dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !0b1000_0010 | f) });
-    dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() & !0b0000_0010 | l) });
-    dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() & !0b0100_0000 | a) });
+    portf().portf.modify(|r, w| unsafe { w.bits(r.bits() & !0b1000_0010 | f) });
+    portl().portl.modify(|r, w| unsafe { w.bits(r.bits() & !0b0000_0010 | l) });
+    porta().porta.modify(|r, w| unsafe { w.bits(r.bits() & !0b0100_0000 | a) });
 }

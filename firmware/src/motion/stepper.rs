@@ -496,7 +496,7 @@ impl<'a> StepGenerator<'a> {
             // One motor, or a 45° diagonal: nothing to decide.
             return self.always;
         }
-        self.always | self.minor_steps()
+        self.minor_steps() | self.always
     }
 
     /// Bresenham for the motors that step on some events only.
