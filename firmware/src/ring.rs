@@ -206,6 +206,24 @@ impl<T: Copy, const N: usize> Consumer<'_, T, N> {
         }
     }
 
+    /// Let `take` look at the oldest item in place; if it returns true,
+    /// free the slot. `false` if the ring is empty or `take` declined. One
+    /// read of the indices (`front` then `release` read them twice).
+    #[inline(always)]
+    pub fn take_front_if(&mut self, take: impl FnOnce(&T) -> bool) -> bool {
+        let head = self.ring.head();
+        if head == self.ring.tail() {
+            return false;
+        }
+        // SAFETY: as in `front`: the slot is published and stays ours until
+        // `head` moves past it, below.
+        if !take(unsafe { (*self.ring.slot(head)).assume_init_ref() }) {
+            return false;
+        }
+        self.ring.head.store(head.wrapping_add(1) & Ring::<T, N>::MASK);
+        true
+    }
+
     /// Take the oldest item.
     pub fn dequeue(&mut self) -> Option<T> {
         let head = self.ring.head();
@@ -261,6 +279,24 @@ mod tests {
             next_out += 1;
         }
         assert_eq!(next_out, 10_000);
+    }
+
+    #[test]
+    fn take_front_if_frees_only_what_it_takes() {
+        let mut ring = Ring::<u8, 4>::new();
+        let (mut producer, mut consumer) = ring.split();
+        assert!(!consumer.take_front_if(|_| true));
+        assert_eq!(producer.enqueue(7), Ok(()));
+        assert_eq!(producer.enqueue(8), Ok(()));
+        let mut seen = 0;
+        assert!(!consumer.take_front_if(|&v| {
+            seen = v;
+            false
+        }));
+        assert_eq!(seen, 7);
+        assert!(consumer.take_front_if(|&v| v == 7));
+        assert_eq!(consumer.dequeue(), Some(8));
+        assert_eq!(consumer.dequeue(), None);
     }
 
     #[test]

@@ -264,6 +264,10 @@ pub struct StepGenerator<'a> {
     endstops_to_read: u8,
     in_block: bool,
     discarding: bool,
+    /// `in_block && !discarding && fault.is_none()`, kept as one byte for
+    /// the ordinary segment change ([`Self::refresh_continuable`] after
+    /// every change of the three).
+    continuable: bool,
 
     // The event computed ahead, fired by the next call.
     pending_mask: u8,
@@ -366,6 +370,7 @@ impl<'a> StepGenerator<'a> {
             endstops_to_read: 0,
             in_block: false,
             discarding: false,
+            continuable: false,
             pending_mask: 0,
             pending_dir: 0,
             long_wait: 0,
@@ -538,19 +543,20 @@ impl<'a> StepGenerator<'a> {
     /// interrupt its register saves on every event.
     #[inline(always)]
     fn take_next_segment_of_block(&mut self) -> bool {
-        if !self.in_block || self.discarding || self.fault.is_some() {
+        debug_assert_eq!(self.continuable, self.in_block && !self.discarding && self.fault.is_none());
+        if !self.continuable {
             return false;
         }
-        let Some(segment) = self.segments.front() else { return false };
-        if segment.starts_block || segment.events == 0 {
-            return false;
-        }
-        self.interval = segment.interval;
-        self.add = segment.add;
-        self.events_left = segment.events;
-        self.events_started = self.events_started.wrapping_add(segment.events);
-        self.segments.release();
-        true
+        self.segments.take_front_if(|segment| {
+            if segment.starts_block || segment.events == 0 {
+                return false;
+            }
+            self.interval = segment.interval;
+            self.add = segment.add;
+            self.events_left = segment.events;
+            self.events_started = self.events_started.wrapping_add(segment.events);
+            true
+        })
     }
 
     fn set_long_wait(&mut self, ticks: u32) {
@@ -586,6 +592,7 @@ impl<'a> StepGenerator<'a> {
                     // The feeder pushes the block first; if it is missing
                     // the queues are corrupt: stop rather than guess.
                     self.fault = Some(StepFault::Stopped);
+                    self.refresh_continuable();
                     return IDLE_POLL_TICKS;
                 };
                 self.start_block(&block);
@@ -638,6 +645,7 @@ impl<'a> StepGenerator<'a> {
     fn start_block(&mut self, block: &StepBlock) {
         self.in_block = true;
         self.discarding = false;
+        self.refresh_continuable();
         self.events = block.events;
         self.events_started = 0;
         self.watch = block.watch;
@@ -673,11 +681,16 @@ impl<'a> StepGenerator<'a> {
             self.origin = self.axis_progress().positions();
         }
         self.in_block = false;
+        self.refresh_continuable();
         self.endstops_to_read = 0;
         self.moving = 0;
         self.always = 0;
         self.minor = 0;
         self.blocks_done = self.blocks_done.wrapping_add(1);
+    }
+
+    fn refresh_continuable(&mut self) {
+        self.continuable = self.in_block && !self.discarding && self.fault.is_none();
     }
 
     /// Events of the running block done so far (the pending one counted).
@@ -755,6 +768,7 @@ impl<'a> StepGenerator<'a> {
         self.pending_mask = 0;
         self.set_long_wait(0);
         self.discarding = true;
+        self.refresh_continuable();
         self.events_started = self.events;
         while let Some(segment) = self.segments.front() {
             if segment.starts_block {
@@ -770,6 +784,7 @@ impl<'a> StepGenerator<'a> {
     /// [`Self::clear_fault`]. Positions are lost: the main loop re-homes.
     pub fn halt(&mut self, fault: StepFault) {
         self.fault = Some(fault);
+        self.refresh_continuable();
         self.events_left = 0;
         self.pending_mask = 0;
         self.set_long_wait(0);
@@ -790,6 +805,7 @@ impl<'a> StepGenerator<'a> {
         self.drain();
         self.fault = None;
         self.discarding = false;
+        self.refresh_continuable();
     }
 
     /// A copy of what the main loop needs (cheap: no arithmetic). A board
