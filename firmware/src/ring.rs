@@ -82,12 +82,16 @@ impl Index {
     }
 }
 
+/// The indices come first (`repr(C)`): the AVR reaches them and the slots
+/// from one pointer register (the step interrupt's segment change kept a
+/// second pointer, and saved it, when they came after 176 bytes of slots).
+#[repr(C)]
 pub struct Ring<T, const N: usize> {
-    slots: [UnsafeCell<MaybeUninit<T>>; N],
     /// Next slot the consumer reads; written by the consumer only.
     head: Index,
     /// Next slot the producer writes; written by the producer only.
     tail: Index,
+    slots: [UnsafeCell<MaybeUninit<T>>; N],
 }
 
 // SAFETY: each index is written by one end only and published with
