@@ -551,10 +551,11 @@ impl<'a> StepGenerator<'a> {
             if segment.starts_block || segment.events == 0 {
                 return false;
             }
-            self.interval = segment.interval;
-            self.add = segment.add;
+            // Events first: then no register holds them during the copy.
             self.events_left = segment.events;
             self.events_started = self.events_started.wrapping_add(segment.events);
+            self.interval = segment.interval;
+            self.add = segment.add;
             true
         })
     }
