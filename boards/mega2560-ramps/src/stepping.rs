@@ -11,11 +11,45 @@
 //!
 //! Per interrupt, in order: endstops (only when the generator watches any),
 //! DIR pins (only when they change) and STEP pins high from
-//! `pins_now()` (the event computed last time), then `on_timer()` computes
-//! the next event, the next compare is set, and the STEP pins go low. The
+//! `pins_now()` (the event computed last time), then the next event is
+//! computed, the next compare is set, and every STEP pin goes low. The
 //! generator presents a direction change in an action without steps and
 //! waits its set-up time before the next step, so DIR is always settled
 //! before STEP rises.
+//!
+//! # What an event costs, and why the handler looks as it does
+//!
+//! Measured on simavr (the bench's `step_trials`, one stepper): an
+//! ordinary event, entry to `reti`, takes 235 cycles (335 before this
+//! layout), one that also takes the next segment of the running block
+//! ≈ 340 (≈ 480). At 50 000 steps/s an interval is 320 cycles.
+//!
+//! - The compiler saves, in the prologue of an interrupt handler that
+//!   contains a call, every register a call may clobber, on every run. So
+//!   the handler makes no call it can see: everything an ordinary event
+//!   needs is inline ([`StepGenerator::ordinary_ready`], which also takes
+//!   the next segment of the running block, and
+//!   [`StepGenerator::ordinary_event`]), and the rare work (reading the
+//!   endstops while homing or with hard limits on, a piece of a long wait,
+//!   a new block, a direction change's lead, the end of the queue) is in
+//!   [`cold_path`], reached through `ferrostep_step_cold`, which saves and
+//!   restores the call-clobbered registers itself, on that path only. The
+//!   prologue now saves the 12 registers the inline code uses (r18–r27,
+//!   r30, r31) instead of 24 and has no stack frame.
+//! - STEP high on PORTF/PORTA (I/O space) is a skip-if-clear and an `sbi`
+//!   per pin; STEP low clears all four pins unconditionally, so the mask
+//!   is not held in a register across the computation.
+//! - The port and timer registers are reached at their fixed addresses
+//!   (`Peripherals::steal` stored a flag on every event).
+//! - The generator counts only `events_left` per event (the events done
+//!   are derived from it), does its Bresenham before the wait sum (nothing
+//!   live across the loop), and tests one byte to see whether the running
+//!   block may continue with the queue's next segment.
+//!
+//! Tried and dropped (measured): the Bresenham unrolled with fixed
+//! addresses (+440 B, no faster), its state as one array of records (more
+//! registers), the wait sum byte by byte (+21 cycles), the long-wait
+//! branch out of line (no faster, +30 B).
 //!
 //! | motor | STEP | DIR |
 //! |---|---|---|
@@ -43,10 +77,12 @@ use firmware::motion::{StepFault, StepFeeder, StepGenerator, StepQueues, Stepper
 use firmware::motion::StepperStatus;
 
 #[cfg(feature = "motion")]
-/// Extra CPU cycles (16 MHz) the STEP pins stay high after `on_timer` and
-/// the compare update, which alone take ≥ 150 cycles (≈ 10 µs, measured by
-/// the bench's `min_step_pulse_cycles`): the A4988 needs 1 µs, the DRV8825
-/// 1.9 µs, a TB6600 or CL86T 5 µs; raise this for slower drivers.
+/// Extra CPU cycles (16 MHz) the STEP pins stay high after the next
+/// event's computation and the compare update, which alone take ≥ 120
+/// cycles (7.5 µs; the bench's `min_step_pulse_cycles`, printed by the
+/// `step_trials` example): the A4988 needs
+/// 1 µs, the DRV8825 1.9 µs, a TB6600 or CL86T 5 µs; raise this for slower
+/// drivers.
 pub const STEP_PULSE_MIN_EXTRA_CYCLES: u32 = 0;
 
 #[cfg(feature = "motion")]

@@ -24,12 +24,13 @@ fn main() {
         board.record_isr_intervals(false);
         board.record_isr_intervals(true);
         let trial = bench::step_trial(&mut board, axes, rate).unwrap_or_else(|e| panic!("{e}"));
-        for (axis, verdict) in ["X", "Y", "Z"].iter().zip(&trial.verdicts) {
+        for (index, (axis, verdict)) in ["X", "Y", "Z"].iter().zip(&trial.verdicts).enumerate() {
             println!(
-                "{rate:>8.0} {axis}: {} steps, cruise {:.1} steps/s, worst lateness {:.1} % of the interval: {}",
+                "{rate:>8.0} {axis}: {} steps, cruise {:.1} steps/s, worst lateness {:.1} % of the interval, shortest STEP pulse {} cycles: {}",
                 verdict.steps,
                 verdict.cruise_hz,
                 verdict.worst_late * 100.0,
+                board.min_step_pulse_cycles(index).map_or("-".into(), |c| c.to_string()),
                 verdict.failure.as_deref().unwrap_or("on time")
             );
         }
