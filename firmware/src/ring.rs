@@ -123,8 +123,21 @@ impl<T: Copy, const N: usize> Ring<T, N> {
         (Producer { ring }, Consumer { ring })
     }
 
+    #[inline(always)]
     fn slot(&self, index: u8) -> *mut MaybeUninit<T> {
-        self.slots[usize::from(index & Self::MASK)].get()
+        let index = index & Self::MASK;
+        if N * size_of::<T>() <= 256 {
+            // The byte offset fits a byte: one 8-bit multiply on the AVR
+            // instead of a 16-bit one (the step interrupt's segment change
+            // spent ~14 cycles on it).
+            let offset = index.wrapping_mul(size_of::<T>() as u8);
+            // SAFETY: index < N, so the offset lies inside `slots`, at the
+            // start of slot `index` (the slots are contiguous, no padding
+            // between array elements).
+            UnsafeCell::raw_get(unsafe { self.slots.as_ptr().cast::<u8>().add(usize::from(offset)) }.cast())
+        } else {
+            self.slots[usize::from(index)].get()
+        }
     }
 
     #[inline(always)]

@@ -22,7 +22,7 @@
 //! Measured on simavr (the bench's `step_trials`, one stepper): an
 //! ordinary event, entry to `reti`, takes 235 cycles (335 before this
 //! layout), one that also takes the next segment of the running block
-//! ≈ 340 (≈ 480). At 50 000 steps/s an interval is 320 cycles.
+//! ≈ 335 (≈ 480). At 50 000 steps/s an interval is 320 cycles.
 //!
 //! - The compiler saves, in the prologue of an interrupt handler that
 //!   contains a call, every register a call may clobber, on every run. So

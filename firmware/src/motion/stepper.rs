@@ -33,7 +33,7 @@
 //!
 //! On the ATmega2560 (simavr) an ordinary event costs the step interrupt
 //! 235 cycles from entry to `reti`, one that takes the block's next segment
-//! ≈ 340. The board splits `on_timer` into [`StepGenerator::ordinary_ready`]
+//! ≈ 335. The board splits `on_timer` into [`StepGenerator::ordinary_ready`]
 //! and [`StepGenerator::ordinary_event`], inline, and
 //! `on_timer_general`, which it reaches through a call that saves
 //! registers on that path only: a call the compiler can see anywhere in an

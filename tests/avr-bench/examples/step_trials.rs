@@ -53,6 +53,18 @@ fn main() {
             for (v, (n, longest)) in by_vector {
                 println!("         vector {v}: {n} runs, longest {longest} cycles");
             }
+            // The step interrupt's commonest run lengths (ordinary event,
+            // segment change, ...).
+            let mut lengths17: std::collections::BTreeMap<u64, usize> = Default::default();
+            for (&(a, b), &v) in board.isr_intervals().iter().zip(&vectors) {
+                if v == 17 {
+                    *lengths17.entry(b - a).or_default() += 1;
+                }
+            }
+            let mut common: Vec<(u64, usize)> = lengths17.into_iter().collect();
+            common.sort_by_key(|&(_, n)| std::cmp::Reverse(n));
+            let common: Vec<String> = common.iter().take(6).map(|(c, n)| format!("{c} ×{n}")).collect();
+            println!("         vector 17 commonest lengths (cycles ×runs): {}", common.join(", "));
             let mut locks: std::collections::BTreeMap<String, (usize, u64)> = Default::default();
             for &(pc, cycles) in board.main_loop_interrupt_locks() {
                 let name = board.symbol_at(pc).map_or(String::new(), avr_bench::board::demangle);
