@@ -801,6 +801,9 @@ impl<'a> StepGenerator<'a> {
     pub fn halt(&mut self, fault: StepFault) {
         self.fault = Some(fault);
         self.refresh_continuable();
+        // The events of the running segment not computed yet are not done:
+        // keep `events_done` as it was (the encoder loops' positions).
+        self.events_started = self.events_done();
         self.events_left = 0;
         self.pending_mask = 0;
         self.set_long_wait(0);
@@ -965,6 +968,23 @@ mod tests {
         }
         assert_eq!(generator.status().blocks_done, 2);
         assert_eq!(generator.axis_progress().positions(), [700, -200]);
+    }
+
+    /// A halt in the middle of a segment: X's and Y's positions count the
+    /// steps that were made (within the one pending), not the rest of the
+    /// segment.
+    #[cfg(feature = "encoders")]
+    #[test]
+    fn a_halt_keeps_the_positions_of_the_steps_made() {
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        assert!(feeder.push_block(block([1000, 500, 0, 0], 0b0011)));
+        assert!(feeder.push_segment(Segment { interval: 200 << 8, add: 0, events: 1000, starts_block: true }));
+        let events = run(&mut generator, 40_000);
+        let count = |motor: u8| events.iter().filter(|e| e.1 & (1 << motor) != 0).count() as i32;
+        generator.halt(StepFault::Stopped);
+        let [x, y] = generator.axis_progress().positions();
+        assert!((x - count(0)).abs() <= 1 && (y - count(1)).abs() <= 1, "{x} {y} vs {} {}", count(0), count(1));
     }
 
     #[test]
