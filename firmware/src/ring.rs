@@ -82,12 +82,16 @@ impl Index {
     }
 }
 
+/// The indices come first (`repr(C)`): the AVR reaches them and the slots
+/// from one pointer register (the step interrupt's segment change kept a
+/// second pointer, and saved it, when they came after 176 bytes of slots).
+#[repr(C)]
 pub struct Ring<T, const N: usize> {
-    slots: [UnsafeCell<MaybeUninit<T>>; N],
     /// Next slot the consumer reads; written by the consumer only.
     head: Index,
     /// Next slot the producer writes; written by the producer only.
     tail: Index,
+    slots: [UnsafeCell<MaybeUninit<T>>; N],
 }
 
 // SAFETY: each index is written by one end only and published with
@@ -119,8 +123,21 @@ impl<T: Copy, const N: usize> Ring<T, N> {
         (Producer { ring }, Consumer { ring })
     }
 
+    #[inline(always)]
     fn slot(&self, index: u8) -> *mut MaybeUninit<T> {
-        self.slots[usize::from(index & Self::MASK)].get()
+        let index = index & Self::MASK;
+        if N * size_of::<T>() <= 256 {
+            // The byte offset fits a byte: one 8-bit multiply on the AVR
+            // instead of a 16-bit one (the step interrupt's segment change
+            // spent ~14 cycles on it).
+            let offset = index.wrapping_mul(size_of::<T>() as u8);
+            // SAFETY: index < N, so the offset lies inside `slots`, at the
+            // start of slot `index` (the slots are contiguous, no padding
+            // between array elements).
+            UnsafeCell::raw_get(unsafe { self.slots.as_ptr().cast::<u8>().add(usize::from(offset)) }.cast())
+        } else {
+            self.slots[usize::from(index)].get()
+        }
     }
 
     #[inline(always)]
@@ -206,6 +223,24 @@ impl<T: Copy, const N: usize> Consumer<'_, T, N> {
         }
     }
 
+    /// Let `take` look at the oldest item in place; if it returns true,
+    /// free the slot. `false` if the ring is empty or `take` declined. One
+    /// read of the indices (`front` then `release` read them twice).
+    #[inline(always)]
+    pub fn take_front_if(&mut self, take: impl FnOnce(&T) -> bool) -> bool {
+        let head = self.ring.head();
+        if head == self.ring.tail() {
+            return false;
+        }
+        // SAFETY: as in `front`: the slot is published and stays ours until
+        // `head` moves past it, below.
+        if !take(unsafe { (*self.ring.slot(head)).assume_init_ref() }) {
+            return false;
+        }
+        self.ring.head.store(head.wrapping_add(1) & Ring::<T, N>::MASK);
+        true
+    }
+
     /// Take the oldest item.
     pub fn dequeue(&mut self) -> Option<T> {
         let head = self.ring.head();
@@ -261,6 +296,24 @@ mod tests {
             next_out += 1;
         }
         assert_eq!(next_out, 10_000);
+    }
+
+    #[test]
+    fn take_front_if_frees_only_what_it_takes() {
+        let mut ring = Ring::<u8, 4>::new();
+        let (mut producer, mut consumer) = ring.split();
+        assert!(!consumer.take_front_if(|_| true));
+        assert_eq!(producer.enqueue(7), Ok(()));
+        assert_eq!(producer.enqueue(8), Ok(()));
+        let mut seen = 0;
+        assert!(!consumer.take_front_if(|&v| {
+            seen = v;
+            false
+        }));
+        assert_eq!(seen, 7);
+        assert!(consumer.take_front_if(|&v| v == 7));
+        assert_eq!(consumer.dequeue(), Some(8));
+        assert_eq!(consumer.dequeue(), None);
     }
 
     #[test]

@@ -11,11 +11,45 @@
 //!
 //! Per interrupt, in order: endstops (only when the generator watches any),
 //! DIR pins (only when they change) and STEP pins high from
-//! `pins_now()` (the event computed last time), then `on_timer()` computes
-//! the next event, the next compare is set, and the STEP pins go low. The
+//! `pins_now()` (the event computed last time), then the next event is
+//! computed, the next compare is set, and every STEP pin goes low. The
 //! generator presents a direction change in an action without steps and
 //! waits its set-up time before the next step, so DIR is always settled
 //! before STEP rises.
+//!
+//! # What an event costs, and why the handler looks as it does
+//!
+//! Measured on simavr (the bench's `step_trials`, one stepper): an
+//! ordinary event, entry to `reti`, takes 235 cycles (335 before this
+//! layout), one that also takes the next segment of the running block
+//! ≈ 335 (≈ 480). At 50 000 steps/s an interval is 320 cycles.
+//!
+//! - The compiler saves, in the prologue of an interrupt handler that
+//!   contains a call, every register a call may clobber, on every run. So
+//!   the handler makes no call it can see: everything an ordinary event
+//!   needs is inline ([`StepGenerator::ordinary_ready`], which also takes
+//!   the next segment of the running block, and
+//!   [`StepGenerator::ordinary_event`]), and the rare work (reading the
+//!   endstops while homing or with hard limits on, a piece of a long wait,
+//!   a new block, a direction change's lead, the end of the queue) is in
+//!   [`cold_path`], reached through `ferrostep_step_cold`, which saves and
+//!   restores the call-clobbered registers itself, on that path only. The
+//!   prologue now saves the 12 registers the inline code uses (r18–r27,
+//!   r30, r31) instead of 24 and has no stack frame.
+//! - STEP high on PORTF/PORTA (I/O space) is a skip-if-clear and an `sbi`
+//!   per pin; STEP low clears all four pins unconditionally, so the mask
+//!   is not held in a register across the computation.
+//! - The port and timer registers are reached at their fixed addresses
+//!   (`Peripherals::steal` stored a flag on every event).
+//! - The generator counts only `events_left` per event (the events done
+//!   are derived from it), does its Bresenham before the wait sum (nothing
+//!   live across the loop), and tests one byte to see whether the running
+//!   block may continue with the queue's next segment.
+//!
+//! Tried and dropped (measured): the Bresenham unrolled with fixed
+//! addresses (+440 B, no faster), its state as one array of records (more
+//! registers), the wait sum byte by byte (+21 cycles), the long-wait
+//! branch out of line (no faster, +30 B).
 //!
 //! | motor | STEP | DIR |
 //! |---|---|---|
@@ -43,10 +77,12 @@ use firmware::motion::{StepFault, StepFeeder, StepGenerator, StepQueues, Stepper
 use firmware::motion::StepperStatus;
 
 #[cfg(feature = "motion")]
-/// Extra CPU cycles (16 MHz) the STEP pins stay high after `on_timer` and
-/// the compare update, which alone take ≥ 150 cycles (≈ 10 µs, measured by
-/// the bench's `min_step_pulse_cycles`): the A4988 needs 1 µs, the DRV8825
-/// 1.9 µs, a TB6600 or CL86T 5 µs; raise this for slower drivers.
+/// Extra CPU cycles (16 MHz) the STEP pins stay high after the next
+/// event's computation and the compare update, which alone take ≥ 120
+/// cycles (7.5 µs; the bench's `min_step_pulse_cycles`, printed by the
+/// `step_trials` example): the A4988 needs
+/// 1 µs, the DRV8825 1.9 µs, a TB6600 or CL86T 5 µs; raise this for slower
+/// drivers.
 pub const STEP_PULSE_MIN_EXTRA_CYCLES: u32 = 0;
 
 #[cfg(feature = "motion")]
@@ -160,14 +196,14 @@ pub fn correction_steps(dp: &Peripherals, steps: u8, positive: u8) {
         let levels = unsafe { *addr_of_mut!(DIR_LEVELS) };
         let wanted = (levels & !steps) | ((positive ^ config.dir_invert) & steps);
         let setup_cycles = u32::from(config.dir_setup_ticks.max(2)) * 8;
-        write_dirs(dp, wanted);
+        write_dirs(wanted);
         avr_device::asm::delay_cycles(setup_cycles);
         let f_steps = steps & 1 | (steps & 2) << 5;
         dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | f_steps) });
         avr_device::asm::delay_cycles(32);
         dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !f_steps) });
         avr_device::asm::delay_cycles(setup_cycles);
-        write_dirs(dp, levels);
+        write_dirs(levels);
     });
 }
 
@@ -191,55 +227,153 @@ fn endstops(dp: &Peripherals) -> u8 {
 #[cfg(feature = "motion")]
 #[avr_device::interrupt(atmega2560)]
 fn TIMER1_COMPA() {
-    // SAFETY: interrupts are off in this handler, so it has the generator
-    // and DIR_LEVELS to itself; the main loop takes them only in critical
-    // sections. The port writes below touch STEP/DIR bits only, and the
-    // main loop writes these ports with interrupts off.
-    let dp = unsafe { Peripherals::steal() };
-    let Some(generator) = (unsafe { (*addr_of_mut!(GENERATOR)).as_mut() }) else { return };
-    if generator.endstop_mask() != 0 {
-        generator.on_endstops(endstops(&dp));
+    // SAFETY (for the accesses to GENERATOR and DIR_LEVELS below):
+    // interrupts are off in this handler, so it has them to itself; the
+    // main loop takes them only in critical sections. No reference to the
+    // generator is held across a `cold_call`, which takes its own.
+    // SAFETY: `Some`: `init` sets GENERATOR before it enables this
+    // interrupt (OCIE1A), and nothing sets it back to `None`.
+    let generator = || unsafe { (*addr_of_mut!(GENERATOR)).as_mut().unwrap_unchecked() };
+    if generator().endstop_mask() != 0 {
+        cold_call(COLD_ENDSTOPS);
     }
     // The pins first, the computation of the next event after: the edges
     // keep their scheduled times whatever that computation costs.
-    let (steps, dir) = generator.pins_now();
+    let (steps, dir) = generator().pins_now();
     let dir_levels = unsafe { &mut *addr_of_mut!(DIR_LEVELS) };
     if dir != *dir_levels {
-        write_dirs(&dp, dir);
+        write_dirs(dir);
         *dir_levels = dir;
     }
-    let (f_steps, l_steps, a_steps) = (steps & 1 | (steps & 2) << 5, (steps & 4) << 1, (steps & 8) << 1);
-    // STEP high: X PF0, Y PF6, Z PL3, E0 PA4; only the ports that step
-    // (each read-modify-write costs 5–7 cycles, PORTL more).
+    step_high(steps);
+    let mut ticks = 0;
+    if !generator().ordinary_ready() {
+        ticks = cold_call(COLD_GENERAL);
+    }
+    if ticks == 0 {
+        ticks = generator().ordinary_event();
+    }
+    // SAFETY: the register block of Timer1, at its fixed address.
+    schedule_next(unsafe { &*TC1::ptr() }, ticks);
+    // The computation and the scheduling took well over the pulse width;
+    // the delay only guarantees it.
+    if STEP_PULSE_MIN_EXTRA_CYCLES > 0 {
+        avr_device::asm::delay_cycles(STEP_PULSE_MIN_EXTRA_CYCLES);
+    }
+    step_low();
+}
+
+#[cfg(feature = "motion")]
+/// [`cold_path`]: read the endstops and let the generator act on them.
+const COLD_ENDSTOPS: u8 = 0;
+#[cfg(feature = "motion")]
+/// [`cold_path`]: the generator's general path (long wait, new block, end
+/// of the queue, ...).
+const COLD_GENERAL: u8 = 1;
+
+// The step interrupt's way to its cold paths. The compiler saves, in the
+// prologue of an interrupt handler that contains a call, every register a
+// call may clobber, on every run, even when the call is on a path that
+// rarely runs. So the handler makes no call the compiler sees: it calls
+// this routine from inline assembly (`cold_call`), and the routine saves
+// the call-clobbered registers of avr-gcc's convention (which LLVM's AVR
+// back end follows) other than r24/r25, which carry the argument and the
+// result: r18–r23, r26, r27, r30, r31. r0 is LLVM's scratch register
+// (never live across an instruction sequence it did not emit) and r1,
+// the zero register, stays zero across any call.
+#[cfg(feature = "motion")]
+core::arch::global_asm!(
+    ".section .text.ferrostep_step_cold,\"ax\",@progbits",
+    "ferrostep_step_cold:",
+    "push r18", "push r19", "push r20", "push r21", "push r22",
+    "push r23", "push r26", "push r27", "push r30", "push r31",
+    "call {f}",
+    "pop r31", "pop r30", "pop r27", "pop r26", "pop r23",
+    "pop r22", "pop r21", "pop r20", "pop r19", "pop r18",
+    "ret",
+    f = sym cold_path,
+);
+
+#[cfg(feature = "motion")]
+/// Runs [`cold_path`]`(what)` from the step interrupt without the
+/// compiler's register saves (see `ferrostep_step_cold` above).
+#[inline(always)]
+fn cold_call(what: u8) -> u16 {
+    let (lo, hi): (u8, u8);
+    // SAFETY: `ferrostep_step_cold` preserves every register but r24/r25
+    // (declared here as the argument and outputs); `cold_path` is an
+    // ordinary `extern "C"` function. The stack has room for the routine's
+    // ten bytes and the call as for any call. Memory is not declared
+    // untouched, so the compiler reloads the generator afterwards.
+    unsafe {
+        core::arch::asm!(
+            "call ferrostep_step_cold",
+            inout("r24") what => lo,
+            out("r25") hi,
+        );
+    }
+    u16::from(hi) << 8 | u16::from(lo)
+}
+
+#[cfg(feature = "motion")]
+/// The step interrupt's rare cases (interrupts off; the handler holds no
+/// reference to the generator across the call): [`COLD_ENDSTOPS`], or
+/// [`COLD_GENERAL`]: returns the ticks to the next compare, or 0 when the
+/// running segment's next event is still to be computed (by the handler,
+/// inline).
+extern "C" fn cold_path(what: u8) -> u16 {
+    // SAFETY: see above.
+    let Some(generator) = (unsafe { (*addr_of_mut!(GENERATOR)).as_mut() }) else { return IDLE_TICKS };
+    if what == COLD_ENDSTOPS {
+        // SAFETY: only the pin registers are read.
+        generator.on_endstops(endstops(&unsafe { Peripherals::steal() }));
+        return 0;
+    }
+    generator.on_timer_general()
+}
+
+#[cfg(feature = "motion")]
+const IDLE_TICKS: u16 = firmware::motion::stepper::IDLE_POLL_TICKS;
+
+#[cfg(feature = "motion")]
+/// STEP high for the motors in `steps`: X PF0, Y PF6, Z PL3, E0 PA4.
+/// PORTF (0x11) and PORTA (0x02) are in I/O space: a skip-if-bit-clear and
+/// an `sbi` per pin, 2–3 cycles (the compiler's mask, compare and branch
+/// took 5–6). PORTL is not: load, or, store.
+#[inline(always)]
+fn step_high(steps: u8) {
+    // SAFETY: sets single STEP bits of PORTF and PORTA (any value is valid
+    // for a port register; interrupts are off, so the read-modify-write of
+    // `sbi` cannot interleave with another writer); touches no other
+    // register or memory; `sbrc`/`sbi` leave SREG alone.
+    unsafe {
+        core::arch::asm!(
+            "sbrc {s}, 0",
+            "sbi 0x11, 0",
+            "sbrc {s}, 1",
+            "sbi 0x11, 6",
+            "sbrc {s}, 3",
+            "sbi 0x02, 4",
+            s = in(reg) steps,
+            options(nostack, preserves_flags),
+        );
+    }
+    if steps & 4 != 0 {
+        // SAFETY: any bit pattern is valid for this port register.
+        portl().portl.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 3) });
+    }
+}
+
+#[cfg(feature = "motion")]
+/// Every STEP pin low (those already low stay so): no register holds the
+/// step mask across the computation.
+#[inline(always)]
+fn step_low() {
     // SAFETY: any bit pattern is valid for these port registers.
-    if f_steps != 0 {
-        dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | f_steps) });
-    }
-    if l_steps != 0 {
-        dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() | l_steps) });
-    }
-    if a_steps != 0 {
-        dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() | a_steps) });
-    }
-    let action = generator.on_timer();
-    schedule_next(&dp.TC1, action.next_interval_ticks);
-    if steps != 0 {
-        // `on_timer` and the scheduling took well over the pulse width;
-        // the delay only guarantees it.
-        if STEP_PULSE_MIN_EXTRA_CYCLES > 0 {
-            avr_device::asm::delay_cycles(STEP_PULSE_MIN_EXTRA_CYCLES);
-        }
-        // SAFETY: as above.
-        if f_steps != 0 {
-            dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !f_steps) });
-        }
-        if l_steps != 0 {
-            dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() & !l_steps) });
-        }
-        if a_steps != 0 {
-            dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() & !a_steps) });
-        }
-    }
+    portf().portf.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 0)) });
+    portf().portf.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 6)) });
+    porta().porta.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 4)) });
+    portl().portl.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 3)) });
 }
 
 #[cfg(feature = "motion")]
@@ -247,7 +381,7 @@ fn TIMER1_COMPA() {
 /// Returns the counter as read (the time the STEP pins went high, within a
 /// few cycles).
 #[inline(always)]
-fn schedule_next(timer: &TC1, interval: u16) -> u16 {
+fn schedule_next(timer: &avr_device::atmega2560::tc1::RegisterBlock, interval: u16) -> u16 {
     let now = timer.tcnt1.read().bits();
     let mut next = timer.ocr1a.read().bits().wrapping_add(interval);
     if (next.wrapping_sub(now) as i16) < MIN_AHEAD_TICKS as i16 {
@@ -258,14 +392,32 @@ fn schedule_next(timer: &TC1, interval: u16) -> u16 {
 }
 
 #[cfg(feature = "motion")]
+/// The port registers the step interrupt writes, at their fixed addresses
+/// (no `Peripherals::steal`, which costs the interrupt a store).
+fn portf() -> &'static avr_device::atmega2560::portf::RegisterBlock {
+    // SAFETY: a fixed MMIO address; writers keep to the rules above.
+    unsafe { &*avr_device::atmega2560::PORTF::ptr() }
+}
+#[cfg(feature = "motion")]
+fn porta() -> &'static avr_device::atmega2560::porta::RegisterBlock {
+    // SAFETY: as for `portf`.
+    unsafe { &*avr_device::atmega2560::PORTA::ptr() }
+}
+#[cfg(feature = "motion")]
+fn portl() -> &'static avr_device::atmega2560::portl::RegisterBlock {
+    // SAFETY: as for `portf`.
+    unsafe { &*avr_device::atmega2560::PORTL::ptr() }
+}
+
+#[cfg(feature = "motion")]
 /// DIR levels: X PF1, Y PF7, Z PL1, E0 PA6.
 #[inline(always)]
-fn write_dirs(dp: &Peripherals, dir: u8) {
+fn write_dirs(dir: u8) {
     let f = (dir & 1) << 1 | (dir & 2) << 6;
     let l = (dir & 4) >> 1;
     let a = (dir & 8) << 3;
     // SAFETY: any bit pattern is valid for these port registers.
-    dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !0b1000_0010 | f) });
-    dp.PORTL.portl.modify(|r, w| unsafe { w.bits(r.bits() & !0b0000_0010 | l) });
-    dp.PORTA.porta.modify(|r, w| unsafe { w.bits(r.bits() & !0b0100_0000 | a) });
+    portf().portf.modify(|r, w| unsafe { w.bits(r.bits() & !0b1000_0010 | f) });
+    portl().portl.modify(|r, w| unsafe { w.bits(r.bits() & !0b0000_0010 | l) });
+    porta().porta.modify(|r, w| unsafe { w.bits(r.bits() & !0b0100_0000 | a) });
 }

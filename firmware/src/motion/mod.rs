@@ -204,7 +204,7 @@ impl MotionConfig {
             feed_factor: 1.0,
             flow_factor: 1.0,
             arc_tolerance: 0.002,
-            max_step_rate: 40_000.0,
+            max_step_rate: 50_000.0,
             soft_limits: Some(SoftLimits { min: [0.0, 0.0, 0.0], max: [200.0, 200.0, 180.0] }),
             homing: HomingConfig {
                 sequence: [0b001, 0b010, 0b100],
@@ -247,7 +247,7 @@ impl MotionConfig {
             homing: HomingConfig { sequence: [0b111, 0, 0], axes: [tower; 3], acceleration: 100_000.0 },
             home: HomePosition::DeltaTop,
             stepper: StepperConfig::DEFAULT,
-            max_step_rate: 40_000.0,
+            max_step_rate: 50_000.0,
             ..Self::prusa_i3()
         }
     }

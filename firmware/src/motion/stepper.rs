@@ -26,7 +26,19 @@
 //!
 //! which is a handful of 8/16/32-bit additions on the AVR and no
 //! multiplication. A single-motor move or a 45° diagonal skips the
-//! Bresenham loop altogether; changing segment or block is out of line.
+//! Bresenham loop altogether. Taking the next segment of the running block
+//! is inline too (one flag byte, one queue-index read, a 10-byte copy);
+//! a new block, a direction change, a long wait and the end of the queue
+//! are out of line ([`StepGenerator::on_timer_general`]).
+//!
+//! On the ATmega2560 (simavr) an ordinary event costs the step interrupt
+//! 235 cycles from entry to `reti`, one that takes the block's next segment
+//! ≈ 335. The board splits `on_timer` into [`StepGenerator::ordinary_ready`]
+//! and [`StepGenerator::ordinary_event`], inline, and
+//! `on_timer_general`, which it reaches through a call that saves
+//! registers on that path only: a call the compiler can see anywhere in an
+//! AVR interrupt handler makes it save every call-clobbered register on
+//! every run (see the board's `stepping` module).
 //!
 //! # Invariants
 //!
@@ -53,10 +65,13 @@
 //!
 //! ```text
 //! if gen.endstop_mask() != 0 { gen.on_endstops(read_endstop_bits()) }
-//! let action = gen.on_timer();
-//! write DIR pins  = action.dir_mask            (bit i: motor i)
-//! raise STEP pins of action.step_mask
-//! OCR += action.next_interval_ticks            (relative to the last compare)
+//! let (steps, dirs) = gen.pins_now();          (the event computed last time)
+//! write DIR pins  = dirs                       (bit i: motor i)
+//! raise STEP pins of steps
+//! let ticks = gen.on_timer().next_interval_ticks
+//!     (or: if gen.ordinary_ready() { gen.ordinary_event() }
+//!          else { match gen.on_timer_general() { 0 => gen.ordinary_event(), t => t } })
+//! OCR += ticks                                 (relative to the last compare)
 //! lower STEP pins once the configured pulse width has passed
 //! ```
 //!
@@ -253,7 +268,10 @@ pub struct StepGenerator<'a> {
     always: u8,
     minor: u8,
     events: u16,
-    events_done: u16,
+    /// Events of the segments of this block taken so far: the events done
+    /// are `events_started - events_left` ([`Self::events_done`]), so the
+    /// per-event path counts only `events_left`.
+    events_started: u16,
     direction: u8,
     watch: u8,
     watch_release: bool,
@@ -261,6 +279,10 @@ pub struct StepGenerator<'a> {
     endstops_to_read: u8,
     in_block: bool,
     discarding: bool,
+    /// `in_block && !discarding && fault.is_none()`, kept as one byte for
+    /// the ordinary segment change ([`Self::refresh_continuable`] after
+    /// every change of the three).
+    continuable: bool,
 
     // The event computed ahead, fired by the next call.
     pending_mask: u8,
@@ -356,13 +378,14 @@ impl<'a> StepGenerator<'a> {
             always: 0,
             minor: 0,
             events: 0,
-            events_done: 0,
+            events_started: 0,
             direction: 0,
             watch: 0,
             watch_release: false,
             endstops_to_read: 0,
             in_block: false,
             discarding: false,
+            continuable: false,
             pending_mask: 0,
             pending_dir: 0,
             long_wait: 0,
@@ -386,7 +409,7 @@ impl<'a> StepGenerator<'a> {
             progress.steps = [self.steps[0], self.steps[1]];
             progress.events = self.events;
             // The pending event has not fired yet.
-            progress.fired = self.events_done - (self.pending_mask != 0) as u16;
+            progress.fired = self.events_done() - (self.pending_mask != 0) as u16;
             progress.direction = self.direction;
             progress.stopped = self.stopped;
             progress.stopped_steps = [self.stopped_steps[0], self.stopped_steps[1]];
@@ -412,42 +435,88 @@ impl<'a> StepGenerator<'a> {
     /// the next one.
     #[inline(always)]
     pub fn on_timer(&mut self) -> TimerAction {
+        let (step_mask, dir_mask) = self.pins_now();
+        let mut next_interval_ticks = if self.ordinary_ready() { 0 } else { self.on_timer_general() };
+        if next_interval_ticks == 0 {
+            next_interval_ticks = self.ordinary_event();
+        }
+        TimerAction { step_mask, dir_mask, next_interval_ticks }
+    }
+
+    /// The next call is an ordinary event: no long wait under way and
+    /// events left in the running segment, or the next queued segment
+    /// continues the running block and has just been taken (the common
+    /// segment change, done here so that it stays cheap). Then
+    /// [`Self::ordinary_event`] is all `on_timer` does after the pins;
+    /// otherwise [`Self::on_timer_general`]. A board whose interrupt pays
+    /// for every register a call could clobber (the AVR) calls this inline
+    /// and reaches `on_timer_general` through a call that saves registers
+    /// on that path alone.
+    #[inline(always)]
+    pub fn ordinary_ready(&mut self) -> bool {
+        !self.long_waiting && (self.events_left != 0 || self.take_next_segment_of_block())
+    }
+
+    /// STEP mask of the pending event when [`Self::ordinary_ready`]
+    /// (`pins_now().0` without the long-wait test).
+    #[inline(always)]
+    pub fn ordinary_step_mask(&self) -> u8 {
+        self.pending_mask & !self.stopped
+    }
+
+    /// What `on_timer` does after the pins when [`Self::ordinary_ready`]
+    /// is false: a piece of a long wait, or a segment change that the
+    /// ordinary path does not cover (new block, direction change, end of
+    /// the queue, discarding, fault). Returns the ticks to the next call,
+    /// or 0: "events are left in the running segment: compute the next
+    /// with [`Self::ordinary_event`]" (every wait this returns is ≥ 1).
+    /// Out of line: the per-event path keeps few registers.
+    #[inline(never)]
+    pub fn on_timer_general(&mut self) -> u16 {
         if self.long_waiting {
             return self.wait_longer();
         }
-        let step_mask = self.pending_mask & !self.stopped;
-        let dir_mask = self.pending_dir ^ self.config.dir_invert;
-        let next_interval_ticks =
-            if self.events_left != 0 || self.take_next_segment_of_block() { self.next_event() } else { self.next_segment() };
-        TimerAction { step_mask, dir_mask, next_interval_ticks }
+        if self.events_left != 0 {
+            return 0;
+        }
+        self.next_segment()
+    }
+
+    /// The ordinary event: one more event of the running segment (call
+    /// only when [`Self::ordinary_ready`], or after
+    /// [`Self::on_timer_general`] returned 0). Returns the ticks to the
+    /// next call.
+    #[inline(always)]
+    pub fn ordinary_event(&mut self) -> u16 {
+        self.next_event()
     }
 
     /// The hot path: one more event of the running segment. Always
     /// inline: out of line (as `opt-level = "z"` chose) it cost the AVR's
     /// step interrupt a call and six register saves, ~33 cycles an event.
+    /// The Bresenham step comes first, so that nothing is held in registers
+    /// across it; `sum >> 24 != 0` is `ticks > 0xFFFF` as one byte test.
     #[inline(always)]
     fn next_event(&mut self) -> u16 {
+        self.pending_mask = self.bresenham();
         self.events_left -= 1;
         let sum = self.frac as u32 + self.interval;
         self.frac = sum as u8;
         self.interval = self.interval.wrapping_add(self.add as u32);
-        self.pending_mask = self.bresenham();
-        let ticks = sum >> INTERVAL_FRACTION_BITS;
-        if ticks > 0xFFFF {
-            self.set_long_wait(ticks - LONG_WAIT_PIECE);
+        if sum >> 24 != 0 {
+            self.set_long_wait((sum >> INTERVAL_FRACTION_BITS) - LONG_WAIT_PIECE);
             return LONG_WAIT_PIECE as u16;
         }
-        ticks as u16
+        (sum >> INTERVAL_FRACTION_BITS) as u16
     }
 
     #[inline(always)]
     fn bresenham(&mut self) -> u8 {
-        self.events_done = self.events_done.wrapping_add(1);
         if self.minor == 0 {
             // One motor, or a 45° diagonal: nothing to decide.
             return self.always;
         }
-        self.always | self.minor_steps()
+        self.minor_steps() | self.always
     }
 
     /// Bresenham for the motors that step on some events only.
@@ -474,37 +543,36 @@ impl<'a> StepGenerator<'a> {
     /// A wait too long for 16 bits, or the lead of a direction change: an
     /// action without steps that presents the coming event's directions.
     #[cold]
-    #[inline(never)]
-    fn wait_longer(&mut self) -> TimerAction {
+    fn wait_longer(&mut self) -> u16 {
         let piece = if self.long_wait > 0xFFFF { LONG_WAIT_PIECE } else { self.long_wait };
         self.set_long_wait(self.long_wait - piece);
-        TimerAction { step_mask: 0, dir_mask: self.pending_dir ^ self.config.dir_invert, next_interval_ticks: piece as u16 }
+        piece as u16
     }
 
     /// The common segment change, kept cheap: the next segment continues
     /// the running block (no new block, no direction change, no fault, not
     /// discarding). Copies its three fields straight from the queue slot
     /// and frees it; `false` leaves everything else to
-    /// [`Self::next_segment`]. Out of line: inlined into the step
-    /// interrupt it made every event 9 cycles dearer (more registers
-    /// saved) and the change no cheaper. On the ATmega2560 the change costs
-    /// ~150 cycles on top of the ordinary event's ~335; the general path
-    /// (dequeue into a stack copy, block start, direction lead) took up to
-    /// ~800.
-    #[inline(never)]
+    /// [`Self::next_segment`]. Inline in the ordinary path (see
+    /// [`Self::ordinary_ready`]): behind a call it would cost the AVR's
+    /// interrupt its register saves on every event.
+    #[inline(always)]
     fn take_next_segment_of_block(&mut self) -> bool {
-        if !self.in_block || self.discarding || self.fault.is_some() {
+        debug_assert_eq!(self.continuable, self.in_block && !self.discarding && self.fault.is_none());
+        if !self.continuable {
             return false;
         }
-        let Some(segment) = self.segments.front() else { return false };
-        if segment.starts_block || segment.events == 0 {
-            return false;
-        }
-        self.interval = segment.interval;
-        self.add = segment.add;
-        self.events_left = segment.events;
-        self.segments.release();
-        true
+        self.segments.take_front_if(|segment| {
+            if segment.starts_block || segment.events == 0 {
+                return false;
+            }
+            // Events first: then no register holds them during the copy.
+            self.events_left = segment.events;
+            self.events_started = self.events_started.wrapping_add(segment.events);
+            self.interval = segment.interval;
+            self.add = segment.add;
+            true
+        })
     }
 
     fn set_long_wait(&mut self, ticks: u32) {
@@ -523,7 +591,7 @@ impl<'a> StepGenerator<'a> {
         }
         loop {
             let Some(segment) = self.segments.dequeue() else {
-                if self.in_block && self.events_done != self.events {
+                if self.in_block && self.events_done() != self.events {
                     if !self.discarding {
                         self.underruns = self.underruns.wrapping_add(1);
                     }
@@ -540,6 +608,7 @@ impl<'a> StepGenerator<'a> {
                     // The feeder pushes the block first; if it is missing
                     // the queues are corrupt: stop rather than guess.
                     self.fault = Some(StepFault::Stopped);
+                    self.refresh_continuable();
                     return IDLE_POLL_TICKS;
                 };
                 self.start_block(&block);
@@ -549,6 +618,7 @@ impl<'a> StepGenerator<'a> {
             self.interval = segment.interval;
             self.add = segment.add;
             self.events_left = segment.events;
+            self.events_started = self.events_started.wrapping_add(segment.events);
             if self.events_left == 0 {
                 continue;
             }
@@ -571,11 +641,11 @@ impl<'a> StepGenerator<'a> {
 
     /// Like [`Self::next_event`], returning the whole wait.
     fn next_event_ticks(&mut self) -> u32 {
+        self.pending_mask = self.bresenham();
         self.events_left -= 1;
         let sum = self.frac as u32 + self.interval;
         self.frac = sum as u8;
         self.interval = self.interval.wrapping_add(self.add as u32);
-        self.pending_mask = self.bresenham();
         (sum >> INTERVAL_FRACTION_BITS).max(1)
     }
 
@@ -591,8 +661,9 @@ impl<'a> StepGenerator<'a> {
     fn start_block(&mut self, block: &StepBlock) {
         self.in_block = true;
         self.discarding = false;
+        self.refresh_continuable();
         self.events = block.events;
-        self.events_done = 0;
+        self.events_started = 0;
         self.watch = block.watch;
         self.watch_release = block.watch_release;
         self.stopped = 0;
@@ -626,11 +697,21 @@ impl<'a> StepGenerator<'a> {
             self.origin = self.axis_progress().positions();
         }
         self.in_block = false;
+        self.refresh_continuable();
         self.endstops_to_read = 0;
         self.moving = 0;
         self.always = 0;
         self.minor = 0;
         self.blocks_done = self.blocks_done.wrapping_add(1);
+    }
+
+    fn refresh_continuable(&mut self) {
+        self.continuable = self.in_block && !self.discarding && self.fault.is_none();
+    }
+
+    /// Events of the running block done so far (the pending one counted).
+    fn events_done(&self) -> u16 {
+        self.events_started.wrapping_sub(self.events_left)
     }
 
     /// Endstop bits worth reading now (0: the board may skip the reads).
@@ -679,7 +760,7 @@ impl<'a> StepGenerator<'a> {
     #[inline(never)]
     fn stop_motors(&mut self, motors: u8) {
         // The pending event has not fired: it is not counted.
-        let fired = self.events_done - (self.pending_mask != 0) as u16;
+        let fired = self.events_done() - (self.pending_mask != 0) as u16;
         for motor in 0..MOTORS {
             if motors & (1 << motor) != 0 && self.events != 0 {
                 let steps = (fired as u32 * self.steps[motor] as u32) / self.events as u32;
@@ -703,7 +784,8 @@ impl<'a> StepGenerator<'a> {
         self.pending_mask = 0;
         self.set_long_wait(0);
         self.discarding = true;
-        self.events_done = self.events;
+        self.refresh_continuable();
+        self.events_started = self.events;
         while let Some(segment) = self.segments.front() {
             if segment.starts_block {
                 break;
@@ -718,6 +800,10 @@ impl<'a> StepGenerator<'a> {
     /// [`Self::clear_fault`]. Positions are lost: the main loop re-homes.
     pub fn halt(&mut self, fault: StepFault) {
         self.fault = Some(fault);
+        self.refresh_continuable();
+        // The events of the running segment not computed yet are not done:
+        // keep `events_done` as it was (the encoder loops' positions).
+        self.events_started = self.events_done();
         self.events_left = 0;
         self.pending_mask = 0;
         self.set_long_wait(0);
@@ -738,6 +824,7 @@ impl<'a> StepGenerator<'a> {
         self.drain();
         self.fault = None;
         self.discarding = false;
+        self.refresh_continuable();
     }
 
     /// A copy of what the main loop needs (cheap: no arithmetic). A board
@@ -881,6 +968,23 @@ mod tests {
         }
         assert_eq!(generator.status().blocks_done, 2);
         assert_eq!(generator.axis_progress().positions(), [700, -200]);
+    }
+
+    /// A halt in the middle of a segment: X's and Y's positions count the
+    /// steps that were made (within the one pending), not the rest of the
+    /// segment.
+    #[cfg(feature = "encoders")]
+    #[test]
+    fn a_halt_keeps_the_positions_of_the_steps_made() {
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        assert!(feeder.push_block(block([1000, 500, 0, 0], 0b0011)));
+        assert!(feeder.push_segment(Segment { interval: 200 << 8, add: 0, events: 1000, starts_block: true }));
+        let events = run(&mut generator, 40_000);
+        let count = |motor: u8| events.iter().filter(|e| e.1 & (1 << motor) != 0).count() as i32;
+        generator.halt(StepFault::Stopped);
+        let [x, y] = generator.axis_progress().positions();
+        assert!((x - count(0)).abs() <= 1 && (y - count(1)).abs() <= 1, "{x} {y} vs {} {}", count(0), count(1));
     }
 
     #[test]

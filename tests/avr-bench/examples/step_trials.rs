@@ -24,12 +24,13 @@ fn main() {
         board.record_isr_intervals(false);
         board.record_isr_intervals(true);
         let trial = bench::step_trial(&mut board, axes, rate).unwrap_or_else(|e| panic!("{e}"));
-        for (axis, verdict) in ["X", "Y", "Z"].iter().zip(&trial.verdicts) {
+        for (index, (axis, verdict)) in ["X", "Y", "Z"].iter().zip(&trial.verdicts).enumerate() {
             println!(
-                "{rate:>8.0} {axis}: {} steps, cruise {:.1} steps/s, worst lateness {:.1} % of the interval: {}",
+                "{rate:>8.0} {axis}: {} steps, cruise {:.1} steps/s, worst lateness {:.1} % of the interval, shortest STEP pulse {} cycles: {}",
                 verdict.steps,
                 verdict.cruise_hz,
                 verdict.worst_late * 100.0,
+                board.min_step_pulse_cycles(index).map_or("-".into(), |c| c.to_string()),
                 verdict.failure.as_deref().unwrap_or("on time")
             );
         }
@@ -52,6 +53,18 @@ fn main() {
             for (v, (n, longest)) in by_vector {
                 println!("         vector {v}: {n} runs, longest {longest} cycles");
             }
+            // The step interrupt's commonest run lengths (ordinary event,
+            // segment change, ...).
+            let mut lengths17: std::collections::BTreeMap<u64, usize> = Default::default();
+            for (&(a, b), &v) in board.isr_intervals().iter().zip(&vectors) {
+                if v == 17 {
+                    *lengths17.entry(b - a).or_default() += 1;
+                }
+            }
+            let mut common: Vec<(u64, usize)> = lengths17.into_iter().collect();
+            common.sort_by_key(|&(_, n)| std::cmp::Reverse(n));
+            let common: Vec<String> = common.iter().take(6).map(|(c, n)| format!("{c} ×{n}")).collect();
+            println!("         vector 17 commonest lengths (cycles ×runs): {}", common.join(", "));
             let mut locks: std::collections::BTreeMap<String, (usize, u64)> = Default::default();
             for &(pc, cycles) in board.main_loop_interrupt_locks() {
                 let name = board.symbol_at(pc).map_or(String::new(), avr_bench::board::demangle);
