@@ -1,7 +1,9 @@
 //! USART0 (the USB bridge): interrupt-driven receive, polled transmit.
 //!
 //! The receive interrupt does one thing: move the byte (and the UART's own
-//! overrun flag) into the core's receive ring. Transmit waits for the data
+//! overrun flag) into the core's receive ring, through a small buffer of
+//! its own so that it never leaves the UART's two-byte FIFO waiting
+//! (see `USART0_RX`). Transmit waits for the data
 //! register; the receive interrupt keeps running meanwhile, so waiting to
 //! send never loses input.
 
@@ -31,11 +33,11 @@ const UBRR: u16 = ((CPU_HZ + 4 * BAUD) / (8 * BAUD) - 1) as u16;
 static mut RX_PRODUCER: Option<RxProducer<'static>> = None;
 
 /// The producer, for the main loop (inside a critical section) or for the
-/// receive interrupt (its RX source is off while it runs, see below).
+/// receive interrupt's draining run (the only one, see `USART0_RX`).
 fn with_producer<R>(_cs: CriticalSection<'_>, f: impl FnOnce(&mut RxProducer<'static>) -> R) -> Option<R> {
-    // SAFETY: the token (a critical section, or the receive interrupt with
-    // its own source disabled and nothing else touching the producer)
-    // gives exclusive access.
+    // SAFETY: the token (a critical section, or the receive interrupt's
+    // draining run, which nothing else that touches the producer can
+    // interrupt) gives exclusive access.
     unsafe { (*addr_of_mut!(RX_PRODUCER)).as_mut().map(f) }
 }
 
@@ -75,52 +77,93 @@ pub fn init(dp: &Peripherals, producer: RxProducer<'static>) {
     usart.ucsr0b.write(|w| w.rxen0().set_bit().txen0().set_bit().rxcie0().set_bit());
 }
 
-/// USART0 receive complete. The handler switches its own source off, then
-/// for each byte the UART holds takes it and its overrun flag and lets
-/// every other interrupt in while it runs the ring and the emergency
-/// scanner (~250 cycles): a step is held up only by the entry and these
-/// few register reads, not by the whole handler. The source comes back on
-/// (with interrupts off) just before returning, so a byte that arrived
-/// after the last check is handled next.
+/// Bytes taken from the UART and not yet through [`receive`]: the
+/// handler's first, interrupts-off part fills it; the run of the handler
+/// that is draining it (`DRAINING`) empties it with interrupts on.
+const RAW_SLOTS: usize = 16;
+static mut RAW: [(u8, bool); RAW_SLOTS] = [(0, false); RAW_SLOTS];
+static mut RAW_HEAD: u8 = 0;
+static mut RAW_LEN: u8 = 0;
+/// A byte was lost because `RAW` was full: charged to the next byte, as
+/// the UART's own overrun flag is.
+static mut RAW_LOST: bool = false;
+static mut DRAINING: bool = false;
+
+/// USART0 receive complete, in two parts.
+///
+/// 1. Interrupts off, a few dozen cycles: every byte the UART holds goes
+///    into `RAW` with its overrun flag.
+/// 2. Unless an outer run of this handler is already at it, the bytes go
+///    through the ring and the emergency scanner (~250 cycles each) with
+///    interrupts on: a step is held up only by part 1.
+///
+/// The receive interrupt stays enabled throughout, so a byte that arrives
+/// while part 2 runs, or while another handler runs on top of it (the step
+/// interrupt's new block: up to ≈ 1 600 cycles), is taken at once by a
+/// nested part 1. At 250 000 baud a byte comes every 640 cycles and the
+/// UART holds two: when this handler switched its own source off for part
+/// 2, a step interrupt on top of it lost bytes.
 #[avr_device::interrupt(atmega2560)]
 fn USART0_RX() {
     // SAFETY: USART0's status and data registers are read only here; the
-    // main loop only writes the transmit side; UCSR0B's receive-interrupt
-    // bit is written only here, with interrupts off.
+    // main loop only writes the transmit side. RAW and its indices are
+    // written with interrupts off only.
     let usart = unsafe { &*USART0::ptr() };
-    usart.ucsr0b.modify(|_, w| w.rxcie0().clear_bit());
+    unsafe {
+        loop {
+            // The overrun flag belongs to the byte at the head: read it first.
+            let overrun = usart.ucsr0a.read().dor0().bit_is_set() | core::mem::take(&mut *addr_of_mut!(RAW_LOST));
+            let byte = usart.udr0.read().bits();
+            if (RAW_LEN as usize) < RAW_SLOTS {
+                let slot = (RAW_HEAD as usize + RAW_LEN as usize) % RAW_SLOTS;
+                (*addr_of_mut!(RAW))[slot] = (byte, overrun);
+                RAW_LEN += 1;
+            } else {
+                RAW_LOST = true;
+            }
+            if usart.ucsr0a.read().rxc0().bit_is_clear() {
+                break;
+            }
+        }
+        if DRAINING {
+            return;
+        }
+        DRAINING = true;
+    }
     // With the encoder loops the tick runs ≈ 0.5 ms with interrupts on: it
-    // must not sit on top of this handler while its source is off (two
-    // more bytes and the UART overruns; found on simavr). Its mask is put
+    // must not sit on top of part 2 (found on simavr). Its mask is put
     // back as it was (the main loop masks it too).
     #[cfg(feature = "encoders")]
     let tick = crate::clock::hold_tick();
-    // Every byte the UART holds, in one entry: at 250 000 baud a byte comes
-    // every 640 cycles, and bytes that piled up while other handlers ran
-    // on top of this one are taken without leaving and re-entering (the
-    // UART holds two; a third one arriving meanwhile is lost).
     loop {
-        // The overrun flag belongs to the byte at the head: read it first.
-        let overrun = usart.ucsr0a.read().dor0().bit_is_set();
-        let byte = usart.udr0.read().bits();
-        // SAFETY: only this handler's own source is off; the producer is
-        // touched by nothing that can interrupt it.
+        // SAFETY: interrupts are off here (on entry, and after each byte).
+        let next = unsafe {
+            if RAW_LEN == 0 {
+                None
+            } else {
+                let taken = (*addr_of_mut!(RAW))[RAW_HEAD as usize % RAW_SLOTS];
+                RAW_HEAD = ((RAW_HEAD as usize + 1) % RAW_SLOTS) as u8;
+                RAW_LEN -= 1;
+                Some(taken)
+            }
+        };
+        let Some((byte, overrun)) = next else { break };
+        // SAFETY: only this run of the handler drains; a nested run only
+        // adds to RAW (with interrupts off) and returns.
         unsafe { avr_device::interrupt::enable() };
         receive(byte, overrun);
         avr_device::interrupt::disable();
-        if usart.ucsr0a.read().rxc0().bit_is_clear() {
-            break;
-        }
     }
     #[cfg(feature = "encoders")]
     crate::clock::release_tick(tick);
-    usart.ucsr0b.modify(|_, w| w.rxcie0().set_bit());
+    // SAFETY: interrupts are off.
+    unsafe { DRAINING = false };
 }
 
 #[inline(never)]
 fn receive(byte: u8, overrun: bool) {
-    // SAFETY: see the handler: its source is off, the main loop is
-    // interrupted, and no other interrupt uses the producer.
+    // SAFETY: see the handler: only its draining run calls this, the main
+    // loop is interrupted, and no other interrupt uses the producer.
     let cs = unsafe { CriticalSection::new() };
     let Some(Some(emergency)) = with_producer(cs, |p| p.push(byte, overrun)) else { return };
     avr_device::interrupt::free(|cs| {

@@ -128,9 +128,16 @@ pub fn init(dp: &Peripherals, config: StepperConfig) -> StepFeeder<'static> {
 
 /// Stop the interrupt at once (kill, panic): no further STEP pulses.
 pub fn stop_timer(dp: &Peripherals) {
-    // SAFETY: clearing OCIE1A only.
+    // SAFETY: clearing OCIE1A only; the flag is written with interrupts
+    // off (kill, panic) and read by the step interrupt's cold path.
     dp.TC1.timsk1.write(|w| unsafe { w.bits(0) });
+    unsafe { *addr_of_mut!(TIMER_STOPPED) = true };
 }
+
+/// `stop_timer` ran: the step interrupt's general path, which lets the
+/// receive interrupt in (and so an `M112`), must not switch its own source
+/// back on.
+static mut TIMER_STOPPED: bool = false;
 
 fn with_generator<R>(_cs: CriticalSection<'_>, f: impl FnOnce(&mut StepGenerator<'static>) -> R) -> Option<R> {
     // SAFETY: the critical section keeps the step interrupt out, and the
@@ -316,11 +323,21 @@ fn cold_call(what: u8) -> u16 {
 }
 
 #[cfg(feature = "motion")]
-/// The step interrupt's rare cases (interrupts off; the handler holds no
-/// reference to the generator across the call): [`COLD_ENDSTOPS`], or
-/// [`COLD_GENERAL`]: returns the ticks to the next compare, or 0 when the
-/// running segment's next event is still to be computed (by the handler,
-/// inline).
+/// The step interrupt's rare cases (the handler holds no reference to the
+/// generator across the call): [`COLD_ENDSTOPS`], or [`COLD_GENERAL`]:
+/// returns the ticks to the next compare, or 0 when the running segment's
+/// next event is still to be computed (by the handler, inline).
+///
+/// The general path (a new block: up to ≈ 1 600 cycles) lets the serial
+/// receive interrupt in: at 250 000 baud a byte arrives every 640 cycles
+/// and the UART holds two, so a step interrupt that long with interrupts
+/// off lost bytes (the bench's 250 000-baud stream, once its host sent at
+/// the real rate). Its own source is off meanwhile (it cannot re-enter),
+/// and so is the encoder loops' tick, which runs ≈ 0.5 ms with interrupts
+/// on; the ADC and millisecond handlers are short. Nothing they run
+/// touches the generator. The STEP pins are high and the next compare not
+/// yet set: a byte makes the pulse a little longer, never a step late
+/// (the compare is set from the previous one).
 extern "C" fn cold_path(what: u8) -> u16 {
     // SAFETY: see above.
     let Some(generator) = (unsafe { (*addr_of_mut!(GENERATOR)).as_mut() }) else { return IDLE_TICKS };
@@ -329,7 +346,23 @@ extern "C" fn cold_path(what: u8) -> u16 {
         generator.on_endstops(endstops(&unsafe { Peripherals::steal() }));
         return 0;
     }
-    generator.on_timer_general()
+    // SAFETY: Timer1's interrupt mask (OCIE1A is the only one used).
+    let timer = unsafe { &*TC1::ptr() };
+    timer.timsk1.write(|w| unsafe { w.bits(0) });
+    #[cfg(feature = "encoders")]
+    let tick = crate::clock::hold_tick();
+    // SAFETY: the handlers that may now run do not use the generator, and
+    // this one's own source is off.
+    unsafe { avr_device::interrupt::enable() };
+    let ticks = generator.on_timer_general();
+    avr_device::interrupt::disable();
+    #[cfg(feature = "encoders")]
+    crate::clock::release_tick(tick);
+    // SAFETY: as above; a kill in between keeps the timer stopped.
+    if !unsafe { *addr_of_mut!(TIMER_STOPPED) } {
+        timer.timsk1.write(|w| unsafe { w.bits(1 << 1) });
+    }
+    ticks
 }
 
 #[cfg(feature = "motion")]
