@@ -84,9 +84,6 @@ const RAW_SLOTS: usize = 16;
 static mut RAW: [(u8, bool); RAW_SLOTS] = [(0, false); RAW_SLOTS];
 static mut RAW_HEAD: u8 = 0;
 static mut RAW_LEN: u8 = 0;
-/// A byte was lost because `RAW` was full: charged to the next byte, as
-/// the UART's own overrun flag is.
-static mut RAW_LOST: bool = false;
 static mut DRAINING: bool = false;
 
 /// USART0 receive complete, in two parts.
@@ -97,12 +94,15 @@ static mut DRAINING: bool = false;
 ///    through the ring and the emergency scanner (~250 cycles each) with
 ///    interrupts on: a step is held up only by part 1.
 ///
-/// The receive interrupt stays enabled throughout, so a byte that arrives
-/// while part 2 runs, or while another handler runs on top of it (the step
-/// interrupt's new block: up to ≈ 1 600 cycles), is taken at once by a
-/// nested part 1. At 250 000 baud a byte comes every 640 cycles and the
-/// UART holds two: when this handler switched its own source off for part
-/// 2, a step interrupt on top of it lost bytes.
+/// The receive interrupt stays enabled, so a byte that arrives while part 2
+/// runs, or while another handler runs on top of it (the step interrupt's
+/// new block: up to ≈ 1 600 cycles), is taken at once by a nested part 1.
+/// At 250 000 baud a byte comes every 640 cycles and the UART holds two:
+/// when this handler switched its own source off for part 2, a step
+/// interrupt on top of it lost bytes. Only when `RAW` is full (a burst
+/// faster than the wire, as QEMU delivers them) does part 1 switch the
+/// source off and leave the bytes in the UART; part 2 switches it back on
+/// as soon as it has taken one.
 #[avr_device::interrupt(atmega2560)]
 fn USART0_RX() {
     // SAFETY: USART0's status and data registers are read only here; the
@@ -111,16 +111,16 @@ fn USART0_RX() {
     let usart = unsafe { &*USART0::ptr() };
     unsafe {
         loop {
-            // The overrun flag belongs to the byte at the head: read it first.
-            let overrun = usart.ucsr0a.read().dor0().bit_is_set() | core::mem::take(&mut *addr_of_mut!(RAW_LOST));
-            let byte = usart.udr0.read().bits();
-            if (RAW_LEN as usize) < RAW_SLOTS {
-                let slot = (RAW_HEAD as usize + RAW_LEN as usize) % RAW_SLOTS;
-                (*addr_of_mut!(RAW))[slot] = (byte, overrun);
-                RAW_LEN += 1;
-            } else {
-                RAW_LOST = true;
+            if RAW_LEN as usize == RAW_SLOTS {
+                usart.ucsr0b.modify(|_, w| w.rxcie0().clear_bit());
+                break;
             }
+            // The overrun flag belongs to the byte at the head: read it first.
+            let overrun = usart.ucsr0a.read().dor0().bit_is_set();
+            let byte = usart.udr0.read().bits();
+            let slot = (RAW_HEAD as usize + RAW_LEN as usize) % RAW_SLOTS;
+            (*addr_of_mut!(RAW))[slot] = (byte, overrun);
+            RAW_LEN += 1;
             if usart.ucsr0a.read().rxc0().bit_is_clear() {
                 break;
             }
@@ -144,6 +144,9 @@ fn USART0_RX() {
                 let taken = (*addr_of_mut!(RAW))[RAW_HEAD as usize % RAW_SLOTS];
                 RAW_HEAD = ((RAW_HEAD as usize + 1) % RAW_SLOTS) as u8;
                 RAW_LEN -= 1;
+                // Room again: the source back on (part 1 may have switched
+                // it off on a full buffer).
+                usart.ucsr0b.modify(|_, w| w.rxcie0().set_bit());
                 Some(taken)
             }
         };
