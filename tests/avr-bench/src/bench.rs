@@ -163,10 +163,13 @@ pub const TYPICAL_G1: &[&str] = &[
 
 #[derive(Clone, Debug)]
 pub struct ParseResult {
-    /// Median main-loop cycles from a G1 line's `\n` to its first reply
-    /// byte, and the same for the empty numbered line.
+    /// Median main-loop cycles from a G1 line's `\n` to its `ok`, and the
+    /// same for the empty numbered line.
     pub g1_median: f64,
     pub baseline_median: f64,
+    /// Main-loop cycles a G1 costs after its `ok`: putting it into the
+    /// planner (`Motion::queue_piece`), the mean over the G1 lines.
+    pub planning_mean: f64,
     pub lines: usize,
     /// Mean length of the G1 lines as sent (with `N…` and `*…`), bytes.
     pub g1_bytes: f64,
@@ -176,25 +179,31 @@ pub struct ParseResult {
 
 impl ParseResult {
     pub fn cycles_per_line(&self) -> f64 {
-        self.g1_median - self.baseline_median
+        self.g1_median - self.baseline_median + self.planning_mean
     }
 }
 
 /// Cycles the main loop spends on a G1 line beyond an empty line.
 ///
 /// The host sends, one at a time after each `ok`, numbered lines as
-/// printcore would: `N<n> <G1 line>*<sum>` alternating with the empty
-/// numbered line `N<n> *<sum>`. For each line the window runs from the
+/// printcore would: `N<n> <G1 line>*<sum>`, each followed by two empty
+/// numbered lines `N<n> *<sum>` (the second one is the baseline: the
+/// first arrives while the G1 is still being planned). For each line the window runs from the
 /// cycle at which its `\n` is complete in the receiver (RXC) to the cycle
 /// at which the firmware writes the first byte of its reply to UDR0;
 /// interrupt handler cycles inside the window are subtracted. The figure is
 /// median(G1 windows) − median(empty-line windows): checksum over the
-/// extra bytes, lexing, parsing and executing the G1 up to its first reply
-/// byte, planning included (the `ok` follows the move into the planner).
+/// extra bytes, lexing, parsing and checking the G1 up to its `ok`; plus
+/// the planning, which runs after the `ok` (while the host sends the next
+/// line): the main-loop cycles in `Motion::queue_piece` (kinematics, step
+/// counts, look-ahead) per G1, from the inclusive profile.
 pub fn parse_cycles(elf: &Path, repeats: usize) -> Result<ParseResult, String> {
     let mut board = boot(elf, RampsConfig::stock(115_200))?;
     board.host_mut().config = HostConfig::raw(115_200);
-    exchange(&mut board, &["M110 N0", "G92 X100 Y100 E0", "M83"], 5.0)?;
+    // M302 P1: the hot end is cold on the bench; the G1s extrude.
+    exchange(&mut board, &["M110 N0", "G92 X100 Y100 E0", "M83", "M302 P1"], 5.0)?;
+    board.inclusive_profile(true);
+    board.inclusive_main_loop_only(true);
     let mut lines = Vec::new();
     let mut is_g1 = Vec::new();
     let mut n = 1;
@@ -202,11 +211,16 @@ pub fn parse_cycles(elf: &Path, repeats: usize) -> Result<ParseResult, String> {
         for g1 in TYPICAL_G1 {
             let _ = r;
             lines.push(with_checksum(&format!("N{n} {g1}")));
-            is_g1.push(true);
+            is_g1.push(Some(true));
             n += 1;
-            lines.push(with_checksum(&format!("N{n} ")));
-            is_g1.push(false);
-            n += 1;
+            // Two empty lines: the first one arrives while the G1 is being
+            // planned (its window holds some of that); the second one is
+            // the baseline.
+            for baseline in [None, Some(false)] {
+                lines.push(with_checksum(&format!("N{n} ")));
+                is_g1.push(baseline);
+                n += 1;
+            }
         }
     }
     let sent_before = board.host().sent.len();
@@ -226,7 +240,8 @@ pub fn parse_cycles(elf: &Path, repeats: usize) -> Result<ParseResult, String> {
         let window = reply.first_byte_cycle.saturating_sub(rx_complete);
         let isr = board.isr_cycles_between(rx_complete, reply.first_byte_cycle);
         let main = (window - isr) as f64;
-        if is_g1[i] {
+        let Some(is_a_g1) = is_g1[i] else { continue };
+        if is_a_g1 {
             if first_g1_reply.is_empty() {
                 first_g1_reply = reply.text.clone();
             }
@@ -241,16 +256,24 @@ pub fn parse_cycles(elf: &Path, repeats: usize) -> Result<ParseResult, String> {
             base.push(main);
         }
     }
+    let planning = board
+        .inclusive_by_function()
+        .into_iter()
+        .find(|(name, _)| name.ends_with("Motion>::queue_piece"))
+        .map(|(_, cycles)| cycles)
+        .ok_or("Motion::queue_piece never ran (or is inlined: the planning is not measured)")?;
+    let planning_mean = planning as f64 / g1.len().max(1) as f64;
     let g1_bytes = lines
         .iter()
         .zip(&is_g1)
-        .filter(|(_, g)| **g)
+        .filter(|(_, g)| **g == Some(true))
         .map(|(l, _)| l.len() as f64 + 1.0)
         .sum::<f64>()
         / g1.len().max(1) as f64;
     Ok(ParseResult {
         g1_median: median(&mut g1),
         baseline_median: median(&mut base),
+        planning_mean,
         lines: g1.len(),
         g1_bytes,
         first_g1_reply,
@@ -553,7 +576,10 @@ pub struct StreamResult {
 /// Lines per second from a file of short G1 segments at `baud` with
 /// printcore numbering and ok flow control: lines acknowledged, divided by
 /// the time from the first segment's first byte to the last segment's `ok`
-/// arriving at the host.
+/// arriving at the host. The segments are 0.2 mm at 100 mm/s (500 a
+/// second of motion), so the firmware and the wire set the rate, not the
+/// moves: with 1 mm segments (until session 8) the planner filled and the
+/// figure was the motion's 100 lines/s, whatever the firmware could take.
 pub fn stream_rate(elf: &Path, baud: u32, segments: usize) -> Result<StreamResult, String> {
     let mut board = boot(elf, RampsConfig::stock(baud))?;
     let expected_frame = 10 * u64::from(CPU_HZ) / u64::from(baud);
@@ -564,7 +590,7 @@ pub fn stream_rate(elf: &Path, baud: u32, segments: usize) -> Result<StreamResul
             10.0 * f64::from(CPU_HZ) / frame as f64
         ));
     }
-    let job = short_segments(segments);
+    let job = segments_of(segments, 0.2);
     let header = 5;
     board.send(job.iter());
     let timeout = segments as f64 * 0.05 + 5.0;

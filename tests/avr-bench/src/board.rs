@@ -373,6 +373,9 @@ struct Shared {
     /// Inclusive profile: cycles per function entry (word address) with
     /// everything it called, and the shadow call stack that feeds it.
     inclusive: Option<(Vec<u64>, Vec<(u32, u16)>)>,
+    /// The inclusive profile counts main-loop cycles only (not those of
+    /// the handlers that interrupted a function).
+    inclusive_main_only: bool,
     /// SPEC §1's NSE-5310s on the TWI bus, once attached.
     nse: Option<Nse5310Pair>,
 }
@@ -582,6 +585,7 @@ impl Board {
                 main_cli_open: None,
                 profile: None,
                 inclusive: None,
+                inclusive_main_only: false,
                 nse: None,
             });
             shared.next_sample = shared.sample_period_cycles;
@@ -831,8 +835,10 @@ impl Board {
                     // was pushed): a frame ends when SP rises above it,
                     // whatever popped it (ret, reti, a tail call's ret).
                     let word = u16::from(*(*avr).flash.add(pc_before as usize)) | u16::from(*(*avr).flash.add(pc_before as usize + 1)) << 8;
-                    for &(entry, _) in stack.iter() {
-                        cycles[(entry / 2) as usize] += spent;
+                    if nesting == 0 || !(*shared).inclusive_main_only {
+                        for &(entry, _) in stack.iter() {
+                            cycles[(entry / 2) as usize] += spent;
+                        }
                     }
                     let sp = u16::from(*(*avr).data.add(SPL)) | u16::from(*(*avr).data.add(SPH)) << 8;
                     while stack.last().is_some_and(|&(_, at)| sp > at) {
@@ -1289,6 +1295,12 @@ impl Board {
     /// interrupt entries; a handler's cycles count for what it interrupted).
     pub fn inclusive_profile(&mut self, on: bool) {
         self.shared.inclusive = on.then(|| (vec![0; (crate::elf::FLASH_BYTES / 2) as usize], Vec::new()));
+    }
+
+    /// The inclusive profile counts only the main loop's own cycles: a
+    /// function's figure leaves out the handlers that interrupted it.
+    pub fn inclusive_main_loop_only(&mut self, on: bool) {
+        self.shared.inclusive_main_only = on;
     }
 
     /// Inclusive cycles per function, highest first.

@@ -173,15 +173,16 @@ fn main() {
             key: "parse_cycles_per_g1_line",
             value: Ok(p.cycles_per_line().round()),
             shown: format!(
-                "{} cycles ({:.0} µs; G1 {} − empty line {}, medians of {})",
+                "{} cycles ({:.0} µs; to its ok: G1 {} − empty line {}, medians of {}; then planning {})",
                 group(p.cycles_per_line().round()),
                 p.cycles_per_line() / 16.0,
                 group(p.g1_median),
                 group(p.baseline_median),
-                p.lines
+                p.lines,
+                group(p.planning_mean.round())
             ),
             anchor: format!(
-                "the line's own wire time at 250000 baud: {} cycles; measures lex+parse+protocol+planning (first reply: {:?})",
+                "the line's own wire time at 250000 baud: {} cycles; measures lex+parse+protocol+planning, the planning after the ok (first reply: {:?})",
                 group(wire_250k(p.g1_bytes)),
                 p.first_g1_reply
             ),
