@@ -52,7 +52,9 @@ fn times_ten_plus(value: u32, digit: u8) -> Option<u32> {
     if value > TIMES_TEN_LIMIT {
         return None;
     }
-    let result = value * 10 + u32::from(digit);
+    // ·10 as ·8 + ·2: a 32-bit multiplication is a library call on the
+    // AVR (≈ 100 cycles a digit more).
+    let result = (value << 3) + (value << 1) + u32::from(digit);
     if result > i32::MAX as u32 {
         None
     } else {

@@ -62,9 +62,9 @@ impl SpeedSqr {
     pub const ZERO: Self = Self(0);
     const PER_MM2_S2: f32 = 256.0;
 
-    /// From (mm/s)².
+    /// From (mm/s)² (`to_u32` saturates: no bound needed).
     pub fn from_mm2_s2(value: f32) -> Self {
-        Self(to_u32(min(value * Self::PER_MM2_S2, u32::MAX as f32)))
+        Self(to_u32(value * Self::PER_MM2_S2))
     }
 
     /// In (mm/s)².

@@ -29,6 +29,9 @@ fn main() {
     let mut board = bench::boot(&elf, config).unwrap_or_else(|e| panic!("{e}"));
     board.profile(true);
     board.inclusive_profile(true);
+    // FERROSTEP_PROFILE_MAIN_ONLY: the inclusive figures leave out the
+    // handlers that interrupted each function (the main loop's own cost).
+    board.inclusive_main_loop_only(std::env::var_os("FERROSTEP_PROFILE_MAIN_ONLY").is_some());
     board.sample_pcs(2_000);
     let start = board.cycle();
     let isr_start = board.stats().isr_cycles;
