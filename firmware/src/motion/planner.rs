@@ -285,6 +285,22 @@ impl Planner {
         }
     }
 
+    /// The oldest block's exit speed can no longer change: the next block
+    /// exists and is at or before `planned`, which the passes never touch
+    /// again (see the module comment). Its segments may then be queued as
+    /// far ahead as the interrupt's queue allows.
+    pub fn exit_is_final(&self) -> bool {
+        let following = next(self.tail);
+        if self.is_empty() || following == self.head {
+            return false;
+        }
+        let slots = PLANNER_SLOTS as u8;
+        // Ring distances from the oldest block.
+        let to_planned = (self.planned + slots - self.tail) % slots;
+        let to_head = (self.head + slots - self.tail) % slots;
+        to_planned >= 1 && to_planned < to_head
+    }
+
     /// The oldest block is fully prepared: drop it.
     pub fn discard_current(&mut self) {
         if self.is_empty() {

@@ -53,13 +53,16 @@ pub const SPEED_RATIO: f32 = 1.5;
 /// when it has nothing else to do.
 const SEGMENTS_PER_FILL: usize = 2;
 /// Step time [`Prep::fill`] keeps queued for the interrupt, in
-/// [`QUEUED_UNIT_TICKS`]: 25 ms. Enough to cover the longest main-loop pass
-/// of a print (a line parsed and planned, a report written: a few ms),
-/// and no more: what is queued is committed, and the look-ahead can only
-/// raise the speed of blocks not yet cut into segments. Queuing the whole
-/// segment queue (15 × 5–10 ms) committed the deceleration of the newest
-/// block before the host's next line could arrive, and a stream of short
-/// lines slowed itself down.
+/// [`QUEUED_UNIT_TICKS`], while the running block's exit speed may still
+/// change: 25 ms. Enough to cover a main-loop pass of a print (a line
+/// parsed and planned, a report written: a few ms), and no more: what is
+/// queued is committed, and the look-ahead can only raise the speed of
+/// blocks not yet cut into segments. Queuing the whole segment queue
+/// (15 × 5–10 ms) committed the deceleration of the newest block before
+/// the host's next line could arrive, and a stream of short lines slowed
+/// itself down. Once the exit is final (`Planner::exit_is_final`) the
+/// whole queue fills, so a long pass (`M500` writing the EEPROM) does not
+/// stop the steps.
 const QUEUED_TARGET: u16 = 25_000 / 32;
 /// Below this much queued (10 ms), or with fewer than two segments,
 /// [`Prep::fill`] queues up to [`SEGMENTS_PER_FILL`] at once; above it one
@@ -317,7 +320,10 @@ impl Prep {
         // line that arrived waits for one segment's preparation at most.
         while queued < SEGMENTS_PER_FILL {
             let enough_segments = feeder.queued_segments() >= 2;
-            if enough_segments && (self.queued_time >= QUEUED_TARGET || (queued > 0 && self.queued_time >= QUEUED_LOW)) {
+            if enough_segments && queued > 0 && self.queued_time >= QUEUED_LOW {
+                break;
+            }
+            if enough_segments && self.queued_time >= QUEUED_TARGET && !planner.exit_is_final() {
                 break;
             }
             let starts_block = !self.active;
@@ -515,6 +521,31 @@ mod tests {
         }
         assert!(prep.fill(&mut planner, &mut feeder) >= 1);
         assert!(planner.current().is_some_and(|block| block.millimetres > 90.0));
+    }
+
+    /// Once the running block's exit can no longer change (the next block
+    /// is planned for good), the whole segment queue fills: a long main-loop
+    /// pass then does not stop the steps.
+    #[test]
+    fn fill_queues_further_once_the_exit_is_final() {
+        use super::super::planner::{MotorLimits, PlannerMove};
+        use super::super::stepper::{StepQueues, MOTORS, SEGMENT_SLOTS};
+        let mut queues = StepQueues::new();
+        let (mut feeder, _generator) = queues.split(Default::default());
+        let mut planner = Planner::new();
+        let limits = MotorLimits { max_rate: [100_000.0; MOTORS], max_accel: [1.0e6; MOTORS] };
+        let motion = PlannerMove { steps: [10_000, 0, 0, 0], millimetres: 100.0, unit: [1.0, 0.0, 0.0, 0.0], speed: 50.0, acceleration: 1.0e6, watch: 0, watch_release: false };
+        planner.push(&motion, &limits).unwrap();
+        assert!(!planner.exit_is_final());
+        planner.push(&motion, &limits).unwrap();
+        // Straight on at the same feed: the second block enters at full
+        // speed, its best, and is planned for good.
+        assert!(planner.exit_is_final());
+        let mut prep = Prep::new();
+        for _ in 0..40 {
+            prep.fill(&mut planner, &mut feeder);
+        }
+        assert_eq!(feeder.queued_segments(), SEGMENT_SLOTS - 1);
     }
 
     #[test]
