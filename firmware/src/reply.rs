@@ -85,6 +85,26 @@ impl ufmt::uDisplay for Fixed {
     }
 }
 
+/// An unsigned whole number (`u8`, `u16`) printed by [`write_fixed`]:
+/// with every one printed this way, `ufmt`'s `u8`, `u16` and `usize`
+/// printers (≈ 270 bytes on the AVR) are not in the firmware. The value
+/// goes to one out-of-line writer in two registers, not as a pointer to a
+/// copy on the stack nor as an `i32` and a digit count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Whole(pub u16);
+
+impl ufmt::uDisplay for Whole {
+    #[inline(always)]
+    fn fmt<W: uWrite + ?Sized>(&self, f: &mut Formatter<'_, W>) -> Result<(), W::Error> {
+        write_whole(f, self.0)
+    }
+}
+
+#[inline(never)]
+fn write_whole<W: uWrite + ?Sized>(f: &mut Formatter<'_, W>, value: u16) -> Result<(), W::Error> {
+    write_fixed(f, i32::from(value), 0)
+}
+
 /// Bytes shown to the user as text, with anything unprintable replaced by `?`
 /// (an echo of garbage must not become garbage on the host's terminal).
 pub struct Printable<'a>(pub &'a [u8]);
@@ -144,6 +164,13 @@ mod tests {
     fn a_whole_fixed_prints_as_ufmt_prints_the_i32() {
         for n in [0, 1, -1, 9, 10, -10, 99, 100, 12345, -70000, i32::MAX, i32::MIN, i32::MIN + 1] {
             assert_eq!(shown(Fixed::whole(n)), shown(n), "{n}");
+        }
+    }
+
+    #[test]
+    fn a_whole_prints_as_ufmt_prints_the_u16() {
+        for n in [0u16, 1, 9, 10, 99, 100, 255, 256, 12345, u16::MAX] {
+            assert_eq!(shown(Whole(n)), shown(n), "{n}");
         }
     }
 

@@ -35,7 +35,7 @@ use core::mem::MaybeUninit;
 use core::ptr::addr_of_mut;
 use crate::line::{Line, MAX_LINE};
 use crate::protocol::HostProtocol;
-use crate::reply::Printable;
+use crate::reply::{Printable, Whole};
 #[cfg(feature = "printer")]
 use crate::reply::Fixed;
 use crate::settings::{self, Settings};
@@ -399,7 +399,7 @@ impl<'q> Machine<'q> {
         match storage::load(storage) {
             Ok((settings, stored)) => {
                 self.settings = settings;
-                ufmt::uwrite!(out, "echo:V{} stored settings retrieved (", storage::LAYOUT_VERSION)?;
+                ufmt::uwrite!(out, "echo:V{} stored settings retrieved (", Whole(storage::LAYOUT_VERSION.into()))?;
                 write_stored(&stored, out)
             }
             Err(error) => {
@@ -408,14 +408,14 @@ impl<'q> Machine<'q> {
                     LoadError::Corrupt { stored, computed } => ufmt::uwrite!(
                         out,
                         "echo:EEPROM CRC mismatch - (stored) {} != {} (calculated)!\n",
-                        stored,
-                        computed
+                        Whole(stored.into()),
+                        Whole(computed.into())
                     )?,
                     LoadError::OldVersion(version) => ufmt::uwrite!(
                         out,
                         "echo:EEPROM version mismatch (EEPROM=V{} Firmware=V{})\n",
-                        version,
-                        storage::LAYOUT_VERSION
+                        Whole(version.into()),
+                        Whole(storage::LAYOUT_VERSION.into())
                     )?,
                     LoadError::TooSmall => out.write_str("echo:EEPROM too small for the settings\n")?,
                 }
@@ -574,7 +574,7 @@ impl<'q> Machine<'q> {
             // Spindle and coolant: this machine has neither, so "off" holds.
             Code::M(3 | 4 | 7 | 8) => {
                 let Code::M(number) = code else { return Ok(Ok(())) };
-                ufmt::uwrite!(out, "echo:M{} ignored: no spindle or coolant on this machine\n", number)?;
+                ufmt::uwrite!(out, "echo:M{} ignored: no spindle or coolant on this machine\n", Whole(number.into()))?;
             }
             // Nothing of these is ever active: no cutter or tool-length
             // compensation, no canned cycles; path blending is the planner's.
@@ -654,7 +654,7 @@ impl<'q> Machine<'q> {
             // take as fatal.
             #[cfg(not(feature = "printer"))]
             Code::M(code @ (114 | 119 | 120 | 121)) => {
-                ufmt::uwrite!(out, "echo:M{} ignored: this machine has no printer axes\n", code)?;
+                ufmt::uwrite!(out, "echo:M{} ignored: this machine has no printer axes\n", Whole(code.into()))?;
                 Ok(())
             }
             code if gcode::is_mode_setting(code) => self.apply_setting(code, out)?,
@@ -785,7 +785,7 @@ impl<'q> Machine<'q> {
         if tool < EXTRUDERS {
             return Ok(());
         }
-        ufmt::uwrite!(out, "echo:T{} Invalid extruder\n", tool)
+        ufmt::uwrite!(out, "echo:T{} Invalid extruder\n", Whole(tool.into()))
     }
 
     #[cfg(feature = "heaters")]
@@ -1011,7 +1011,7 @@ const HALTED_M105_TO_M119: u16 = {
 /// one copy of the code for both.
 #[inline(never)]
 fn write_stored<W: uWrite + ?Sized>(stored: &storage::Stored, out: &mut W) -> Result<(), W::Error> {
-    ufmt::uwrite!(out, "{} bytes; crc {})\n", stored.bytes, stored.crc)
+    ufmt::uwrite!(out, "{} bytes; crc {})\n", Whole(stored.bytes as u16), Whole(stored.crc.into()))
 }
 
 /// `before`, the line's text (trimmed, unprintable bytes masked), `after`:

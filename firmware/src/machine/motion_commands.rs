@@ -84,7 +84,7 @@ impl<'q> Machine<'q> {
             }
             MotionError::Fault(StepFault::LimitHit(switches)) => {
                 self.lose_position();
-                ufmt::uwrite!(out, "Error:Endstop hit during a move (switches {}): motion stopped, home with G28\n", switches)
+                ufmt::uwrite!(out, "Error:Endstop hit during a move (switches {}): motion stopped, home with G28\n", crate::reply::Whole(switches.into()))
             }
             other => {
                 self.lose_position();
@@ -418,7 +418,7 @@ impl<'q> Machine<'q> {
         }
         if !any {
             // `echo:  M665 L361.00 R227.00 H300.00` and the like.
-            let _ = ufmt::uwrite!(out, "echo:  M{}", code as u16);
+            let _ = ufmt::uwrite!(out, "echo:  M{}", crate::reply::Whole(code as u16));
             for (&letter, &value) in letters.iter().zip(&values) {
                 let _ = ufmt::uwrite!(
                     out,

@@ -247,7 +247,7 @@ impl<'q> Machine<'q> {
                     crate::thermal::report::write_temperature_fields(&self.hotend, Some(&self.bed), out)?;
                     out.write_str(" W:")?;
                     match left {
-                        Some(s) => ufmt::uwrite!(out, "{}\n", s)?,
+                        Some(s) => ufmt::uwrite!(out, "{}\n", crate::reply::Whole(s.into()))?,
                         None => out.write_str("?\n")?,
                     }
                 }

@@ -125,7 +125,7 @@ impl CycleReport {
     /// a result, ` Ku: 33.18 Tu: 21.34` / ` Classic PID ` /
     /// ` Kp: 19.91 Ki: 1.87 Kd: 53.00`.
     pub fn write<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, " bias: {} d: {} min: {} max: {}", self.bias, self.d, self.min, self.max)?;
+        ufmt::uwrite!(out, " bias: {} d: {} min: {} max: {}", crate::reply::Whole(self.bias.into()), crate::reply::Whole(self.d.into()), self.min, self.max)?;
         match &self.result {
             Some(result) => {
                 let tu = crate::reply::Fixed { mantissa: (result.period_ms / 10) as i32, digits: 2 };

@@ -79,7 +79,7 @@ impl Gains {
     /// `M<code> P… I… D…` (no newline): `M301` for a hot end, `M304` for
     /// the bed.
     pub fn write_as<W: ufmt::uWrite + ?Sized>(&self, code: u16, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "M{} P{} I{} D{}", code, Gain(self.kp), Gain(self.ki), Gain(self.kd))
+        ufmt::uwrite!(out, "M{} P{} I{} D{}", crate::reply::Whole(code.into()), Gain(self.kp), Gain(self.ki), Gain(self.kd))
     }
 }
 
