@@ -396,9 +396,8 @@ impl<'q> Machine<'q> {
     }
 
     fn report_loaded_settings<W: uWrite + ?Sized>(&mut self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
-        match storage::load(storage) {
-            Ok((settings, stored)) => {
-                self.settings = settings;
+        match storage::load_into(storage, &mut self.settings) {
+            Ok(stored) => {
                 ufmt::uwrite!(out, "echo:V{} stored settings retrieved (", Whole(storage::LAYOUT_VERSION.into()))?;
                 write_stored(&stored, out)
             }
