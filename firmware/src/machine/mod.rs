@@ -513,8 +513,13 @@ impl<'q> Machine<'q> {
         storage: &mut dyn NonVolatile,
         out: &mut W,
     ) -> Result<Outcome, W::Error> {
-        let mut command = Command::new(Code::Other);
-        match gcode::parse_into(text, &mut command) {
+        // SAFETY: the main loop; the protocol's use of the command ended
+        // with the line's reception.
+        #[cfg(target_arch = "avr")]
+        let command = unsafe { Command::scratch() };
+        #[cfg(not(target_arch = "avr"))]
+        let command = &mut Command::new(Code::Other);
+        match gcode::parse_into(text, command) {
             Ok(()) => {}
             Err(ParseError::Empty) => return Ok(Outcome::Done),
             // Arguments that do not parse are an error only for commands we
@@ -542,7 +547,7 @@ impl<'q> Machine<'q> {
                 return Ok(Outcome::Failed(error));
             }
         }
-        let outcome = self.dispatch(&command, text, now_ms, storage, out);
+        let outcome = self.dispatch(command, text, now_ms, storage, out);
         self.modal.machine_frame = false;
         outcome
     }
