@@ -488,10 +488,8 @@ impl<'q> Machine<'q> {
                 error.write(out)?;
                 write_ok(out)
             }
-            Outcome::Started(running) => {
-                self.running = running;
-                Ok(())
-            }
+            // `running` is already set.
+            Outcome::Started => Ok(()),
         }
     }
 
@@ -622,7 +620,7 @@ impl<'q> Machine<'q> {
         #[cfg(feature = "powder-bed")]
         if let Some(result) = self.bed_command(command, out)? {
             return Ok(match result {
-                Ok(Some(running)) => Outcome::Started(running),
+                Ok(Some(running)) => self.start(running),
                 Ok(None) => Outcome::Done,
                 Err(error) => Outcome::Failed(error),
             });
@@ -664,7 +662,7 @@ impl<'q> Machine<'q> {
             code if gcode::is_mode_setting(code) => self.apply_setting(code, out)?,
             Code::M(2 | 30) => {
                 self.end_program();
-                return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false }));
+                return Ok(self.start(Running::WaitForMotion { then_disable: false }));
             }
             Code::G(92) => self.modal.set_logical_position(command),
             Code::M(82) => {
@@ -679,7 +677,7 @@ impl<'q> Machine<'q> {
                 self.steppers_enabled = true;
                 Ok(())
             }
-            Code::M(18 | 84) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: true })),
+            Code::M(18 | 84) => return Ok(self.start(Running::WaitForMotion { then_disable: true })),
             Code::M(105) => {
                 self.report_temperatures_on_ok(out)?;
                 return Ok(Outcome::Acknowledged);
@@ -704,7 +702,7 @@ impl<'q> Machine<'q> {
             #[cfg(feature = "printer")]
             Code::M(119) => self.report_endstops(out).map(Ok)?,
             Code::M(155) => self.set_auto_report(command, now_ms),
-            Code::M(400) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false })),
+            Code::M(400) => return Ok(self.start(Running::WaitForMotion { then_disable: false })),
             #[cfg(feature = "printer")]
             Code::M(code @ (120 | 121)) => self.set_endstops_always(code == 120),
             #[cfg(feature = "delta")]
@@ -741,6 +739,13 @@ impl<'q> Machine<'q> {
             Ok(()) => Outcome::Done,
             Err(error) => Outcome::Failed(error),
         })
+    }
+
+    /// Start a command that runs on (`ok` when it finishes).
+    #[inline(always)]
+    fn start(&mut self, running: Running) -> Outcome {
+        self.running = running;
+        Outcome::Started
     }
 
     /// `M105`: Marlin puts the report on the `ok` line itself.
@@ -1042,8 +1047,11 @@ enum Outcome {
     Acknowledged,
     /// Refused: send the error, then `ok`.
     Failed(CommandError),
-    /// Still running: `ok` when it finishes.
-    Started(Running),
+    /// Still running (`Machine::running` says what): `ok` when it
+    /// finishes. The running state is stored where it is kept, not
+    /// carried here: with the auto-tune in it, this made the executor's
+    /// frame larger than the 63 bytes the AVR reaches in one instruction.
+    Started,
 }
 
 #[cfg(feature = "printer")]

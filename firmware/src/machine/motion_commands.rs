@@ -314,7 +314,7 @@ impl<'q> Machine<'q> {
             (Err(e), _) | (_, Err(e)) => return Outcome::Failed(e.into()),
         };
         match ms {
-            Some(ms) if ms >= 0 => Outcome::Started(Running::DwellAfterMotion { ms: ms as u32 }),
+            Some(ms) if ms >= 0 => self.start(Running::DwellAfterMotion { ms: ms as u32 }),
             _ => Outcome::Failed(CommandError::OutOfRange(if command.has(b'P') {
                 b'P'
             } else {
@@ -339,7 +339,7 @@ impl<'q> Machine<'q> {
         match self.motion.home(motors) {
             Ok(()) => {
                 self.steppers_enabled = true;
-                Outcome::Started(Running::Homing)
+                self.start(Running::Homing)
             }
             Err(error) => Outcome::Failed(CommandError::Motion(error)),
         }

@@ -223,7 +223,7 @@ impl<'q> Machine<'q> {
             None => Outcome::Done,
             Some(config) => {
                 self.last_report_ms = now_ms;
-                Outcome::Started(Running::HeatWait { slot, wait: TemperatureWait::new(config, target, cooling, now_ms) })
+                self.start(Running::HeatWait { slot, wait: TemperatureWait::new(config, target, cooling, now_ms) })
             }
         })
     }
@@ -344,6 +344,6 @@ impl<'q> Machine<'q> {
             return Ok(Outcome::Failed(CommandError::Halted));
         }
         crate::flash_str!("PID Autotune start\n").write_to(out)?;
-        Ok(Outcome::Started(Running::Autotune { slot, apply, tune }))
+        Ok(self.start(Running::Autotune { slot, apply, tune }))
     }
 }
