@@ -190,6 +190,23 @@ fn settings_commands_change_what_m503_prints() {
 }
 
 #[test]
+fn m303_refuses_each_word_out_of_its_range() {
+    for (line, expected) in [
+        ("M303 E1 S200\n", "Error:Value out of range for E\nok\n"),
+        ("M303 E-2\n", "Error:Value out of range for E\nok\n"),
+        ("M303 S0\n", "Error:Value out of range for S\nok\n"),
+        ("M303 E-1 S400.6\n", "Error:Value out of range for S\nok\n"),
+        ("M303 C2\n", "Error:Value out of range for C\nok\n"),
+        ("M303 C20.5\n", "Error:Value out of range for C\nok\n"),
+        ("M303 E5 C2\n", "Error:Value out of range for E\nok\n"),
+        ("M303 U\n", "Error:Missing value after U\nok\n"),
+    ] {
+        assert_eq!(reply(line), expected, "{line}");
+    }
+    assert_eq!(reply("M303 E0.4 S399.5 C2.5 U-7\n"), "PID Autotune start\n");
+}
+
+#[test]
 fn invalid_settings_are_refused_whole() {
     let mut machine = new_machine();
     assert_eq!(converse(&mut machine, 0, "M92 X80 Y-1\n"), "Error:Value out of range for Y\nok\n");

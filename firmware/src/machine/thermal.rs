@@ -310,27 +310,19 @@ impl<'q> Machine<'q> {
     /// `M303 E<0|-1> S<°C> C<cycles> [U1]`: relay auto-tune of the hot end
     /// (`E0`) or the bed (`E-1`).
     pub(super) fn autotune<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<Outcome, W::Error> {
-        let int = |letter, default: i32| -> Result<i32, CommandError> {
-            match command.value(letter)? {
-                None => Ok(default),
-                Some(v) => v.to_int().ok_or(CommandError::OutOfRange(letter)),
-            }
-        };
+        // Each word through the settings' reader (`set_scaled`: a whole
+        // number within its range, else out of range; absent, the default).
         let parsed = (|| -> Result<(HeaterSlot, i32, u8, bool), CommandError> {
-            let slot = match int(b'E', 0)? {
-                0 => HeaterSlot::Hotend,
-                -1 => HeaterSlot::Bed,
-                _ => return Err(CommandError::OutOfRange(b'E')),
-            };
-            let target = int(b'S', if slot == HeaterSlot::Bed { 70 } else { 150 })?;
-            if !(1..=400).contains(&target) {
-                return Err(CommandError::OutOfRange(b'S'));
-            }
-            let cycles = int(b'C', 5)?;
-            if !(3..=20).contains(&cycles) {
-                return Err(CommandError::OutOfRange(b'C'));
-            }
-            Ok((slot, target, cycles as u8, int(b'U', 0)? != 0))
+            let mut e = 0;
+            super::set_scaled(command, b'E', 0, -1, 0, &mut e)?;
+            let slot = if e == 0 { HeaterSlot::Hotend } else { HeaterSlot::Bed };
+            let mut target = if slot == HeaterSlot::Bed { 70 } else { 150 };
+            super::set_scaled(command, b'S', 0, 1, 400, &mut target)?;
+            let mut cycles = 5;
+            super::set_scaled(command, b'C', 0, 3, 20, &mut cycles)?;
+            let mut apply = 0;
+            super::set_scaled(command, b'U', 0, i32::MIN, i32::MAX, &mut apply)?;
+            Ok((slot, target, cycles as u8, apply != 0))
         })();
         let (slot, target, cycles, apply) = match parsed {
             Ok(p) => p,
