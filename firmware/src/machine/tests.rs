@@ -207,6 +207,22 @@ fn m303_refuses_each_word_out_of_its_range() {
 }
 
 #[test]
+fn m301_refuses_bad_gains_and_keeps_the_old_ones() {
+    let mut machine = new_machine();
+    for (line, expected) in [
+        ("M301 P-1\n", "Error:Value out of range for P\nok\n"),
+        ("M301 I-0.5 D3\n", "Error:Value out of range for P\nok\n"),
+        ("M301 D300000\n", "Error:Value out of range for D\nok\n"),
+        ("M301 P1 I\n", "Error:Missing value after I\nok\n"),
+        ("M301 P1 I2 D\n", "Error:Missing value after D\nok\n"),
+    ] {
+        assert_eq!(converse(&mut machine, 0, line), expected, "{line}");
+    }
+    assert_eq!(converse(&mut machine, 0, "M301\n"), "echo:M301 P22.20 I1.08 D114.00\nok\n");
+    assert_eq!(converse(&mut machine, 0, "M301 D0.5\nM301\n"), "ok\necho:M301 P22.20 I1.08 D0.50\nok\n");
+}
+
+#[test]
 fn invalid_settings_are_refused_whole() {
     let mut machine = new_machine();
     assert_eq!(converse(&mut machine, 0, "M92 X80 Y-1\n"), "Error:Value out of range for Y\nok\n");

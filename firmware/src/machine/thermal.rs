@@ -270,20 +270,20 @@ impl<'q> Machine<'q> {
     /// without any, the current gains.
     pub(super) fn set_pid<W: uWrite + ?Sized>(&mut self, command: &Command, slot: HeaterSlot, out: &mut W) -> Result<(), CommandError> {
         let current = self.channel(slot).gains();
-        let read = |letter, now: u32| -> Result<i32, CommandError> {
-            match command.value(letter)? {
-                None => Ok(now as i32),
-                Some(v) => v.to_scaled(4).ok_or(CommandError::OutOfRange(letter)),
-            }
-        };
         if !(command.has(b'P') || command.has(b'I') || command.has(b'D')) {
             let _ = out.write_str("echo:");
             let _ = current.write_as(if slot == HeaterSlot::Bed { 304 } else { 301 }, out);
             let _ = out.write_str("\n");
             return Ok(());
         }
-        let gains = Gains::new(read(b'P', current.kp)?, read(b'I', current.ki)?, read(b'D', current.kd)?)
-            .ok_or(CommandError::OutOfRange(b'P'))?;
+        // Each given word replaces its gain (× 10⁴), read by the settings'
+        // reader; the gains' own bounds are checked together after.
+        let mut values = [current.kp as i32, current.ki as i32, current.kd as i32];
+        for (value, &letter) in values.iter_mut().zip(b"PID") {
+            super::set_scaled(command, letter, 4, i32::MIN, i32::MAX, value)?;
+        }
+        let [kp, ki, kd] = values;
+        let gains = Gains::new(kp, ki, kd).ok_or(CommandError::OutOfRange(b'P'))?;
         self.channel(slot).set_gains(gains);
         self.store_gains(slot, gains);
         Ok(())
