@@ -209,12 +209,6 @@ impl<'q> Machine<'q> {
         };
         let feed = self.modal.read_feed(command)?;
         let mut target = self.modal.target(command)?;
-        let offset = |letter| -> Result<Option<i32>, CommandError> {
-            command
-                .value(letter)?
-                .map(|value| self.modal.length_um(letter, value))
-                .transpose()
-        };
         // The centre's offset along the plane's two axes (Grbl: I J, K I, J K).
         let plane = self.modal.plane;
         let (first, second) = match plane {
@@ -222,11 +216,20 @@ impl<'q> Machine<'q> {
             Plane::Zx => (b'K', b'I'),
             Plane::Yz => (b'J', b'K'),
         };
-        let (i, j, r) = (offset(first)?, offset(second)?, offset(b'R')?);
-        let centre = match (i, j, r) {
-            (None, None, Some(r)) => ArcCentre::Radius(r),
-            (None, None, None) => return Err(CommandError::Missing(b'R')),
-            (i, j, _) => ArcCentre::Offset([i.unwrap_or(0), j.unwrap_or(0)]),
+        // The three words in µm (0 when absent) and which were given (bit
+        // 0, 1, 2): a loop and a mask, not three `Result<Option<i32>>`.
+        let (mut values, mut given, mut bit) = ([0i32; 3], 0u8, 1u8);
+        for (value, letter) in values.iter_mut().zip([first, second, b'R']) {
+            if let Some(word) = command.value(letter)? {
+                *value = self.modal.length_um(letter, word)?;
+                given |= bit;
+            }
+            bit <<= 1;
+        }
+        let centre = match given {
+            0b100 => ArcCentre::Radius(values[2]),
+            0 => return Err(CommandError::Missing(b'R')),
+            _ => ArcCentre::Offset([values[0], values[1]]),
         };
         self.modal.motion_mode = if clockwise {
             MotionMode::ClockwiseArc

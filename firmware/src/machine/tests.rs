@@ -319,6 +319,15 @@ fn fan_commands_set_the_duty() {
 #[test]
 fn arcs_need_a_centre_or_a_radius() {
     assert_eq!(reply("G2 X10 Y10\n"), "Error:Missing R word\nok\n");
+    // Every word is read (in the order I, J, R) before the centre is chosen.
+    assert_eq!(reply("G2 X10 I5 R\n"), "Error:Missing value after R\nok\n");
+    assert_eq!(reply("G2 X10 J R5 I\n"), "Error:Missing value after I\nok\n");
+    assert_eq!(reply("G2 X10 I5 R99999999\n"), "Error:Value out of range for R\nok\n");
+    // A centre offset wins over R; R alone is the radius.
+    assert_eq!(reply("G2 X10 Y10 R10\n"), "ok\n");
+    assert_eq!(reply("G3 X10 Y10 I5 J5 R1\n"), "ok\n");
+    assert_eq!(reply("G2 X10 J5\n"), "Error:Arc end is not on the circle\nok\n");
+    assert_eq!(reply("G2 X10 R-10\n"), "ok\n");
 }
 
 #[test]
