@@ -223,6 +223,27 @@ fn m301_refuses_bad_gains_and_keeps_the_old_ones() {
 }
 
 #[test]
+fn m302_sets_and_reports_the_cold_extrusion_interlock() {
+    let mut machine = new_machine();
+    for (line, expected) in [
+        ("M302\n", "echo:Cold extrudes are disabled (min temp 170C)\nok\n"),
+        ("M302 S1001\n", "Error:Value out of range for S\nok\n"),
+        ("M302 S-1\n", "Error:Value out of range for S\nok\n"),
+        ("M302 S\n", "Error:Missing value after S\nok\n"),
+        ("M302 S180 P\n", "Error:Missing value after P\nok\n"),
+        ("M302\n", "echo:Cold extrudes are disabled (min temp 170C)\nok\n"),
+        ("M302 S0\n", "ok\n"),
+        ("M302\n", "echo:Cold extrudes are enabled (min temp 0C)\nok\n"),
+        ("M302 P-2\n", "ok\n"),
+        ("M302\n", "echo:Cold extrudes are enabled (min temp 0C)\nok\n"),
+        ("M302 S1000.4 P0\n", "ok\n"),
+        ("M302\n", "echo:Cold extrudes are disabled (min temp 1000C)\nok\n"),
+    ] {
+        assert_eq!(converse(&mut machine, 0, line), expected, "{line}");
+    }
+}
+
+#[test]
 fn invalid_settings_are_refused_whole() {
     let mut machine = new_machine();
     assert_eq!(converse(&mut machine, 0, "M92 X80 Y-1\n"), "Error:Value out of range for Y\nok\n");

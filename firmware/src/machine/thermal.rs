@@ -292,14 +292,14 @@ impl<'q> Machine<'q> {
     #[cfg(feature = "heaters")]
     /// `M302 [S<°C>] [P<0|1>]`: the cold-extrusion interlock.
     pub(super) fn cold_extrusion_command<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
-        let min = match command.value(b'S')? {
-            None => None,
-            Some(v) => Some(Celsius(v.to_int().filter(|t| (0..=1000).contains(t)).ok_or(CommandError::OutOfRange(b'S'))? * 100)),
-        };
-        let allow = match command.value(b'P')? {
-            None => None,
-            Some(v) => Some(v.to_int().ok_or(CommandError::OutOfRange(b'P'))? != 0),
-        };
+        // Both words by the settings' reader; −1 (outside S's range) and
+        // `has` tell whether each was given.
+        let mut min = -1;
+        super::set_scaled(command, b'S', 0, 0, 1000, &mut min)?;
+        let min = (min >= 0).then(|| Celsius(min * 100));
+        let mut allow = 0;
+        super::set_scaled(command, b'P', 0, i32::MIN, i32::MAX, &mut allow)?;
+        let allow = command.has(b'P').then_some(allow != 0);
         if self.cold_extrusion.m302(min, allow) {
             let _ = self.cold_extrusion.write_state(out);
         }
