@@ -398,7 +398,7 @@ impl<'q> Machine<'q> {
     fn report_loaded_settings<W: uWrite + ?Sized>(&mut self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
         match storage::load_into(storage, &mut self.settings) {
             Ok(stored) => {
-                ufmt::uwrite!(out, "echo:V{} stored settings retrieved (", Whole(storage::LAYOUT_VERSION.into()))?;
+                crate::flash_concat!("echo:V", LAYOUT_VERSION_TEXT, " stored settings retrieved (").write_to(out)?;
                 write_stored(&stored, out)
             }
             Err(error) => {
@@ -410,12 +410,10 @@ impl<'q> Machine<'q> {
                         Whole(stored.into()),
                         Whole(computed.into())
                     )?,
-                    LoadError::OldVersion(version) => ufmt::uwrite!(
-                        out,
-                        "echo:EEPROM version mismatch (EEPROM=V{} Firmware=V{})\n",
-                        Whole(version.into()),
-                        Whole(storage::LAYOUT_VERSION.into())
-                    )?,
+                    LoadError::OldVersion(version) => {
+                        ufmt::uwrite!(out, "echo:EEPROM version mismatch (EEPROM=V{}", Whole(version.into()))?;
+                        crate::flash_concat!(" Firmware=V", LAYOUT_VERSION_TEXT, ")\n").write_to(out)?
+                    }
                     LoadError::TooSmall => out.write_str("echo:EEPROM too small for the settings\n")?,
                 }
                 self.settings = self.defaults.clone();
@@ -1173,6 +1171,10 @@ pub fn write_capabilities<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Erro
     crate::flash_str!("Cap:CLOSED_LOOP:1\n").write_to(out)?;
     Ok(())
 }
+
+/// [`storage::LAYOUT_VERSION`] as text, for the constant parts of the
+/// `M501` replies (one string in flash, no number to print).
+const LAYOUT_VERSION_TEXT: &str = ["0", "1", "2", "3", "4", "5", "6", "7", "8", "9"][storage::LAYOUT_VERSION as usize];
 
 /// [`EXTRUDERS`] as text, for the constant `M115` reply.
 const EXTRUDERS_TEXT: &str = ["0", "1", "2", "3", "4", "5", "6", "7", "8", "9"][EXTRUDERS as usize];

@@ -388,6 +388,18 @@ fn a_corrupt_image_at_boot_is_reported_and_the_defaults_stay() {
 }
 
 #[test]
+fn an_image_of_another_layout_is_reported_with_both_versions() {
+    let mut eeprom = MemoryStorage::<4096>::new();
+    crate::storage::save(&mut eeprom, &Settings::default()).unwrap();
+    eeprom.bytes[2] = 1;
+    let mut machine = new_machine();
+    let mut out = Text::default();
+    machine.load_settings(&mut eeprom, &mut out).unwrap();
+    assert!(out.0.starts_with("echo:EEPROM version mismatch (EEPROM=V1 Firmware=V2)\n"), "{}", out.0);
+    assert_eq!(machine.settings(), &Settings::default());
+}
+
+#[test]
 fn each_machine_starts_from_its_own_defaults_and_m502_restores_them() {
     let queues: &'static mut StepQueues = Box::leak(Box::new(StepQueues::new()));
     let config = MotionConfig::spec_delta(false);
