@@ -164,8 +164,12 @@ fn m110_argument(body: &[u8]) -> Option<Option<i32>> {
     if !may_be_m110(body) {
         return None;
     }
-    let mut command = crate::gcode::Command::new(crate::gcode::Code::Other);
-    crate::gcode::parse_into(body, &mut command).ok()?;
+    // SAFETY: the main loop, receiving a line: no command is executing.
+    #[cfg(target_arch = "avr")]
+    let command = unsafe { crate::gcode::Command::scratch() };
+    #[cfg(not(target_arch = "avr"))]
+    let command = &mut crate::gcode::Command::new(crate::gcode::Code::Other);
+    crate::gcode::parse_into(body, command).ok()?;
     if command.code != crate::gcode::Code::M(110) {
         return None;
     }

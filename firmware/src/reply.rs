@@ -85,6 +85,51 @@ impl ufmt::uDisplay for Fixed {
     }
 }
 
+/// An unsigned whole number (`u8`, `u16`) printed by [`write_fixed`]:
+/// with every one printed this way, `ufmt`'s `u8`, `u16` and `usize`
+/// printers (≈ 270 bytes on the AVR) are not in the firmware. The value
+/// goes to one out-of-line writer in two registers, not as a pointer to a
+/// copy on the stack nor as an `i32` and a digit count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Whole(pub u16);
+
+impl ufmt::uDisplay for Whole {
+    #[inline(always)]
+    fn fmt<W: uWrite + ?Sized>(&self, f: &mut Formatter<'_, W>) -> Result<(), W::Error> {
+        write_whole(f, self.0)
+    }
+}
+
+#[inline(never)]
+fn write_whole<W: uWrite + ?Sized>(f: &mut Formatter<'_, W>, value: u16) -> Result<(), W::Error> {
+    write_fixed(f, i32::from(value), 0)
+}
+
+/// `c`'s UTF-8 bytes, in order, to `put` (what `char::encode_utf8`
+/// makes, without its buffer and panic path: a board's `write_char`).
+/// The firmware writes ASCII; the longer forms are there for the contract.
+#[inline(always)]
+pub fn utf8_bytes(c: char, mut put: impl FnMut(u8)) {
+    let code = u32::from(c);
+    if code < 0x80 {
+        put(code as u8);
+        return;
+    }
+    // Continuation bytes after the lead byte, and the lead's marker.
+    let (mut extra, lead) = if code < 0x800 {
+        (1u8, 0xC0)
+    } else if code < 0x1_0000 {
+        (2, 0xE0)
+    } else {
+        (3, 0xF0)
+    };
+    put(lead | (code >> (6 * u32::from(extra))) as u8);
+    while extra > 0 {
+        extra -= 1;
+        put(0x80 | ((code >> (6 * u32::from(extra))) & 0x3F) as u8);
+    }
+}
+
 /// Bytes shown to the user as text, with anything unprintable replaced by `?`
 /// (an echo of garbage must not become garbage on the host's terminal).
 pub struct Printable<'a>(pub &'a [u8]);
@@ -144,6 +189,22 @@ mod tests {
     fn a_whole_fixed_prints_as_ufmt_prints_the_i32() {
         for n in [0, 1, -1, 9, 10, -10, 99, 100, 12345, -70000, i32::MAX, i32::MIN, i32::MIN + 1] {
             assert_eq!(shown(Fixed::whole(n)), shown(n), "{n}");
+        }
+    }
+
+    #[test]
+    fn a_whole_prints_as_ufmt_prints_the_u16() {
+        for n in [0u16, 1, 9, 10, 99, 100, 255, 256, 12345, u16::MAX] {
+            assert_eq!(shown(Whole(n)), shown(n), "{n}");
+        }
+    }
+
+    #[test]
+    fn utf8_bytes_are_what_encode_utf8_makes() {
+        for c in ['\0', 'A', '\x7f', '\u{80}', 'é', '\u{7ff}', '\u{800}', '€', '\u{ffff}', '\u{10000}', '😀', char::MAX] {
+            let mut bytes = std::vec::Vec::new();
+            utf8_bytes(c, |b| bytes.push(b));
+            assert_eq!(bytes, c.encode_utf8(&mut [0; 4]).as_bytes(), "{c:?}");
         }
     }
 

@@ -88,8 +88,8 @@ pub fn save(storage: &mut (impl NonVolatile + ?Sized), settings: &Settings) -> R
         return Err(SaveError::TooSmall);
     }
     let (newest_slot, sequence) = match newest(storage) {
-        Some((slot, sequence)) => (Some(slot), sequence.wrapping_add(1)),
-        None => (None, 0),
+        Ok((slot, sequence)) => (Some(slot), sequence.wrapping_add(1)),
+        Err(_) => (None, 0),
     };
     let slot = match newest_slot {
         Some(0) => 1,
@@ -116,39 +116,52 @@ pub fn save(storage: &mut (impl NonVolatile + ?Sized), settings: &Settings) -> R
 
 /// Load the newest valid image.
 pub fn load(storage: &mut (impl NonVolatile + ?Sized)) -> Result<(Settings, Stored), LoadError> {
+    let mut settings = Settings::default();
+    load_into(storage, &mut settings).map(|stored| (settings, stored))
+}
+
+/// [`load`] into `settings`, which changes only when an image loads: the
+/// payload goes from the storage straight into the settings (checked
+/// first by [`newest`]), with no image and no `Settings` in this frame
+/// nor the caller's (on the AVR they made the loader's frame 245 bytes,
+/// and every access beyond 63 bytes several instructions longer).
+pub fn load_into(storage: &mut (impl NonVolatile + ?Sized), settings: &mut Settings) -> Result<Stored, LoadError> {
     if storage.capacity() < STORAGE_NEEDED {
         return Err(LoadError::TooSmall);
     }
-    let mut image = [0u8; SLOT_LEN];
-    match newest(storage) {
-        Some((slot, _)) => {
-            read_slot_into(storage, slot, &mut image);
-            Ok((decode(&image), Stored { bytes: SLOT_LEN, crc: u16::from_le_bytes([image[7], image[8]]) }))
-        }
-        // Say why nothing loaded: the first slot's problem is as good as any.
-        None => {
-            read_slot_into(storage, 0, &mut image);
-            Err(check(&image).err().unwrap_or(LoadError::NoImage))
-        }
+    let (slot, _) = newest(storage)?;
+    let base = slot * SLOT_LEN;
+    // SAFETY: as in `encode`: `Settings` is `repr(C)` with only `i32`
+    // fields (no padding, asserted size), so any bytes are a valid value.
+    let payload = unsafe { core::slice::from_raw_parts_mut((settings as *mut Settings).cast::<u8>(), PAYLOAD_LEN) };
+    for (index, byte) in payload.iter_mut().enumerate() {
+        *byte = storage.read(base + HEADER_LEN + index);
     }
+    Ok(Stored { bytes: SLOT_LEN, crc: u16::from_le_bytes([storage.read(base + 7), storage.read(base + 8)]) })
 }
 
-/// The valid slot with the newest sequence number, if any.
+/// The valid slot with the newest sequence number; with none, why the
+/// first slot is refused (as good a reason as any).
 #[inline(never)]
-fn newest(storage: &mut (impl NonVolatile + ?Sized)) -> Option<(usize, u16)> {
+fn newest(storage: &mut (impl NonVolatile + ?Sized)) -> Result<(usize, u16), LoadError> {
     let mut best: Option<(usize, u16)> = None;
+    let mut first_error = LoadError::NoImage;
     let mut image = [0u8; SLOT_LEN];
     for slot in 0..2 {
         read_slot_into(storage, slot, &mut image);
-        if let Ok(sequence) = check(&image) {
-            best = match best {
-                // Sequence numbers wrap: newer means "ahead by less than half".
-                Some((_, other)) if sequence.wrapping_sub(other) > u16::MAX / 2 => best,
-                _ => Some((slot, sequence)),
-            };
+        match check(&image) {
+            Ok(sequence) => {
+                best = match best {
+                    // Sequence numbers wrap: newer means "ahead by less than half".
+                    Some((_, other)) if sequence.wrapping_sub(other) > u16::MAX / 2 => best,
+                    _ => Some((slot, sequence)),
+                };
+            }
+            Err(error) if slot == 0 => first_error = error,
+            Err(_) => {}
         }
     }
-    best
+    best.ok_or(first_error)
 }
 
 #[cfg(test)]
@@ -225,13 +238,6 @@ fn encode(settings: &Settings, sequence: u16, image: &mut [u8; SLOT_LEN]) {
     image[HEADER_LEN..].copy_from_slice(bytes);
     let crc = image_crc(image);
     image[7..9].copy_from_slice(&crc.to_le_bytes());
-}
-
-#[inline(never)]
-fn decode(image: &[u8; SLOT_LEN]) -> Settings {
-    // SAFETY: as in `encode`; any bytes are a valid `Settings`, and
-    // `read_unaligned` needs no alignment of the image.
-    unsafe { core::ptr::read_unaligned(image[HEADER_LEN..].as_ptr().cast::<Settings>()) }
 }
 
 /// Storage in RAM, with the faults a test wants (hal-sim and unit tests).

@@ -206,4 +206,12 @@ impl ufmt::uWrite for Tx {
         s.bytes().for_each(Self::write_byte);
         Ok(())
     }
+
+    /// The character's UTF-8 bytes, as the default (`encode_utf8` and
+    /// `write_str`) sends them, straight to the UART: the default's
+    /// buffer, its checks and panic path cost the AVR more code.
+    fn write_char(&mut self, c: char) -> Result<(), Self::Error> {
+        firmware::reply::utf8_bytes(c, Self::write_byte);
+        Ok(())
+    }
 }

@@ -117,13 +117,18 @@ pub enum Code {
 }
 
 /// One parsed line.
+///
+/// `repr(C)`, the words last: the code and the settings, read where the
+/// line is executed, stay within the first 63 bytes of a frame holding
+/// the command, which the AVR reaches in one instruction.
 #[derive(Clone, Debug, PartialEq, Eq)]
+#[repr(C)]
 pub struct Command {
     pub code: Code,
-    words: heapless::Vec<Word, MAX_WORDS>,
     /// Mode-setting codes that came on the same line, in line order; they
     /// apply before `code` (see the module docs).
     pub settings: heapless::Vec<Code, MAX_SETTINGS>,
+    words: heapless::Vec<Word, MAX_WORDS>,
 }
 
 impl ParseError {
@@ -138,6 +143,24 @@ impl ParseError {
 impl Command {
     pub fn new(code: Code) -> Self {
         Self { code, words: heapless::Vec::new(), settings: heapless::Vec::new() }
+    }
+
+    /// On the AVR, an empty command in the one `static` the main loop
+    /// parses into (the executor's line, the protocol's `M110` check):
+    /// on the stack, the command made the frames that held it larger than
+    /// the 63 bytes the AVR reaches in one instruction, and every access
+    /// beyond several instructions longer. Static RAM grows by a command,
+    /// the deepest stack (the executor's) shrinks by one.
+    ///
+    /// # Safety
+    /// Main loop only, and the command returned by the previous call must
+    /// no longer be in use (the executor's and the protocol's uses never
+    /// overlap: lines are received and executed one after the other).
+    #[cfg(target_arch = "avr")]
+    pub(crate) unsafe fn scratch() -> &'static mut Self {
+        static mut SCRATCH: core::mem::MaybeUninit<Command> = core::mem::MaybeUninit::uninit();
+        // SAFETY: see above.
+        unsafe { (*core::ptr::addr_of_mut!(SCRATCH)).write(Self::new(Code::Other)) }
     }
 
     /// Add a word (tests and generated commands).

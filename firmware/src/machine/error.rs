@@ -172,7 +172,7 @@ fn write_message<W: uWrite + ?Sized>(index: u8, argument: u16, out: &mut W) -> R
         match byte {
             0 => break,
             1 => out.write_char(char::from(argument as u8))?,
-            2 => ufmt::uwrite!(out, "{}", argument)?,
+            2 => ufmt::uwrite!(out, "{}", crate::reply::Whole(argument.into()))?,
             _ => out.write_char(char::from(byte))?,
         }
         at += 1;

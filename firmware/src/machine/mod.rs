@@ -35,7 +35,7 @@ use core::mem::MaybeUninit;
 use core::ptr::addr_of_mut;
 use crate::line::{Line, MAX_LINE};
 use crate::protocol::HostProtocol;
-use crate::reply::Printable;
+use crate::reply::{Printable, Whole};
 #[cfg(feature = "printer")]
 use crate::reply::Fixed;
 use crate::settings::{self, Settings};
@@ -396,10 +396,9 @@ impl<'q> Machine<'q> {
     }
 
     fn report_loaded_settings<W: uWrite + ?Sized>(&mut self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
-        match storage::load(storage) {
-            Ok((settings, stored)) => {
-                self.settings = settings;
-                ufmt::uwrite!(out, "echo:V{} stored settings retrieved (", storage::LAYOUT_VERSION)?;
+        match storage::load_into(storage, &mut self.settings) {
+            Ok(stored) => {
+                crate::flash_concat!("echo:V", LAYOUT_VERSION_TEXT, " stored settings retrieved (").write_to(out)?;
                 write_stored(&stored, out)
             }
             Err(error) => {
@@ -408,15 +407,13 @@ impl<'q> Machine<'q> {
                     LoadError::Corrupt { stored, computed } => ufmt::uwrite!(
                         out,
                         "echo:EEPROM CRC mismatch - (stored) {} != {} (calculated)!\n",
-                        stored,
-                        computed
+                        Whole(stored.into()),
+                        Whole(computed.into())
                     )?,
-                    LoadError::OldVersion(version) => ufmt::uwrite!(
-                        out,
-                        "echo:EEPROM version mismatch (EEPROM=V{} Firmware=V{})\n",
-                        version,
-                        storage::LAYOUT_VERSION
-                    )?,
+                    LoadError::OldVersion(version) => {
+                        ufmt::uwrite!(out, "echo:EEPROM version mismatch (EEPROM=V{}", Whole(version.into()))?;
+                        crate::flash_concat!(" Firmware=V", LAYOUT_VERSION_TEXT, ")\n").write_to(out)?
+                    }
                     LoadError::TooSmall => out.write_str("echo:EEPROM too small for the settings\n")?,
                 }
                 self.settings = self.defaults.clone();
@@ -489,10 +486,8 @@ impl<'q> Machine<'q> {
                 error.write(out)?;
                 write_ok(out)
             }
-            Outcome::Started(running) => {
-                self.running = running;
-                Ok(())
-            }
+            // `running` is already set.
+            Outcome::Started => Ok(()),
         }
     }
 
@@ -514,8 +509,13 @@ impl<'q> Machine<'q> {
         storage: &mut dyn NonVolatile,
         out: &mut W,
     ) -> Result<Outcome, W::Error> {
-        let mut command = Command::new(Code::Other);
-        match gcode::parse_into(text, &mut command) {
+        // SAFETY: the main loop; the protocol's use of the command ended
+        // with the line's reception.
+        #[cfg(target_arch = "avr")]
+        let command = unsafe { Command::scratch() };
+        #[cfg(not(target_arch = "avr"))]
+        let command = &mut Command::new(Code::Other);
+        match gcode::parse_into(text, command) {
             Ok(()) => {}
             Err(ParseError::Empty) => return Ok(Outcome::Done),
             // Arguments that do not parse are an error only for commands we
@@ -543,7 +543,7 @@ impl<'q> Machine<'q> {
                 return Ok(Outcome::Failed(error));
             }
         }
-        let outcome = self.dispatch(&command, text, now_ms, storage, out);
+        let outcome = self.dispatch(command, text, now_ms, storage, out);
         self.modal.machine_frame = false;
         outcome
     }
@@ -574,7 +574,7 @@ impl<'q> Machine<'q> {
             // Spindle and coolant: this machine has neither, so "off" holds.
             Code::M(3 | 4 | 7 | 8) => {
                 let Code::M(number) = code else { return Ok(Ok(())) };
-                ufmt::uwrite!(out, "echo:M{} ignored: no spindle or coolant on this machine\n", number)?;
+                ufmt::uwrite!(out, "echo:M{} ignored: no spindle or coolant on this machine\n", Whole(number.into()))?;
             }
             // Nothing of these is ever active: no cutter or tool-length
             // compensation, no canned cycles; path blending is the planner's.
@@ -618,7 +618,7 @@ impl<'q> Machine<'q> {
         #[cfg(feature = "powder-bed")]
         if let Some(result) = self.bed_command(command, out)? {
             return Ok(match result {
-                Ok(Some(running)) => Outcome::Started(running),
+                Ok(Some(running)) => self.start(running),
                 Ok(None) => Outcome::Done,
                 Err(error) => Outcome::Failed(error),
             });
@@ -654,13 +654,13 @@ impl<'q> Machine<'q> {
             // take as fatal.
             #[cfg(not(feature = "printer"))]
             Code::M(code @ (114 | 119 | 120 | 121)) => {
-                ufmt::uwrite!(out, "echo:M{} ignored: this machine has no printer axes\n", code)?;
+                ufmt::uwrite!(out, "echo:M{} ignored: this machine has no printer axes\n", Whole(code.into()))?;
                 Ok(())
             }
             code if gcode::is_mode_setting(code) => self.apply_setting(code, out)?,
             Code::M(2 | 30) => {
                 self.end_program();
-                return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false }));
+                return Ok(self.start(Running::WaitForMotion { then_disable: false }));
             }
             Code::G(92) => self.modal.set_logical_position(command),
             Code::M(82) => {
@@ -675,7 +675,7 @@ impl<'q> Machine<'q> {
                 self.steppers_enabled = true;
                 Ok(())
             }
-            Code::M(18 | 84) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: true })),
+            Code::M(18 | 84) => return Ok(self.start(Running::WaitForMotion { then_disable: true })),
             Code::M(105) => {
                 self.report_temperatures_on_ok(out)?;
                 return Ok(Outcome::Acknowledged);
@@ -700,7 +700,7 @@ impl<'q> Machine<'q> {
             #[cfg(feature = "printer")]
             Code::M(119) => self.report_endstops(out).map(Ok)?,
             Code::M(155) => self.set_auto_report(command, now_ms),
-            Code::M(400) => return Ok(Outcome::Started(Running::WaitForMotion { then_disable: false })),
+            Code::M(400) => return Ok(self.start(Running::WaitForMotion { then_disable: false })),
             #[cfg(feature = "printer")]
             Code::M(code @ (120 | 121)) => self.set_endstops_always(code == 120),
             #[cfg(feature = "delta")]
@@ -737,6 +737,13 @@ impl<'q> Machine<'q> {
             Ok(()) => Outcome::Done,
             Err(error) => Outcome::Failed(error),
         })
+    }
+
+    /// Start a command that runs on (`ok` when it finishes).
+    #[inline(always)]
+    fn start(&mut self, running: Running) -> Outcome {
+        self.running = running;
+        Outcome::Started
     }
 
     /// `M105`: Marlin puts the report on the `ok` line itself.
@@ -785,7 +792,7 @@ impl<'q> Machine<'q> {
         if tool < EXTRUDERS {
             return Ok(());
         }
-        ufmt::uwrite!(out, "echo:T{} Invalid extruder\n", tool)
+        ufmt::uwrite!(out, "echo:T{} Invalid extruder\n", Whole(tool.into()))
     }
 
     #[cfg(feature = "heaters")]
@@ -1011,7 +1018,7 @@ const HALTED_M105_TO_M119: u16 = {
 /// one copy of the code for both.
 #[inline(never)]
 fn write_stored<W: uWrite + ?Sized>(stored: &storage::Stored, out: &mut W) -> Result<(), W::Error> {
-    ufmt::uwrite!(out, "{} bytes; crc {})\n", stored.bytes, stored.crc)
+    ufmt::uwrite!(out, "{} bytes; crc {})\n", Whole(stored.bytes as u16), Whole(stored.crc.into()))
 }
 
 /// `before`, the line's text (trimmed, unprintable bytes masked), `after`:
@@ -1038,8 +1045,11 @@ enum Outcome {
     Acknowledged,
     /// Refused: send the error, then `ok`.
     Failed(CommandError),
-    /// Still running: `ok` when it finishes.
-    Started(Running),
+    /// Still running (`Machine::running` says what): `ok` when it
+    /// finishes. The running state is stored where it is kept, not
+    /// carried here: with the auto-tune in it, this made the executor's
+    /// frame larger than the 63 bytes the AVR reaches in one instruction.
+    Started,
 }
 
 #[cfg(feature = "printer")]
@@ -1161,6 +1171,10 @@ pub fn write_capabilities<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Erro
     crate::flash_str!("Cap:CLOSED_LOOP:1\n").write_to(out)?;
     Ok(())
 }
+
+/// [`storage::LAYOUT_VERSION`] as text, for the constant parts of the
+/// `M501` replies (one string in flash, no number to print).
+const LAYOUT_VERSION_TEXT: &str = ["0", "1", "2", "3", "4", "5", "6", "7", "8", "9"][storage::LAYOUT_VERSION as usize];
 
 /// [`EXTRUDERS`] as text, for the constant `M115` reply.
 const EXTRUDERS_TEXT: &str = ["0", "1", "2", "3", "4", "5", "6", "7", "8", "9"][EXTRUDERS as usize];

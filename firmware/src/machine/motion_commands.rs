@@ -84,7 +84,7 @@ impl<'q> Machine<'q> {
             }
             MotionError::Fault(StepFault::LimitHit(switches)) => {
                 self.lose_position();
-                ufmt::uwrite!(out, "Error:Endstop hit during a move (switches {}): motion stopped, home with G28\n", switches)
+                ufmt::uwrite!(out, "Error:Endstop hit during a move (switches {}): motion stopped, home with G28\n", crate::reply::Whole(switches.into()))
             }
             other => {
                 self.lose_position();
@@ -209,12 +209,6 @@ impl<'q> Machine<'q> {
         };
         let feed = self.modal.read_feed(command)?;
         let mut target = self.modal.target(command)?;
-        let offset = |letter| -> Result<Option<i32>, CommandError> {
-            command
-                .value(letter)?
-                .map(|value| self.modal.length_um(letter, value))
-                .transpose()
-        };
         // The centre's offset along the plane's two axes (Grbl: I J, K I, J K).
         let plane = self.modal.plane;
         let (first, second) = match plane {
@@ -222,11 +216,20 @@ impl<'q> Machine<'q> {
             Plane::Zx => (b'K', b'I'),
             Plane::Yz => (b'J', b'K'),
         };
-        let (i, j, r) = (offset(first)?, offset(second)?, offset(b'R')?);
-        let centre = match (i, j, r) {
-            (None, None, Some(r)) => ArcCentre::Radius(r),
-            (None, None, None) => return Err(CommandError::Missing(b'R')),
-            (i, j, _) => ArcCentre::Offset([i.unwrap_or(0), j.unwrap_or(0)]),
+        // The three words in µm (0 when absent) and which were given (bit
+        // 0, 1, 2): a loop and a mask, not three `Result<Option<i32>>`.
+        let (mut values, mut given, mut bit) = ([0i32; 3], 0u8, 1u8);
+        for (value, letter) in values.iter_mut().zip([first, second, b'R']) {
+            if let Some(word) = command.value(letter)? {
+                *value = self.modal.length_um(letter, word)?;
+                given |= bit;
+            }
+            bit <<= 1;
+        }
+        let centre = match given {
+            0b100 => ArcCentre::Radius(values[2]),
+            0 => return Err(CommandError::Missing(b'R')),
+            _ => ArcCentre::Offset([values[0], values[1]]),
         };
         self.modal.motion_mode = if clockwise {
             MotionMode::ClockwiseArc
@@ -314,7 +317,7 @@ impl<'q> Machine<'q> {
             (Err(e), _) | (_, Err(e)) => return Outcome::Failed(e.into()),
         };
         match ms {
-            Some(ms) if ms >= 0 => Outcome::Started(Running::DwellAfterMotion { ms: ms as u32 }),
+            Some(ms) if ms >= 0 => self.start(Running::DwellAfterMotion { ms: ms as u32 }),
             _ => Outcome::Failed(CommandError::OutOfRange(if command.has(b'P') {
                 b'P'
             } else {
@@ -339,7 +342,7 @@ impl<'q> Machine<'q> {
         match self.motion.home(motors) {
             Ok(()) => {
                 self.steppers_enabled = true;
-                Outcome::Started(Running::Homing)
+                self.start(Running::Homing)
             }
             Err(error) => Outcome::Failed(CommandError::Motion(error)),
         }
@@ -418,7 +421,7 @@ impl<'q> Machine<'q> {
         }
         if !any {
             // `echo:  M665 L361.00 R227.00 H300.00` and the like.
-            let _ = ufmt::uwrite!(out, "echo:  M{}", code as u16);
+            let _ = ufmt::uwrite!(out, "echo:  M{}", crate::reply::Whole(code as u16));
             for (&letter, &value) in letters.iter().zip(&values) {
                 let _ = ufmt::uwrite!(
                     out,

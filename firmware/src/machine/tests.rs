@@ -190,6 +190,60 @@ fn settings_commands_change_what_m503_prints() {
 }
 
 #[test]
+fn m303_refuses_each_word_out_of_its_range() {
+    for (line, expected) in [
+        ("M303 E1 S200\n", "Error:Value out of range for E\nok\n"),
+        ("M303 E-2\n", "Error:Value out of range for E\nok\n"),
+        ("M303 S0\n", "Error:Value out of range for S\nok\n"),
+        ("M303 E-1 S400.6\n", "Error:Value out of range for S\nok\n"),
+        ("M303 C2\n", "Error:Value out of range for C\nok\n"),
+        ("M303 C20.5\n", "Error:Value out of range for C\nok\n"),
+        ("M303 E5 C2\n", "Error:Value out of range for E\nok\n"),
+        ("M303 U\n", "Error:Missing value after U\nok\n"),
+    ] {
+        assert_eq!(reply(line), expected, "{line}");
+    }
+    assert_eq!(reply("M303 E0.4 S399.5 C2.5 U-7\n"), "PID Autotune start\n");
+}
+
+#[test]
+fn m301_refuses_bad_gains_and_keeps_the_old_ones() {
+    let mut machine = new_machine();
+    for (line, expected) in [
+        ("M301 P-1\n", "Error:Value out of range for P\nok\n"),
+        ("M301 I-0.5 D3\n", "Error:Value out of range for P\nok\n"),
+        ("M301 D300000\n", "Error:Value out of range for D\nok\n"),
+        ("M301 P1 I\n", "Error:Missing value after I\nok\n"),
+        ("M301 P1 I2 D\n", "Error:Missing value after D\nok\n"),
+    ] {
+        assert_eq!(converse(&mut machine, 0, line), expected, "{line}");
+    }
+    assert_eq!(converse(&mut machine, 0, "M301\n"), "echo:M301 P22.20 I1.08 D114.00\nok\n");
+    assert_eq!(converse(&mut machine, 0, "M301 D0.5\nM301\n"), "ok\necho:M301 P22.20 I1.08 D0.50\nok\n");
+}
+
+#[test]
+fn m302_sets_and_reports_the_cold_extrusion_interlock() {
+    let mut machine = new_machine();
+    for (line, expected) in [
+        ("M302\n", "echo:Cold extrudes are disabled (min temp 170C)\nok\n"),
+        ("M302 S1001\n", "Error:Value out of range for S\nok\n"),
+        ("M302 S-1\n", "Error:Value out of range for S\nok\n"),
+        ("M302 S\n", "Error:Missing value after S\nok\n"),
+        ("M302 S180 P\n", "Error:Missing value after P\nok\n"),
+        ("M302\n", "echo:Cold extrudes are disabled (min temp 170C)\nok\n"),
+        ("M302 S0\n", "ok\n"),
+        ("M302\n", "echo:Cold extrudes are enabled (min temp 0C)\nok\n"),
+        ("M302 P-2\n", "ok\n"),
+        ("M302\n", "echo:Cold extrudes are enabled (min temp 0C)\nok\n"),
+        ("M302 S1000.4 P0\n", "ok\n"),
+        ("M302\n", "echo:Cold extrudes are disabled (min temp 1000C)\nok\n"),
+    ] {
+        assert_eq!(converse(&mut machine, 0, line), expected, "{line}");
+    }
+}
+
+#[test]
 fn invalid_settings_are_refused_whole() {
     let mut machine = new_machine();
     assert_eq!(converse(&mut machine, 0, "M92 X80 Y-1\n"), "Error:Value out of range for Y\nok\n");
@@ -286,6 +340,15 @@ fn fan_commands_set_the_duty() {
 #[test]
 fn arcs_need_a_centre_or_a_radius() {
     assert_eq!(reply("G2 X10 Y10\n"), "Error:Missing R word\nok\n");
+    // Every word is read (in the order I, J, R) before the centre is chosen.
+    assert_eq!(reply("G2 X10 I5 R\n"), "Error:Missing value after R\nok\n");
+    assert_eq!(reply("G2 X10 J R5 I\n"), "Error:Missing value after I\nok\n");
+    assert_eq!(reply("G2 X10 I5 R99999999\n"), "Error:Value out of range for R\nok\n");
+    // A centre offset wins over R; R alone is the radius.
+    assert_eq!(reply("G2 X10 Y10 R10\n"), "ok\n");
+    assert_eq!(reply("G3 X10 Y10 I5 J5 R1\n"), "ok\n");
+    assert_eq!(reply("G2 X10 J5\n"), "Error:Arc end is not on the circle\nok\n");
+    assert_eq!(reply("G2 X10 R-10\n"), "ok\n");
 }
 
 #[test]
@@ -321,6 +384,18 @@ fn a_corrupt_image_at_boot_is_reported_and_the_defaults_stay() {
     machine.load_settings(&mut eeprom, &mut out).unwrap();
     assert!(out.0.starts_with("echo:EEPROM CRC mismatch - (stored) "), "{}", out.0);
     assert!(out.0.ends_with("echo:Hardcoded Default Settings Loaded\n"), "{}", out.0);
+    assert_eq!(machine.settings(), &Settings::default());
+}
+
+#[test]
+fn an_image_of_another_layout_is_reported_with_both_versions() {
+    let mut eeprom = MemoryStorage::<4096>::new();
+    crate::storage::save(&mut eeprom, &Settings::default()).unwrap();
+    eeprom.bytes[2] = 1;
+    let mut machine = new_machine();
+    let mut out = Text::default();
+    machine.load_settings(&mut eeprom, &mut out).unwrap();
+    assert!(out.0.starts_with("echo:EEPROM version mismatch (EEPROM=V1 Firmware=V2)\n"), "{}", out.0);
     assert_eq!(machine.settings(), &Settings::default());
 }
 

@@ -223,7 +223,7 @@ impl<'q> Machine<'q> {
             None => Outcome::Done,
             Some(config) => {
                 self.last_report_ms = now_ms;
-                Outcome::Started(Running::HeatWait { slot, wait: TemperatureWait::new(config, target, cooling, now_ms) })
+                self.start(Running::HeatWait { slot, wait: TemperatureWait::new(config, target, cooling, now_ms) })
             }
         })
     }
@@ -247,7 +247,7 @@ impl<'q> Machine<'q> {
                     crate::thermal::report::write_temperature_fields(&self.hotend, Some(&self.bed), out)?;
                     out.write_str(" W:")?;
                     match left {
-                        Some(s) => ufmt::uwrite!(out, "{}\n", s)?,
+                        Some(s) => ufmt::uwrite!(out, "{}\n", crate::reply::Whole(s.into()))?,
                         None => out.write_str("?\n")?,
                     }
                 }
@@ -270,20 +270,20 @@ impl<'q> Machine<'q> {
     /// without any, the current gains.
     pub(super) fn set_pid<W: uWrite + ?Sized>(&mut self, command: &Command, slot: HeaterSlot, out: &mut W) -> Result<(), CommandError> {
         let current = self.channel(slot).gains();
-        let read = |letter, now: u32| -> Result<i32, CommandError> {
-            match command.value(letter)? {
-                None => Ok(now as i32),
-                Some(v) => v.to_scaled(4).ok_or(CommandError::OutOfRange(letter)),
-            }
-        };
         if !(command.has(b'P') || command.has(b'I') || command.has(b'D')) {
             let _ = out.write_str("echo:");
             let _ = current.write_as(if slot == HeaterSlot::Bed { 304 } else { 301 }, out);
             let _ = out.write_str("\n");
             return Ok(());
         }
-        let gains = Gains::new(read(b'P', current.kp)?, read(b'I', current.ki)?, read(b'D', current.kd)?)
-            .ok_or(CommandError::OutOfRange(b'P'))?;
+        // Each given word replaces its gain (× 10⁴), read by the settings'
+        // reader; the gains' own bounds are checked together after.
+        let mut values = [current.kp as i32, current.ki as i32, current.kd as i32];
+        for (value, &letter) in values.iter_mut().zip(b"PID") {
+            super::set_scaled(command, letter, 4, i32::MIN, i32::MAX, value)?;
+        }
+        let [kp, ki, kd] = values;
+        let gains = Gains::new(kp, ki, kd).ok_or(CommandError::OutOfRange(b'P'))?;
         self.channel(slot).set_gains(gains);
         self.store_gains(slot, gains);
         Ok(())
@@ -292,14 +292,14 @@ impl<'q> Machine<'q> {
     #[cfg(feature = "heaters")]
     /// `M302 [S<°C>] [P<0|1>]`: the cold-extrusion interlock.
     pub(super) fn cold_extrusion_command<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<(), CommandError> {
-        let min = match command.value(b'S')? {
-            None => None,
-            Some(v) => Some(Celsius(v.to_int().filter(|t| (0..=1000).contains(t)).ok_or(CommandError::OutOfRange(b'S'))? * 100)),
-        };
-        let allow = match command.value(b'P')? {
-            None => None,
-            Some(v) => Some(v.to_int().ok_or(CommandError::OutOfRange(b'P'))? != 0),
-        };
+        // Both words by the settings' reader; −1 (outside S's range) and
+        // `has` tell whether each was given.
+        let mut min = -1;
+        super::set_scaled(command, b'S', 0, 0, 1000, &mut min)?;
+        let min = (min >= 0).then(|| Celsius(min * 100));
+        let mut allow = 0;
+        super::set_scaled(command, b'P', 0, i32::MIN, i32::MAX, &mut allow)?;
+        let allow = command.has(b'P').then_some(allow != 0);
         if self.cold_extrusion.m302(min, allow) {
             let _ = self.cold_extrusion.write_state(out);
         }
@@ -310,27 +310,19 @@ impl<'q> Machine<'q> {
     /// `M303 E<0|-1> S<°C> C<cycles> [U1]`: relay auto-tune of the hot end
     /// (`E0`) or the bed (`E-1`).
     pub(super) fn autotune<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<Outcome, W::Error> {
-        let int = |letter, default: i32| -> Result<i32, CommandError> {
-            match command.value(letter)? {
-                None => Ok(default),
-                Some(v) => v.to_int().ok_or(CommandError::OutOfRange(letter)),
-            }
-        };
+        // Each word through the settings' reader (`set_scaled`: a whole
+        // number within its range, else out of range; absent, the default).
         let parsed = (|| -> Result<(HeaterSlot, i32, u8, bool), CommandError> {
-            let slot = match int(b'E', 0)? {
-                0 => HeaterSlot::Hotend,
-                -1 => HeaterSlot::Bed,
-                _ => return Err(CommandError::OutOfRange(b'E')),
-            };
-            let target = int(b'S', if slot == HeaterSlot::Bed { 70 } else { 150 })?;
-            if !(1..=400).contains(&target) {
-                return Err(CommandError::OutOfRange(b'S'));
-            }
-            let cycles = int(b'C', 5)?;
-            if !(3..=20).contains(&cycles) {
-                return Err(CommandError::OutOfRange(b'C'));
-            }
-            Ok((slot, target, cycles as u8, int(b'U', 0)? != 0))
+            let mut e = 0;
+            super::set_scaled(command, b'E', 0, -1, 0, &mut e)?;
+            let slot = if e == 0 { HeaterSlot::Hotend } else { HeaterSlot::Bed };
+            let mut target = if slot == HeaterSlot::Bed { 70 } else { 150 };
+            super::set_scaled(command, b'S', 0, 1, 400, &mut target)?;
+            let mut cycles = 5;
+            super::set_scaled(command, b'C', 0, 3, 20, &mut cycles)?;
+            let mut apply = 0;
+            super::set_scaled(command, b'U', 0, i32::MIN, i32::MAX, &mut apply)?;
+            Ok((slot, target, cycles as u8, apply != 0))
         })();
         let (slot, target, cycles, apply) = match parsed {
             Ok(p) => p,
@@ -344,6 +336,6 @@ impl<'q> Machine<'q> {
             return Ok(Outcome::Failed(CommandError::Halted));
         }
         crate::flash_str!("PID Autotune start\n").write_to(out)?;
-        Ok(Outcome::Started(Running::Autotune { slot, apply, tune }))
+        Ok(self.start(Running::Autotune { slot, apply, tune }))
     }
 }

@@ -245,25 +245,38 @@ impl ArcCutter {
     }
 }
 
-impl Iterator for ArcCutter {
-    type Item = Point;
-
-    fn next(&mut self) -> Option<Point> {
+impl ArcCutter {
+    /// The next chord's end into `end`; false (and `end` unchanged) when
+    /// the arc is done. Into the caller's buffer: the motion loop's frame
+    /// holds no `Option<Point>` (beyond 63 bytes of frame every access
+    /// costs the AVR several instructions more; out of line it grew).
+    pub fn next_into(&mut self, end: &mut Point) -> bool {
         if self.done >= self.chords {
-            return None;
+            return false;
         }
         self.done += 1;
         if self.done == self.chords {
-            return Some(self.exact_target);
+            *end = self.exact_target;
+            return true;
         }
         let fraction = self.done as f32 / self.chords as f32;
         let (sin, cos) = sin_cos(self.start_angle + self.sweep * fraction);
-        Some(self.plane.from_frame([
+        *end = self.plane.from_frame([
             self.centre[0] + self.radius * cos,
             self.centre[1] + self.radius * sin,
             self.start[2] + (self.target[2] - self.start[2]) * fraction,
             self.start[3] + (self.target[3] - self.start[3]) * fraction,
-        ]))
+        ]);
+        true
+    }
+}
+
+impl Iterator for ArcCutter {
+    type Item = Point;
+
+    fn next(&mut self) -> Option<Point> {
+        let mut end = [0.0; 4];
+        self.next_into(&mut end).then_some(end)
     }
 }
 

@@ -220,7 +220,18 @@ impl Delta {
     /// from 67 to 61 lines/s.)
     #[inline(never)]
     fn run(&self, first: usize, end: usize, input: &Vector3) -> Result<Vector3, KinematicsError> {
-        let mut regs = [0.0; REGISTERS];
+        // On the AVR the registers live in a `static` (reached through a
+        // pointer): in this frame they made it 143 bytes, and each access
+        // beyond 63 several instructions longer. Only the main loop runs
+        // the kinematics, one program at a time.
+        #[cfg(target_arch = "avr")]
+        // SAFETY: the only reference to REGISTER_FILE, and `run` is neither
+        // reentrant nor called from an interrupt.
+        let regs = unsafe { core::hint::black_box(&mut *core::ptr::addr_of_mut!(REGISTER_FILE)) };
+        #[cfg(not(target_arch = "avr"))]
+        let regs = &mut [0.0; REGISTERS];
+        // Every run starts from zeros, as a fresh array on the stack would.
+        *regs = [0.0; REGISTERS];
         // The delta through a pointer the compiler does not follow: the
         // AVR build knows where the machine's delta is, and copied its
         // figures with a 4-byte absolute load per 2 bytes, not a memcpy
@@ -247,13 +258,15 @@ impl Delta {
             if let (Some((pivots, rest)), Some(towers)) =
                 (rest[3..].split_first_chunk_mut::<6>(), towers)
             {
-                *pivots = *towers;
+                // `copy_from_slice`: a memcpy (an assignment became a
+                // memmove, 650 bytes of compiler-builtins).
+                pivots.copy_from_slice(towers);
                 if let Some(inputs) = rest.first_chunk_mut::<3>() {
-                    *inputs = *input;
+                    inputs.copy_from_slice(input);
                 }
             }
         }
-        run_float_program(&mut regs, first, end)?;
+        run_float_program(regs, first, end)?;
         Ok([regs[OUT], regs[OUT + 1], regs[OUT + 2]])
     }
 
@@ -302,6 +315,10 @@ impl Kinematics for Delta {
         steps_per_mm
     }
 }
+
+/// [`Delta::run`]'s registers on the AVR.
+#[cfg(target_arch = "avr")]
+static mut REGISTER_FILE: [f32; REGISTERS] = [0.0; REGISTERS];
 
 /// Float registers of [`run_float_program`] (a power of two: indices are
 /// masked into range, no bounds checks).

@@ -891,11 +891,13 @@ impl<'q> Motion<'q> {
                 }
                 Pending::Arc { arc, cut, feed } => {
                     if !cut.next_into(&mut point) {
-                        let Some(chord_end) = arc.next() else {
+                        // The chord's end in `point`, which the cut's
+                        // first piece then replaces.
+                        if !arc.next_into(&mut point) {
                             self.pending = Pending::Nothing;
                             return;
-                        };
-                        cut.init(&self.position, &chord_end, &self.config);
+                        }
+                        cut.init(&self.position, &point, &self.config);
                         // A new cut has at least one piece: this sets `point`.
                         cut.next_into(&mut point);
                     }

@@ -125,7 +125,7 @@ impl CycleReport {
     /// a result, ` Ku: 33.18 Tu: 21.34` / ` Classic PID ` /
     /// ` Kp: 19.91 Ki: 1.87 Kd: 53.00`.
     pub fn write<W: ufmt::uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, " bias: {} d: {} min: {} max: {}", self.bias, self.d, self.min, self.max)?;
+        ufmt::uwrite!(out, " bias: {} d: {} min: {} max: {}", crate::reply::Whole(self.bias.into()), crate::reply::Whole(self.d.into()), self.min, self.max)?;
         match &self.result {
             Some(result) => {
                 let tu = crate::reply::Fixed { mantissa: (result.period_ms / 10) as i32, digits: 2 };
@@ -332,7 +332,7 @@ impl Autotune {
         // The result of the cycle just measured uses the d it ran with.
         let measured_d = self.d;
         let shift = saturating_mul(i32::from(measured_d), t_high - t_low) / (t_high + t_low).max(1);
-        let bias = (i32::from(self.bias) + shift).clamp(20.min(max_power / 2), (max_power - 20).max(max_power / 2));
+        let bias = super::math::clamp(i32::from(self.bias) + shift, 20.min(max_power / 2), (max_power - 20).max(max_power / 2));
         self.bias = bias as u8;
         self.d = (if bias > max_power / 2 { max_power - 1 - bias } else { bias }) as u8;
         // Only what the agreement test needs of the previous result.

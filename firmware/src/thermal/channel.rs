@@ -250,7 +250,7 @@ impl HeaterChannel {
             return Err(fault);
         }
         let config = self.config();
-        let target = Celsius(target.0.clamp(0, config.max_target().0.max(0)));
+        let target = Celsius(super::math::clamp(target.0, 0, config.max_target().0.max(0)));
         if target != self.target {
             self.target = target;
             let measured = if self.has_reading { Some(self.measured) } else { None };

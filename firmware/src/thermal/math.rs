@@ -6,6 +6,20 @@
 //! with a bound (one `u32` division, already linked), and the few 64-bit
 //! quotients (auto-tune gains) use a shift-and-subtract loop.
 
+/// `value` within `low..=high` (`low` ≤ `high`): `i32::clamp` without its
+/// assertion of that, whose panic path and checks cost the AVR bytes at
+/// every one of its callers, all of which pass ordered bounds.
+#[inline(never)]
+pub fn clamp(value: i32, low: i32, high: i32) -> i32 {
+    if value < low {
+        low
+    } else if value > high {
+        high
+    } else {
+        value
+    }
+}
+
 /// `a · b`, saturating at `i32::MIN`/`i32::MAX`.
 #[inline(never)]
 pub fn saturating_mul(a: i32, b: i32) -> i32 {
@@ -79,6 +93,18 @@ pub fn mul_div_round(x: u32, m: u32, n: u32) -> Option<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn clamp_matches_the_core_clamp_for_ordered_bounds() {
+        let values = [i32::MIN, -1 << 29, -21, -1, 0, 1, 20, 127, 255, 1 << 29, i32::MAX];
+        for value in values {
+            for low in values {
+                for high in values.into_iter().filter(|&high| high >= low) {
+                    assert_eq!(clamp(value, low, high), value.clamp(low, high), "{value} {low} {high}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn saturating_mul_matches_i64_or_saturates() {

@@ -170,7 +170,7 @@ pub enum HeaterId {
 impl ufmt::uDisplay for HeaterId {
     fn fmt<W: ufmt::uWrite + ?Sized>(&self, f: &mut ufmt::Formatter<'_, W>) -> Result<(), W::Error> {
         match self {
-            Self::Hotend(n) => ufmt::uwrite!(f, "{}", n),
+            Self::Hotend(n) => ufmt::uwrite!(f, "{}", crate::reply::Whole((*n).into())),
             Self::Bed => f.write_str("bed"),
             Self::Chamber => f.write_str("chamber"),
         }

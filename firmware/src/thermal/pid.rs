@@ -29,7 +29,7 @@
 //!
 //! Every product goes through `math::saturating_mul`, never `checked_mul`.
 
-use super::math::{saturating_mul, scale};
+use super::math::{clamp, saturating_mul, scale};
 use super::Celsius;
 
 /// Micro-counts in one duty count.
@@ -79,7 +79,7 @@ impl Gains {
     /// `M<code> P… I… D…` (no newline): `M301` for a hot end, `M304` for
     /// the bed.
     pub fn write_as<W: ufmt::uWrite + ?Sized>(&self, code: u16, out: &mut W) -> Result<(), W::Error> {
-        ufmt::uwrite!(out, "M{} P{} I{} D{}", code, Gain(self.kp), Gain(self.ki), Gain(self.kd))
+        ufmt::uwrite!(out, "M{} P{} I{} D{}", crate::reply::Whole(code.into()), Gain(self.kp), Gain(self.ki), Gain(self.kd))
     }
 }
 
@@ -245,9 +245,9 @@ impl PidState {
         let unclamped = proportional + self.integral - self.derivative;
         let winding_up = (unclamped >= max && increment > 0) || (unclamped <= 0 && increment < 0);
         if !winding_up {
-            self.integral = (self.integral + increment).clamp(0, max);
+            self.integral = clamp(self.integral + increment, 0, max);
         }
-        let output = (proportional + self.integral - self.derivative).clamp(0, max);
+        let output = clamp(proportional + self.integral - self.derivative, 0, max);
         ((output + MICRO / 2) / MICRO) as u8
     }
 }
@@ -256,7 +256,7 @@ impl PidState {
 /// any output), so that sums of three of them cannot overflow.
 #[inline(never)]
 fn bounded(value: i32) -> i32 {
-    value.clamp(-(1 << 29), 1 << 29)
+    clamp(value, -(1 << 29), 1 << 29)
 }
 
 /// Bang-bang with hysteresis: `on` is the heater's state before this sample.

@@ -20,9 +20,9 @@ pub fn write_temperature_fields<W: ufmt::uWrite + ?Sized>(hotend: &HeaterChannel
     if let Some(bed) = bed {
         ufmt::uwrite!(out, " B:{} /{}", bed.measured(), bed.target())?;
     }
-    ufmt::uwrite!(out, " @:{}", hotend.power_report())?;
+    ufmt::uwrite!(out, " @:{}", crate::reply::Whole(hotend.power_report().into()))?;
     if let Some(bed) = bed {
-        ufmt::uwrite!(out, " B@:{}", bed.power_report())?;
+        ufmt::uwrite!(out, " B@:{}", crate::reply::Whole(bed.power_report().into()))?;
     }
     Ok(())
 }
