@@ -290,15 +290,10 @@ impl Planner {
     /// again (see the module comment). Its segments may then be queued as
     /// far ahead as the interrupt's queue allows.
     pub fn exit_is_final(&self) -> bool {
-        let following = next(self.tail);
-        if self.is_empty() || following == self.head {
-            return false;
-        }
-        let slots = PLANNER_SLOTS as u8;
-        // Ring distances from the oldest block.
-        let to_planned = (self.planned + slots - self.tail) % slots;
-        let to_head = (self.head + slots - self.tail) % slots;
-        to_planned >= 1 && to_planned < to_head
+        // `planned` lies from `tail` to the newest block (it is `head` only
+        // when the ring is empty): past `tail`, it has the next block at or
+        // before it.
+        self.planned != self.tail && self.planned != self.head
     }
 
     /// The oldest block is fully prepared: drop it.
@@ -552,6 +547,28 @@ mod tests {
         // 100 steps/mm: 5000 steps/s = 50 mm/s, 50 000 steps/s² = 500 mm/s².
         assert_eq!(block.nominal_speed_sqr, 2500.0);
         assert_eq!(block.acceleration, 500.0);
+    }
+
+    /// `exit_is_final` (two index compares) agrees with its definition:
+    /// the block after the oldest exists and is at or before `planned`.
+    #[test]
+    fn the_oldest_exit_is_final_exactly_when_its_successor_is_planned() {
+        let mut planner = Planner::new();
+        let moves = [line(1.0, 0.0, 50.0), line(0.0, 1.0, 50.0), line(1.0, 0.0, 80.0), line(-1.0, 0.0, 50.0), line(0.5, 0.5, 50.0)];
+        let mut seen = [false; 2];
+        for round in 0..200 {
+            if round % 3 == 2 {
+                planner.discard_current();
+            } else {
+                let _ = planner.push(&moves[round % moves.len()], &LIMITS);
+            }
+            let slots = PLANNER_SLOTS as u8;
+            let to_planned = (planner.planned + slots - planner.tail) % slots;
+            let defined = planner.len() >= 2 && to_planned >= 1 && (to_planned as usize) < planner.len();
+            assert_eq!(planner.exit_is_final(), defined, "round {round}");
+            seen[defined as usize] = true;
+        }
+        assert_eq!(seen, [true, true]);
     }
 
     #[test]
