@@ -143,6 +143,12 @@ impl RxProducer<'_> {
         self.nothing_owed();
         core::mem::take(&mut self.dropped)
     }
+
+    /// Something for [`Self::take_dropped`] to do: bytes lost, or markers
+    /// and line ends still owed to the ring.
+    pub fn has_trouble(&self) -> bool {
+        self.dropped != 0 || self.marker_owed || self.lines_owed != 0
+    }
 }
 
 impl RxConsumer<'_> {

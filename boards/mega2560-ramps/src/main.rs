@@ -75,6 +75,8 @@ fn main() -> ! {
     let mut outputs = Outputs::default();
     #[cfg(feature = "machine-powder-bed")]
     let mut last_bed_ms = 0u32;
+    #[cfg(feature = "encoders")]
+    let mut last_encoder_ms = 0u32;
 
     // The loop never sleeps: QEMU's AVR machine does not wake from `sleep`
     // on its timer interrupt and avr-tester stops at the first `sleep`, and
@@ -95,9 +97,14 @@ fn main() -> ! {
         #[cfg(feature = "machine-arm")]
         let _ = link.machine.on_driver_alarms(pins::driver_alarms(&dp), &mut tx);
         let _ = link.service(&mut rx, &mut eeprom, now, &mut tx);
-        // SPEC §1: the encoder loops' settings, faults and reports.
+        // SPEC §1: the encoder loops' settings, faults and reports, once a
+        // millisecond: each look masks the 1 kHz tick that runs the loops,
+        // and masking it on every (short) pass delayed ticks past the next.
         #[cfg(feature = "encoders")]
-        let _ = encoders::service(&dp, &mut link.machine, now.wrapping_sub(next_thermal_ms) < u32::MAX / 2, &mut tx);
+        if now != last_encoder_ms {
+            last_encoder_ms = now;
+            let _ = encoders::service(&dp, &mut link.machine, now.wrapping_sub(next_thermal_ms) < u32::MAX / 2, &mut tx);
+        }
         // The powder bed's millisecond: read, decide, drive.
         #[cfg(feature = "machine-powder-bed")]
         if now != last_bed_ms {

@@ -41,6 +41,11 @@ fn with_producer<R>(_cs: CriticalSection<'_>, f: impl FnOnce(&mut RxProducer<'st
     unsafe { (*addr_of_mut!(RX_PRODUCER)).as_mut().map(f) }
 }
 
+/// Non-zero: the receive ring's producer has lost bytes or owes markers
+/// (`RxProducer::has_trouble`), set by the receive interrupt; the main
+/// loop's `take_dropped` takes its lock only then.
+static mut RX_TROUBLE: u8 = 0;
+
 /// Emergencies seen by the receive interrupt, for the main loop to act on.
 static EMERGENCIES: Mutex<Cell<Pending>> = Mutex::new(Cell::new(Pending::NONE));
 
@@ -55,7 +60,26 @@ impl SerialLink for Rx {
     }
 
     fn take_dropped(&mut self) -> u8 {
-        avr_device::interrupt::free(|cs| with_producer(cs, |p| p.take_dropped())).unwrap_or(0)
+        // The lock only when the receive side reported trouble: the main
+        // loop asks on every pass, and every interrupt lock there may make
+        // a step late at high rates (a byte is read atomically on the AVR;
+        // the flag is set by the receive interrupt and cleared here under
+        // the lock, so a report between the read and the lock waits one
+        // pass).
+        // SAFETY: a one-byte volatile read of a flag only the receive
+        // interrupt sets.
+        if unsafe { core::ptr::read_volatile(addr_of_mut!(RX_TROUBLE)) } == 0 {
+            return 0;
+        }
+        avr_device::interrupt::free(|cs| {
+            with_producer(cs, |p| {
+                let dropped = p.take_dropped();
+                // SAFETY: interrupts are off.
+                unsafe { *addr_of_mut!(RX_TROUBLE) = p.has_trouble() as u8 };
+                dropped
+            })
+        })
+        .unwrap_or(0)
     }
 
     fn take_emergencies(&mut self) -> Pending {
@@ -168,7 +192,18 @@ fn receive(byte: u8, overrun: bool) {
     // SAFETY: see the handler: only its draining run calls this, the main
     // loop is interrupted, and no other interrupt uses the producer.
     let cs = unsafe { CriticalSection::new() };
-    let Some(Some(emergency)) = with_producer(cs, |p| p.push(byte, overrun)) else { return };
+    let Some((emergency, trouble)) = with_producer(cs, |p| {
+        let emergency = p.push(byte, overrun);
+        (emergency, p.has_trouble())
+    }) else {
+        return;
+    };
+    if trouble {
+        // SAFETY: as above (only this run of the handler writes it with
+        // interrupts on; the main loop clears it with interrupts off).
+        unsafe { *addr_of_mut!(RX_TROUBLE) = 1 };
+    }
+    let Some(emergency) = emergency else { return };
     avr_device::interrupt::free(|cs| {
         if emergency == Emergency::Kill {
             // M112 acts here and now, whatever the main loop is doing; with
