@@ -299,7 +299,7 @@ impl Prep {
 
     /// A segment lasting `ticks_q8` went into the interrupt's queue.
     fn remember_queued(&mut self, ticks_q8: f32) {
-        let units = to_u32(min(ticks_q8 * (1.0 / (256.0 * QUEUED_UNIT_TICKS)), u16::MAX as f32)) as u16;
+        let units = to_u32(ticks_q8 * (1.0 / (256.0 * QUEUED_UNIT_TICKS))).min(u16::MAX as u32) as u16;
         if let Some(slot) = self.mirror.get_mut(self.mirror_next as usize) {
             *slot = units;
         }
