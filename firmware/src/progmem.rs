@@ -181,20 +181,7 @@ impl ufmt::uDisplay for FlashStr {
 /// context, for [`flash_str!`] and [`flash_concat!`]): ASCII without NUL.
 #[doc(hidden)]
 pub const fn nul_terminated<const N: usize>(parts: &[&str]) -> [u8; N] {
-    let mut array = [0u8; N];
-    let mut at = 0;
-    let mut i = 0;
-    while i < parts.len() {
-        let bytes = parts[i].as_bytes();
-        let mut j = 0;
-        while j < bytes.len() {
-            assert!(bytes[j] > 0 && bytes[j] < 0x80, "flash strings are ASCII without NUL");
-            array[at] = bytes[j];
-            at += 1;
-            j += 1;
-        }
-        i += 1;
-    }
+    let (array, at) = joined::<N>(parts, false);
     assert!(at + 1 == N);
     array
 }
@@ -211,9 +198,18 @@ pub const fn total_len(parts: &[&str]) -> usize {
     len
 }
 
-/// `parts` one after the other in a byte array (const context).
+/// `parts` one after the other in a byte array (const context); NULs may
+/// separate the strings of a table.
 #[doc(hidden)]
 pub const fn concat_ascii<const N: usize>(parts: &[&str]) -> [u8; N] {
+    let (array, at) = joined::<N>(parts, true);
+    assert!(at == N);
+    array
+}
+
+/// `parts` copied one after the other to the start of an `N`-byte array
+/// (ASCII, NUL only if `nul_allowed`), and how many bytes that took.
+const fn joined<const N: usize>(parts: &[&str], nul_allowed: bool) -> ([u8; N], usize) {
     let mut array = [0u8; N];
     let mut at = 0;
     let mut i = 0;
@@ -221,15 +217,14 @@ pub const fn concat_ascii<const N: usize>(parts: &[&str]) -> [u8; N] {
         let bytes = parts[i].as_bytes();
         let mut j = 0;
         while j < bytes.len() {
-            assert!(bytes[j] < 0x80, "flash strings are ASCII");
+            assert!(bytes[j] < 0x80 && (nul_allowed || bytes[j] > 0), "flash strings are ASCII (without NUL unless a table)");
             array[at] = bytes[j];
             at += 1;
             j += 1;
         }
         i += 1;
     }
-    assert!(at == N);
-    array
+    (array, at)
 }
 
 /// Several `&str` constants joined into one string in flash, as a
