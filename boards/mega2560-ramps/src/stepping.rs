@@ -235,9 +235,11 @@ fn endstops(dp: &Peripherals) -> u8 {
 #[avr_device::interrupt(atmega2560)]
 fn TIMER1_COMPA() {
     // SAFETY (for the accesses to GENERATOR and DIR_LEVELS below):
-    // interrupts are off in this handler, so it has them to itself; the
-    // main loop takes them only in critical sections. No reference to the
-    // generator is held across a `cold_call`, which takes its own.
+    // interrupts are off in this handler (and in `cold_path`'s window with
+    // them on, only handlers that never touch either can run), so it has
+    // them to itself; the main loop takes them only in critical sections.
+    // No reference to the generator is held across a `cold_call`, which
+    // takes its own.
     // SAFETY: `Some`: `init` sets GENERATOR before it enables this
     // interrupt (OCIE1A), and nothing sets it back to `None`.
     let generator = || unsafe { (*addr_of_mut!(GENERATOR)).as_mut().unwrap_unchecked() };
