@@ -41,6 +41,12 @@ pub mod gcode;
 pub mod host_link;
 pub mod line;
 pub mod machine;
+/// The machine this firmware is built for, generated from its machine file
+/// (`machines/*.toml`, see `tools/machine-file`): name, motion, heaters,
+/// endstop polarity.
+pub mod machine_file {
+    include!(concat!(env!("OUT_DIR"), "/machine_file.rs"));
+}
 pub mod machines;
 pub mod motion;
 pub mod num;

@@ -15,11 +15,14 @@
 //! | 2 | 1 | layout version ([`LAYOUT_VERSION`]) |
 //! | 3 | 2 | sequence number (the newer slot has the higher, wrapping) |
 //! | 5 | 2 | payload length |
-//! | 7 | 2 | CRC-16/CCITT of bytes 0–6 and the payload |
-//! | 9 | n | payload ([`Settings`] fields in declaration order, `i32` each) |
+//! | 7 | 2 | CRC-16/CCITT of bytes 0–6, 9–12 and the payload |
+//! | 9 | 4 | the machine file's fingerprint ([`crate::machine_file::FINGERPRINT`]) |
+//! | 13 | n | payload ([`Settings`] fields in declaration order, `i32` each) |
 //!
 //! An image with another magic, version or length, or a wrong CRC, is
-//! refused whole and reported; the defaults stay in force.
+//! refused whole and reported; the defaults stay in force. So is an image
+//! saved by a firmware built for another machine file (its steps/mm and
+//! gains would be another machine's): never half-loaded.
 //!
 //! EEPROM wears out (≈100 000 writes per cell): only bytes that differ are
 //! written.
@@ -27,9 +30,9 @@
 use crate::settings::Settings;
 
 /// Bump whenever the payload layout changes: older images are then refused.
-pub const LAYOUT_VERSION: u8 = 2;
+pub const LAYOUT_VERSION: u8 = 3;
 const MAGIC: u16 = 0xF5E7;
-const HEADER_LEN: usize = 9;
+const HEADER_LEN: usize = 13;
 /// Payload: 21 `i32` fields of [`Settings`].
 pub const PAYLOAD_LEN: usize = 27 * 4;
 /// Bytes one slot occupies.
@@ -73,6 +76,8 @@ pub enum LoadError {
     OldVersion(u8),
     /// The storage is smaller than two slots.
     TooSmall,
+    /// The image was saved by a firmware built for another machine file.
+    OtherMachine,
 }
 
 /// What a successful save or load reports.
@@ -157,7 +162,7 @@ fn newest(storage: &mut (impl NonVolatile + ?Sized)) -> Result<(usize, u16), Loa
                     _ => Some((slot, sequence)),
                 };
             }
-            Err(error) if slot == 0 => first_error = error,
+            Err(error) if slot == 0 || error == LoadError::OtherMachine => first_error = error,
             Err(_) => {}
         }
     }
@@ -197,13 +202,16 @@ fn check(image: &[u8; SLOT_LEN]) -> Result<u16, LoadError> {
     if stored != computed {
         return Err(LoadError::Corrupt { stored, computed });
     }
+    if u32::from_le_bytes([image[9], image[10], image[11], image[12]]) != crate::machine_file::FINGERPRINT {
+        return Err(LoadError::OtherMachine);
+    }
     Ok(u16::from_le_bytes([image[3], image[4]]))
 }
 
 #[inline(never)]
 fn image_crc(image: &[u8; SLOT_LEN]) -> u16 {
     let crc = crc16(0xFFFF, &image[..7]);
-    crc16(crc, &image[HEADER_LEN..])
+    crc16(crc, &image[9..])
 }
 
 /// CRC-16/CCITT-FALSE, bitwise: 30 bytes of code instead of a 512-byte
@@ -232,6 +240,7 @@ fn encode(settings: &Settings, sequence: u16, image: &mut [u8; SLOT_LEN]) {
     image[2] = LAYOUT_VERSION;
     image[3..5].copy_from_slice(&sequence.to_le_bytes());
     image[5..7].copy_from_slice(&(PAYLOAD_LEN as u16).to_le_bytes());
+    image[9..13].copy_from_slice(&crate::machine_file::FINGERPRINT.to_le_bytes());
     // SAFETY: `Settings` is `repr(C)` with only `i32` fields (no padding,
     // asserted size), so all its PAYLOAD_LEN bytes are initialised.
     let bytes = unsafe { core::slice::from_raw_parts((settings as *const Settings).cast::<u8>(), PAYLOAD_LEN) };
@@ -307,7 +316,7 @@ mod tests {
         let (settings, loaded) = load(&mut eeprom).unwrap();
         assert_eq!(settings, custom());
         assert_eq!(stored, loaded);
-        assert_eq!(stored.bytes, 117);
+        assert_eq!(stored.bytes, 121);
     }
 
     #[test]
@@ -345,6 +354,23 @@ mod tests {
             *byte = 0xFF;
         }
         assert!(matches!(load(&mut eeprom), Err(LoadError::Corrupt { .. })));
+    }
+
+    #[test]
+    fn settings_saved_for_another_machine_file_are_refused_whole() {
+        let mut storage = MemoryStorage::<512>::new();
+        save(&mut storage, &custom()).unwrap();
+        // Another machine's build writes its own fingerprint (and a CRC
+        // that covers it: the image is intact, only not ours).
+        let mut image = read_slot(&mut storage, 0);
+        let other = crate::machine_file::FINGERPRINT ^ 1;
+        image[9..13].copy_from_slice(&other.to_le_bytes());
+        let crc = image_crc(&image);
+        image[7..9].copy_from_slice(&crc.to_le_bytes());
+        for (i, &b) in image.iter().enumerate() {
+            storage.write(i, b);
+        }
+        assert_eq!(load(&mut storage).map(|(s, _)| s), Err(LoadError::OtherMachine));
     }
 
     #[test]

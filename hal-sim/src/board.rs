@@ -498,7 +498,7 @@ mod tests {
         board.receive(b"M92 E415\nM500\n");
         board.advance(10);
         let mut rebooted = SimBoard::with_eeprom(SimEeprom { bytes: board.eeprom.bytes, ..SimEeprom::new() });
-        assert!(rebooted.take_output().contains("echo:V2 stored settings retrieved"));
+        assert!(rebooted.take_output().contains("echo:V3 stored settings retrieved"));
         assert_eq!(rebooted.link.machine.settings().steps_per_mm_milli[3], 415_000);
     }
 

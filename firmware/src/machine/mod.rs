@@ -386,6 +386,26 @@ impl<'q> Machine<'q> {
         Ok(())
     }
 
+    /// Take what the machine file says beyond the motion configuration
+    /// ([`crate::machine_file`]): its heaters (thermistor tables, control,
+    /// output, protections) with their default gains — which become the
+    /// `M502` defaults — and its endstops' triggered levels (`M119`). The
+    /// board calls it once at boot, after any `become_…`, before loading
+    /// the stored settings.
+    pub fn use_machine_file(&mut self) {
+        let [hotend, bed] = crate::machine_file::heaters();
+        if let Some((config, gains)) = hotend {
+            self.hotend = HeaterChannel::new(config, gains);
+            self.defaults.hotend_pid = gains_setting(gains);
+        }
+        if let Some((config, gains)) = bed {
+            self.bed = HeaterChannel::new(config, gains);
+            self.defaults.bed_pid = gains_setting(gains);
+        }
+        self.settings = self.defaults.clone();
+        self.endstop_trigger_levels = crate::machine_file::ENDSTOP_TRIGGER_LEVELS;
+    }
+
     /// Load the stored settings (at boot, and for `M501`), reporting the
     /// outcome; on any problem the defaults stay in force.
     pub fn load_settings<W: uWrite + ?Sized>(&mut self, storage: &mut dyn NonVolatile, out: &mut W) -> Result<(), W::Error> {
@@ -415,6 +435,9 @@ impl<'q> Machine<'q> {
                         crate::flash_concat!(" Firmware=V", LAYOUT_VERSION_TEXT, ")\n").write_to(out)?
                     }
                     LoadError::TooSmall => out.write_str("echo:EEPROM too small for the settings\n")?,
+                    LoadError::OtherMachine => {
+                        out.write_str("echo:Stored settings belong to another machine file: not loaded (M500 saves this machine's)\n")?
+                    }
                 }
                 self.settings = self.defaults.clone();
                 out.write_str("echo:Hardcoded Default Settings Loaded\n")
@@ -1160,7 +1183,9 @@ pub fn write_capabilities<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Erro
         crate::FIRMWARE_NAME,
         " ",
         crate::FIRMWARE_VERSION,
-        " (Rust) SOURCE_CODE_URL:local PROTOCOL_VERSION:1.0 MACHINE_TYPE:RepRap EXTRUDER_COUNT:",
+        " (Rust) SOURCE_CODE_URL:local PROTOCOL_VERSION:1.0 MACHINE_TYPE:",
+        crate::machine_file::NAME,
+        " EXTRUDER_COUNT:",
         EXTRUDERS_TEXT,
         "\n",
         CAPABILITIES
@@ -1170,6 +1195,11 @@ pub fn write_capabilities<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Erro
     #[cfg(feature = "encoders")]
     crate::flash_str!("Cap:CLOSED_LOOP:1\n").write_to(out)?;
     Ok(())
+}
+
+/// Gains as the settings keep them (Marlin's units × 10⁴ in `i32`s).
+fn gains_setting(gains: Gains) -> [i32; 3] {
+    [gains.kp, gains.ki, gains.kd].map(|g| g.min(i32::MAX as u32) as i32)
 }
 
 /// [`storage::LAYOUT_VERSION`] as text, for the constant parts of the

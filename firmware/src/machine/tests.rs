@@ -366,9 +366,9 @@ fn m500_saves_and_m501_restores_over_later_changes() {
         machine.poll(0, &mut eeprom, out).unwrap();
     };
     send(&mut machine, "M92 X80\nM500\n", &mut out);
-    assert!(out.0.starts_with("ok\necho:Settings Stored (117 bytes; crc "), "{}", out.0);
+    assert!(out.0.starts_with("ok\necho:Settings Stored (121 bytes; crc "), "{}", out.0);
     send(&mut machine, "M92 X90\nM501\n", &mut out);
-    assert!(out.0.contains("echo:V2 stored settings retrieved (117 bytes; crc "), "{}", out.0);
+    assert!(out.0.contains("echo:V3 stored settings retrieved (121 bytes; crc "), "{}", out.0);
     assert_eq!(machine.settings().steps_per_mm_milli[0], 80_000);
 }
 
@@ -395,7 +395,7 @@ fn an_image_of_another_layout_is_reported_with_both_versions() {
     let mut machine = new_machine();
     let mut out = Text::default();
     machine.load_settings(&mut eeprom, &mut out).unwrap();
-    assert!(out.0.starts_with("echo:EEPROM version mismatch (EEPROM=V1 Firmware=V2)\n"), "{}", out.0);
+    assert!(out.0.starts_with("echo:EEPROM version mismatch (EEPROM=V1 Firmware=V3)\n"), "{}", out.0);
     assert_eq!(machine.settings(), &Settings::default());
 }
 
@@ -605,3 +605,29 @@ const M503_EXPECTED: &str = concat!(
     "echo:  M304 P10.00 I0.023 D305.40\n",
     "ok\n",
 );
+
+#[test]
+fn the_default_machine_file_is_the_prusa_i3_the_simulator_runs() {
+    // machines/prusa-i3.toml, generated into `machine_file`, and the
+    // `MotionConfig::prusa_i3` fixture that hal-sim and the tests use are
+    // one machine: a change to either shows here.
+    assert_eq!(crate::machine_file::MOTION, MotionConfig::prusa_i3());
+    assert_eq!(crate::machine_file::NAME, "Prusa i3");
+    assert_eq!(crate::machine_file::BAUD, 115_200);
+    assert_eq!(crate::machine_file::ENDSTOP_TRIGGER_LEVELS, 0b11_1111);
+    let [hotend, bed] = crate::machine_file::heaters();
+    let (hotend, hotend_gains) = hotend.unwrap();
+    let (bed, bed_gains) = bed.unwrap();
+    assert_eq!((hotend_gains, bed_gains), (Gains::MARLIN_HOTEND, Gains::MARLIN_BED));
+    let (file, stock) = (hotend.load(), HOTEND_0.load());
+    assert_eq!((file.guard, file.control, file.output, file.id), (stock.guard, stock.control, stock.output, stock.id));
+    let (file, stock) = (bed.load(), BED.load());
+    assert_eq!((file.guard, file.control, file.output, file.id), (stock.guard, stock.control, stock.output, stock.id));
+}
+
+#[test]
+fn m115_names_the_machine_files_machine() {
+    let mut out = Text(String::new());
+    super::write_capabilities(&mut out).unwrap();
+    assert!(out.0.contains(" MACHINE_TYPE:Prusa i3 EXTRUDER_COUNT:1\n"), "{}", out.0);
+}

@@ -36,7 +36,7 @@ include!(concat!(env!("OUT_DIR"), "/thermistor_tables.rs"));
 pub struct ThermistorTable<const N: usize>(Flash<[(u16, u16); N]>);
 
 impl<const N: usize> ThermistorTable<N> {
-    const fn new(rows: [(u16, u16); N]) -> Self {
+    pub const fn new(rows: [(u16, u16); N]) -> Self {
         Self(Flash::new(rows))
     }
 
@@ -99,6 +99,11 @@ impl Thermistor {
     pub const Ntc100kB3950Pullup4k7: Thermistor = Thermistor(&NTC100K_B3950_4K7);
     /// 100 k NTC, β 3950, 4.8 kΩ pull-up (SPEC §4's extrusion line).
     pub const Ntc100kB3950Pullup4k8: Thermistor = Thermistor(&NTC100K_B3950_4K8);
+
+    /// A thermistor with its own table (a machine file's, generated).
+    pub const fn new(table: Table<ROWS>) -> Self {
+        Self(table)
+    }
 
     /// Temperature of an (oversampled) reading.
     pub fn celsius(self, reading: Oversampled) -> Result<Celsius, SensorFault> {
@@ -264,14 +269,14 @@ impl CompletedSum {
 mod tests {
     use super::*;
 
-    fn at(table: Table<54>, adc: u16) -> i32 {
+    fn at(table: Table<ROWS>, adc: u16) -> i32 {
         celsius_from_adc(table, adc).unwrap().0
     }
 
     #[test]
-    fn tables_have_54_rows_and_state_their_error_within_a_tenth_of_a_degree() {
-        assert_eq!(NTC100K_B3950_4K7.len(), 54);
-        assert_eq!(NTC100K_B3950_4K8.len(), 54);
+    fn tables_have_their_rows_and_state_their_error_within_a_tenth_of_a_degree() {
+        assert_eq!(NTC100K_B3950_4K7.len(), ROWS);
+        assert_eq!(NTC100K_B3950_4K8.len(), ROWS);
         const { assert!(NTC100K_B3950_4K7_ERROR_CENTI <= 10) };
         const { assert!(NTC100K_B3950_4K8_ERROR_CENTI <= 10) };
     }
@@ -322,7 +327,7 @@ mod tests {
     }
 
     /// The previous conversion (i32 rows, signed arithmetic), as the reference.
-    fn reference(table: Table<54>, x16: u16) -> Result<Celsius, SensorFault> {
+    fn reference(table: Table<ROWS>, x16: u16) -> Result<Celsius, SensorFault> {
         let rows: std::vec::Vec<(u16, i32)> = (0..table.len()).map(|i| table.get(i).unwrap()).collect();
         let x16 = i32::from(x16);
         let sixteenths = |(adc, _): (u16, i32)| i32::from(adc) * 16;

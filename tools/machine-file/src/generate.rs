@@ -137,6 +137,20 @@ pub fn core_source(machine: &Machine, p: &str) -> String {
     for heater in &machine.heaters {
         heater_source(heater, p, w);
     }
+    let slot = |roles: &[HeaterRole]| match machine.heaters.iter().find(|h| roles.contains(&h.role)).map(|h| h.role) {
+        Some(HeaterRole::Hotend) => "Some((&HOTEND, HOTEND_GAINS))",
+        Some(HeaterRole::Barrel) => "Some((&BARREL, BARREL_GAINS))",
+        Some(HeaterRole::Bed) => "Some((&BED, BED_GAINS))",
+        None => "None",
+    };
+    writeln!(
+        w,
+        "/// The heaters: the hot end (or the extrusion line's barrel) and the bed, each with its default gains.\n\
+         pub fn heaters() -> [Option<(&'static {p}::progmem::Flash<{p}::thermal::HeaterConfig>, {p}::thermal::Gains)>; 2] {{\n    [{}, {}]\n}}",
+        slot(&[HeaterRole::Hotend, HeaterRole::Barrel]),
+        slot(&[HeaterRole::Bed])
+    )
+    .unwrap();
     out
 }
 
