@@ -11,12 +11,21 @@
 //!
 //! The script is generated from the installed binutils at build time, not
 //! kept in the repository.
+//!
+//! Before that, the machine: the file named by `FERROSTEP_MACHINE`
+//! (default `machines/prusa-i3.toml`) is read and checked by
+//! `tools/machine-file` — a wrong value stops the build with the file, the
+//! key and the problem — and becomes `$OUT_DIR/pins.rs` (every pin, PWM
+//! channel, thermistor channel and endstop polarity, included by
+//! `src/pins.rs`) and this crate's `feature = "…"` switches (what is
+//! linked in: motion, heaters, the machine's own modules, display, …).
 
 use std::path::PathBuf;
 use std::process::Command;
 
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
+    machine();
     if std::env::var("CARGO_CFG_TARGET_ARCH").as_deref() != Ok("avr") {
         return;
     }
@@ -29,6 +38,30 @@ fn main() {
     let out = PathBuf::from(std::env::var_os("OUT_DIR").unwrap()).join("atmega2560-low-data.x");
     std::fs::write(&out, script).unwrap();
     println!("cargo:rustc-link-arg=-Wl,-T,{}", out.display());
+}
+
+/// The machine file: pins and feature switches (see the module comment).
+fn machine() {
+    let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap());
+    let workspace = manifest.parent().and_then(|p| p.parent()).unwrap();
+    let path = machine_file::selected_path(workspace);
+    println!("cargo:rerun-if-env-changed={}", machine_file::MACHINE_VARIABLE);
+    println!("cargo:rerun-if-env-changed={}", machine_file::ALL_OPTIONS_VARIABLE);
+    println!("cargo:rerun-if-changed={}", path.display());
+    let machine = match machine_file::load(&path) {
+        Ok(machine) => machine,
+        Err(message) => {
+            eprintln!("{message}");
+            std::process::exit(1);
+        }
+    };
+    let all = machine_file::generate::ALL_BOARD_FEATURES.iter().map(|f| format!("\"{f}\"")).collect::<Vec<_>>().join(", ");
+    println!("cargo::rustc-check-cfg=cfg(feature, values({all}))");
+    for feature in machine_file::generate::board_features(&machine) {
+        println!("cargo::rustc-cfg=feature=\"{feature}\"");
+    }
+    let out = PathBuf::from(std::env::var_os("OUT_DIR").unwrap()).join("pins.rs");
+    std::fs::write(out, machine_file::generate::board_source(&machine)).unwrap();
 }
 
 /// The default script between its `=====` rulers, with `.data` moved in

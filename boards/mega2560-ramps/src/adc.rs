@@ -35,7 +35,7 @@ const SAMPLES_PER_READING: u8 = 16;
 pub const MISSING_PERIODS_LIMIT: u8 = 3;
 
 /// The thermistors in conversion order: hot end, bed.
-const CHANNELS: [u8; 2] = [pins::HOTEND_THERMISTOR_CHANNEL, pins::BED_THERMISTOR_CHANNEL];
+const CHANNELS: [u8; 2] = [if pins::HOTEND.is_some() { pins::HOTEND_ADC } else { pins::BARREL_ADC }, pins::BED_ADC];
 
 /// ADCSRA: ADEN, ADSC, ADIE and prescaler 128 (16 MHz / 128 = 125 kHz).
 /// ADIF (bit 4) is written 0, which leaves a pending completion alone.

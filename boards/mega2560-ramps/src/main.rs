@@ -157,10 +157,6 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
     unsafe { avr_device::interrupt::enable() };
     // SAFETY: called once, from main, before anything else uses `LINK`.
     let link = HostLink::init_in(unsafe { &mut *core::ptr::addr_of_mut!(LINK) }, config, feeder);
-    #[cfg(feature = "bed-ssr")]
-    link.machine.use_bed_config(&firmware::thermal::channel::BED_SSR);
-    #[cfg(feature = "bed-bang-bang")]
-    link.machine.use_bed_config(&firmware::thermal::channel::BED_BANG_BANG);
     #[cfg(feature = "machine-extrusion-line")]
     {
         link.machine.become_extrusion_line();
@@ -171,10 +167,10 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
         link.machine.become_powder_bed();
         bed::init(dp);
     }
-    // By reference: iterating the array by value pulled in its IntoIter.
-    for &endstop in &pins::ENDSTOPS {
-        pins::make_input_pulled_up(dp, endstop);
-    }
+    // The machine file's heaters, gains and endstop polarity (after the
+    // machines' own set-up above, which it refines).
+    link.machine.use_machine_file();
+    pins::init_endstops(dp);
     #[cfg(feature = "machine-arm")]
     for alarm in pins::DRIVER_ALARMS {
         pins::make_input_pulled_up(dp, alarm);
@@ -183,50 +179,27 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
     (link, serial::Rx { consumer })
 }
 
-/// The Prusa i3's configuration, kept in flash (it is `const`) and copied
-/// out once at boot: building it in code costs 2 KB of stores.
-#[cfg(not(any(feature = "machine-delta", feature = "machine-arm")))]
+/// The machine file's motion configuration, kept in flash (it is
+/// `const`) and copied out once at boot: building it in code costs 2 KB of
+/// stores.
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static PRUSA_I3: firmware::progmem::Flash<MotionConfig> = firmware::progmem::Flash::new(MotionConfig::prusa_i3());
+static MOTION: firmware::progmem::Flash<MotionConfig> = firmware::progmem::Flash::new(firmware::machine_file::MOTION);
 
-/// The SPEC delta, in flash as the Prusa i3; only its tower positions
-/// (sines and cosines) are computed at boot.
-#[cfg(feature = "machine-delta")]
-#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static SPEC_DELTA: firmware::progmem::Flash<MotionConfig> = firmware::progmem::Flash::new(MotionConfig::spec_delta_unplaced(false));
-
-/// The machine chosen at build time (cargo feature `machine-…`). Out of
-/// line: the configuration is built in the caller's slot through a pointer.
+/// The machine this firmware is built for (its machine file). Out of
+/// line: the configuration is built in the caller's slot through a
+/// pointer. A delta's tower positions (sines and cosines) are computed
+/// here, at boot.
 #[inline(never)]
 fn machine_config() -> MotionConfig {
     #[cfg(feature = "machine-delta")]
     {
-        let mut config = SPEC_DELTA.load();
+        let mut config = MOTION.load();
         config.place_towers();
-        return config;
+        config
     }
-    #[cfg(feature = "machine-arm")]
-    return MotionConfig::spec_arm(400);
-    #[cfg(not(any(feature = "machine-delta", feature = "machine-arm")))]
-    PRUSA_I3.load()
+    #[cfg(not(feature = "machine-delta"))]
+    MOTION.load()
 }
-
-#[cfg(all(feature = "bed-ssr", feature = "bed-bang-bang"))]
-compile_error!("choose one bed: bed-ssr or bed-bang-bang");
-
-#[cfg(any(
-    all(feature = "machine-delta", feature = "machine-arm"),
-    all(feature = "machine-delta", feature = "machine-extrusion-line"),
-    all(feature = "machine-arm", feature = "machine-extrusion-line"),
-    all(feature = "machine-powder-bed", any(feature = "machine-delta", feature = "machine-arm", feature = "machine-extrusion-line"))
-))]
-compile_error!("choose one machine: machine-delta, machine-arm, machine-extrusion-line or machine-powder-bed");
-
-#[cfg(all(feature = "machine-powder-bed", any(feature = "bed-ssr", feature = "bed-bang-bang")))]
-compile_error!("the powder bed has no heated bed");
-
-#[cfg(all(feature = "machine-extrusion-line", any(feature = "bed-ssr", feature = "bed-bang-bang")))]
-compile_error!("the extrusion line has no bed: its SSR is the barrel's");
 
 /// What the outputs were last set to (`None`: not yet), so that the main
 /// loop writes a pin only when its value changes: each write holds the
@@ -264,11 +237,9 @@ fn apply_outputs(dp: &Peripherals, machine: &Machine, last: &mut Outputs) {
     }
     let fan = machine.fan_duty();
     if last.fan_duty != Some(fan) {
-        // The extrusion line's fans are on D8 (its D9 is the barrel's SSR).
-        #[cfg(not(feature = "machine-extrusion-line"))]
+        // On the machine file's fan pin (the extrusion line's fans are on
+        // D8: its D9 is the barrel's relay).
         pwm::set(dp, pwm::Output::Fan, fan);
-        #[cfg(feature = "machine-extrusion-line")]
-        pwm::set(dp, pwm::Output::Bed, fan);
         last.fan_duty = Some(fan);
     }
     // The powder bed has no heaters: D10 and D8 are its roller and suction.

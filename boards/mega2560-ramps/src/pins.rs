@@ -1,4 +1,5 @@
-//! RAMPS 1.4 on the Mega 2560 (Marlin's pin map).
+//! The Mega 2560's pins as the machine file wires them; the defaults a
+//! machine file starts from are RAMPS 1.4's (Marlin's pin map):
 //!
 //! | role      | X    | Y    | Z    | E0   | E1   |
 //! |-----------|------|------|------|------|------|
@@ -19,6 +20,7 @@ use avr_device::atmega2560::Peripherals;
 /// with eleven arms per access.
 #[derive(Clone, Copy)]
 #[repr(u8)]
+#[allow(dead_code)] // every port is listed; a machine uses some
 pub enum Port {
     A = 0x20,
     B = 0x23,
@@ -26,7 +28,6 @@ pub enum Port {
     D = 0x29,
     E = 0x2C,
     F = 0x2F,
-    #[cfg_attr(not(feature = "machine-powder-bed"), allow(dead_code))]
     G = 0x32,
     H = 0x00,
     J = 0x03,
@@ -38,10 +39,24 @@ impl Port {
     /// The data-space address of the port's PINx register; DDRx is at
     /// +1 and PORTx at +2.
     #[inline(always)]
-    fn pin_register(self) -> *mut u8 {
+    pub fn pin_register(self) -> *mut u8 {
         let low = self as u8;
         let address = if low < 0x20 { 0x100 + u16::from(low) } else { u16::from(low) };
         address as usize as *mut u8
+    }
+}
+
+impl Port {
+    #[cfg_attr(not(feature = "motion"), allow(dead_code))]
+    /// The I/O-space address of the port's PORTx register (what `sbi` and
+    /// `cbi` take), for ports A–G; `None` for H–L, which lie beyond it.
+    pub const fn port_io_address(self) -> Option<u8> {
+        let low = self as u8;
+        if low < 0x20 {
+            None
+        } else {
+            Some(low + 2 - 0x20)
+        }
     }
 }
 
@@ -58,25 +73,25 @@ pub const fn pin(port: Port, bit: u8) -> Pin {
     Pin { port, bit }
 }
 
-/// Stepper driver enables (active low: high = disabled).
-pub const STEPPER_ENABLES: [Pin; 5] =
-    [pin(Port::D, 7), pin(Port::F, 2), pin(Port::K, 0), pin(Port::A, 2), pin(Port::C, 7)];
-/// Heater and fan MOSFET gates (high = on).
-pub const HEATER_OUTPUTS: [Pin; 3] = [HOTEND, BED, FAN];
-/// The hot-end heater (D10, OC2A).
-pub const HOTEND: Pin = pin(Port::B, 4);
-/// The heated bed (D8, OC4C).
-pub const BED: Pin = pin(Port::H, 5);
-/// The part-cooling fan (D9, OC2B).
-pub const FAN: Pin = pin(Port::H, 6);
-/// Endstops in the core's bit order: X_MIN, X_MAX, Y_MIN, Y_MAX, Z_MIN, Z_MAX.
-pub const ENDSTOPS: [Pin; 6] =
-    [pin(Port::E, 5), pin(Port::E, 4), pin(Port::J, 1), pin(Port::J, 0), pin(Port::D, 3), pin(Port::D, 2)];
+// The machine's pins, generated from its machine file (build.rs): `STEP`,
+// `DIR`, `ENABLE` (X, Y, Z, E0), `ENDSTOPS` (M119's order) with
+// `ENDSTOP_PULLUPS` and `ENDSTOP_ACTIVE_LOW`, the heaters' outputs, PWM
+// channels and thermistor channels (`HOTEND`, `BED`, `BARREL`, `*_PWM`,
+// `*_ADC`), `RELAY` and `FAN`. Everything below, the step interrupt
+// included, reads them from here.
+// (Not every machine uses every item: the extrusion line has no bed, …)
+#[allow(dead_code)]
+mod generated {
+    use super::{pin, Pin, Port};
+    include!(concat!(env!("OUT_DIR"), "/pins.rs"));
+}
+pub use generated::*;
 
-/// The ADC channel of the hot-end thermistor (T0).
-pub const HOTEND_THERMISTOR_CHANNEL: u8 = 13;
-/// The ADC channel of the bed thermistor.
-pub const BED_THERMISTOR_CHANNEL: u8 = 14;
+/// RAMPS's second extruder driver (unused): its enable is held off.
+pub const E1_ENABLE: Pin = pin(Port::C, 7);
+/// The RAMPS 1.4 MOSFET gates (D10, D9, D8): whatever the machine file
+/// puts on them, they are driven low at boot and on every halt.
+pub const HEATER_OUTPUTS: [Pin; 3] = [pin(Port::B, 4), pin(Port::H, 6), pin(Port::H, 5)];
 
 /// SPEC §3's driver ALARM inputs (the arm build), motors X Y Z E0 in
 /// order: A9–A12 = PK1–PK4 on RAMPS AUX-2, pulled up.
@@ -96,17 +111,6 @@ pub fn driver_alarms(dp: &Peripherals) -> u8 {
         .fold(0, |alarms, (motor, &alarm)| if read(dp, alarm) == DRIVER_ALARM_ACTIVE_HIGH { alarms | 1 << motor } else { alarms })
 }
 
-/// STEP and DIR pins of X, Y, Z and E0 (driven by [`crate::stepping`]).
-pub const STEP_DIR: [Pin; 8] = [
-    pin(Port::F, 0),
-    pin(Port::F, 1),
-    pin(Port::F, 6),
-    pin(Port::F, 7),
-    pin(Port::L, 3),
-    pin(Port::L, 1),
-    pin(Port::A, 4),
-    pin(Port::A, 6),
-];
 
 /// Drive `pin` as an output at `high`. The level is written before the
 /// direction so that the pin never glitches to the other level. Interrupts
@@ -140,36 +144,85 @@ fn make_output_unguarded(_dp: &Peripherals, pin: Pin, high: bool) {
 
 /// Make `pin` an input with its pull-up on (endstops switch to ground or
 /// are open-collector; an open wire then reads high).
-pub fn make_input_pulled_up(_dp: &Peripherals, pin: Pin) {
+#[allow(dead_code)]
+pub fn make_input_pulled_up(dp: &Peripherals, pin: Pin) {
+    make_input(dp, pin, true);
+}
+
+/// Make `pin` an input, its pull-up on or off.
+pub fn make_input(_dp: &Peripherals, pin: Pin, pull_up: bool) {
     let mask = 1u8 << pin.bit;
     let base = pin.port.pin_register();
-    // SAFETY: as in `make_output_unguarded`: DDRx, then PORTx.
-    unsafe {
+    // SAFETY: as in `make_output_unguarded`: DDRx, then PORTx; interrupts
+    // are held off (the step interrupt writes other bits of some ports).
+    avr_device::interrupt::free(|_| unsafe {
         let ddr = base.add(DDR);
         ddr.write_volatile(ddr.read_volatile() & !mask);
         let out = base.add(PORT);
-        out.write_volatile(out.read_volatile() | mask);
+        out.write_volatile(if pull_up { out.read_volatile() | mask } else { out.read_volatile() & !mask });
+    });
+}
+
+/// The endstops as inputs, each with its pull-up as the machine file says.
+pub fn init_endstops(dp: &Peripherals) {
+    for (index, endstop) in ENDSTOPS.iter().enumerate() {
+        if let Some(pin) = *endstop {
+            make_input(dp, pin, ENDSTOP_PULLUPS & (1 << index) != 0);
+        }
     }
 }
 
 /// The level of an input pin.
+#[inline(always)]
 pub fn read(_dp: &Peripherals, pin: Pin) -> bool {
     // SAFETY: `pin_register` is the port's PINx, readable at any time.
     let bits = unsafe { pin.port.pin_register().read_volatile() };
     bits & (1 << pin.bit) != 0
 }
 
-/// Drive every stepper driver's enable (active low).
+/// Drive every stepper driver's enable (active low); E1's stays off.
 #[cfg_attr(any(feature = "machine-extrusion-line", feature = "machine-powder-bed"), allow(dead_code))]
 pub fn set_steppers_enabled(dp: &Peripherals, enabled: bool) {
-    for &enable in &STEPPER_ENABLES {
+    for &enable in &ENABLE {
         make_output(dp, enable, !enabled);
     }
 }
 
-/// Endstop levels packed in the core's bit order.
+/// Endstop levels packed in the core's bit order (X_MIN, X_MAX, Y_MIN, …);
+/// a switch that is not fitted reads as not triggered.
 pub fn endstop_levels(dp: &Peripherals) -> u8 {
-    ENDSTOPS.iter().enumerate().fold(0, |bits, (i, &pin)| bits | (u8::from(read(dp, pin)) << i))
+    ENDSTOPS.iter().enumerate().fold(0, |bits, (i, endstop)| {
+        let motor = i / 2;
+        let active_low = ENDSTOP_ACTIVE_LOW & (1 << motor) != 0;
+        let level = match *endstop {
+            Some(pin) => read(dp, pin),
+            None => active_low,
+        };
+        bits | (u8::from(level) << i)
+    })
+}
+
+/// Endstops in the step generator's layout (bit m: motor m's min switch,
+/// 4 + m: its max), 1 = triggered, polarity applied; switches not fitted
+/// read as not triggered. The pins are constants: this compiles to a few
+/// port reads and bit tests.
+#[inline(always)]
+#[cfg_attr(not(feature = "motion"), allow(dead_code))]
+pub fn endstops_triggered(dp: &Peripherals) -> u8 {
+    let mut levels = 0u8;
+    let mut index = 0;
+    while index < 6 {
+        let bit = if index % 2 == 0 { 1 << (index / 2) } else { 0x10 << (index / 2) };
+        let high = match ENDSTOPS[index] {
+            Some(pin) => read(dp, pin),
+            None => ENDSTOP_ACTIVE_LOW & bit != 0,
+        };
+        if high {
+            levels |= bit;
+        }
+        index += 1;
+    }
+    levels ^ ENDSTOP_ACTIVE_LOW
 }
 
 /// The safe state: every heater and fan off, every stepper driver disabled.
@@ -181,7 +234,8 @@ pub fn all_outputs_safe(dp: &Peripherals) {
     for &heater in &HEATER_OUTPUTS {
         make_output(dp, heater, false);
     }
-    for &enable in &STEPPER_ENABLES {
+    for &enable in &ENABLE {
         make_output(dp, enable, true);
     }
+    make_output(dp, E1_ENABLE, true);
 }

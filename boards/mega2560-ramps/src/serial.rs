@@ -15,15 +15,15 @@ use firmware::emergency::{Emergency, Pending};
 use firmware::host_link::SerialLink;
 use firmware::rx::{RxConsumer, RxProducer};
 
-/// Baud rate: Marlin's default 115200, or 250000 with `--features baud-250000`.
-#[cfg(not(feature = "baud-250000"))]
-pub const BAUD: u32 = 115_200;
-#[cfg(feature = "baud-250000")]
-pub const BAUD: u32 = 250_000;
+/// Baud rate: the machine file's `machine.baud` (115200 in the shipped
+/// files but one, 250000 for hosts that want it).
+pub const BAUD: u32 = firmware::machine_file::BAUD;
 
 const CPU_HZ: u32 = 16_000_000;
+
 /// Double-speed mode divisor (U2X0 = 1): UBRR = f/(8·baud) − 1, rounded.
 /// 115200 → 16 (117647 baud, +2.1 %, as on every Arduino); 250000 → 7 (exact).
+/// The machine file's checker refuses rates this makes more than 2.5 % off.
 const UBRR: u16 = ((CPU_HZ + 4 * BAUD) / (8 * BAUD) - 1) as u16;
 
 /// The interrupt's end of the receive ring, installed once by [`init`]

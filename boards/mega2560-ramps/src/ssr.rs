@@ -1,6 +1,5 @@
-//! A heater behind a solid-state relay: the bed on D8 (cargo feature
-//! `bed-ssr`), or the extrusion line's barrel on D9
-//! (`machine-extrusion-line`).
+//! A heater behind a solid-state relay (`control = "ssr-window"` in the
+//! machine file): the bed on D8, or the extrusion line's barrel on D9.
 //!
 //! A zero-crossing SSR switches whole mains half-cycles, so a MOSFET's
 //! kilohertz PWM is useless to it: the bed's duty becomes a 200 ms
@@ -26,11 +25,13 @@ struct Window {
     running: bool,
 }
 
-/// The relay's pin.
-#[cfg(not(feature = "machine-extrusion-line"))]
-const PIN: crate::pins::Pin = crate::pins::BED;
-#[cfg(feature = "machine-extrusion-line")]
-const PIN: crate::pins::Pin = crate::pins::FAN;
+/// The relay's pin and window (the machine file's `control = "ssr-window"`
+/// heater).
+const RELAY: (crate::pins::Pin, TimeProportioning) = match crate::pins::RELAY {
+    Some(relay) => relay,
+    None => panic!("ssr.rs is built only for a machine with a relay-window heater"),
+};
+const PIN: crate::pins::Pin = RELAY.0;
 
 static BED: Mutex<Cell<Window>> = Mutex::new(Cell::new(Window { pwm: SlowPwm::new(), duty: 0, running: false }));
 
@@ -55,7 +56,7 @@ pub fn on_tick(dp: &Peripherals, cs: CriticalSection, now_ms: u32) {
     if !window.running {
         return;
     }
-    let level = window.pwm.level(&TimeProportioning::SSR, now_ms, window.duty);
+    let level = window.pwm.level(&RELAY.1, now_ms, window.duty);
     cell.set(window);
     crate::pins::make_output_in(dp, cs, PIN, level);
 }

@@ -112,7 +112,7 @@ pub fn init(dp: &Peripherals, config: StepperConfig) -> StepFeeder<'static> {
     let (feeder, generator) = queues.split(config);
     // SAFETY: interrupts are still disabled (see above).
     unsafe { *addr_of_mut!(GENERATOR) = Some(generator) };
-    for &pin in &crate::pins::STEP_DIR {
+    for pin in crate::pins::STEP.into_iter().chain(crate::pins::DIR) {
         crate::pins::make_output(dp, pin, false);
     }
     let timer = &dp.TC1;
@@ -205,10 +205,10 @@ pub fn correction_steps(dp: &Peripherals, steps: u8, positive: u8) {
         let setup_cycles = u32::from(config.dir_setup_ticks.max(2)) * 8;
         write_dirs(wanted);
         avr_device::asm::delay_cycles(setup_cycles);
-        let f_steps = steps & 1 | (steps & 2) << 5;
-        dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() | f_steps) });
+        let _ = dp;
+        step_high(steps & 0b11);
         avr_device::asm::delay_cycles(32);
-        dp.PORTF.portf.modify(|r, w| unsafe { w.bits(r.bits() & !f_steps) });
+        step_low();
         avr_device::asm::delay_cycles(setup_cycles);
         write_dirs(levels);
     });
@@ -220,15 +220,10 @@ pub fn halt() {
 
 #[cfg(feature = "motion")]
 /// Endstops in the generator's layout (bit i motor i min, 4 + i max),
-/// 1 = triggered: RAMPS switches with pull-ups read high when pressed
-/// (Marlin's `*_ENDSTOP_INVERTING false`).
+/// 1 = triggered, each switch's polarity from the machine file.
 #[inline(always)]
 fn endstops(dp: &Peripherals) -> u8 {
-    let e = dp.PORTE.pine.read().bits();
-    let j = dp.PORTJ.pinj.read().bits();
-    let d = dp.PORTD.pind.read().bits();
-    // X_MIN PE5, X_MAX PE4, Y_MIN PJ1, Y_MAX PJ0, Z_MIN PD3, Z_MAX PD2.
-    (e >> 5 & 1) | (j >> 1 & 1) << 1 | (d >> 3 & 1) << 2 | (e >> 4 & 1) << 4 | (j & 1) << 5 | (d >> 2 & 1) << 6
+    crate::pins::endstops_triggered(dp)
 }
 
 #[cfg(feature = "motion")]
@@ -370,33 +365,60 @@ extern "C" fn cold_path(what: u8) -> u16 {
 #[cfg(feature = "motion")]
 const IDLE_TICKS: u16 = firmware::motion::stepper::IDLE_POLL_TICKS;
 
+
+/// For each of the four motors, `$body` with `PIN` the motor's pin from
+/// `$table` (`pins::STEP` or `pins::DIR`), `IO` its port's I/O address
+/// (`None` beyond I/O space) and `$motor` its number: unrolled, so every
+/// pin is a constant and no table is read at run time.
 #[cfg(feature = "motion")]
-/// STEP high for the motors in `steps`: X PF0, Y PF6, Z PL3, E0 PA4.
-/// PORTF (0x11) and PORTA (0x02) are in I/O space: a skip-if-bit-clear and
-/// an `sbi` per pin, 2–3 cycles (the compiler's mask, compare and branch
-/// took 5–6). PORTL is not: load, or, store.
+macro_rules! for_each_motor_pin {
+    ($table:path, |$motor:ident| $body:block) => {
+        for_each_motor_pin!(@one $table, 0, $motor, $body);
+        for_each_motor_pin!(@one $table, 1, $motor, $body);
+        for_each_motor_pin!(@one $table, 2, $motor, $body);
+        for_each_motor_pin!(@one $table, 3, $motor, $body);
+    };
+    (@one $table:path, $n:literal, $motor:ident, $body:block) => {{
+        #[allow(dead_code)]
+        const PIN: crate::pins::Pin = $table[$n];
+        #[allow(dead_code)]
+        const IO: Option<u8> = PIN.port.port_io_address();
+        #[allow(dead_code)]
+        const IO_OR_0: u8 = match IO { Some(a) => a, None => 0 };
+        #[allow(unused_macros)]
+        macro_rules! $motor { () => { $n } }
+        $body
+    }};
+}
+
+/// STEP high for the motors in `steps` (bit m: motor m), on the machine
+/// file's `pins::STEP`. A pin in I/O space (ports A–G) is a
+/// skip-if-bit-clear and an `sbi`, 2–3 cycles (the compiler's mask,
+/// compare and branch took 5–6); others a test and a read-modify-write.
+#[cfg(feature = "motion")]
 #[inline(always)]
 fn step_high(steps: u8) {
-    // SAFETY: sets single STEP bits of PORTF and PORTA (any value is valid
-    // for a port register; interrupts are off, so the read-modify-write of
-    // `sbi` cannot interleave with another writer); touches no other
-    // register or memory; `sbrc`/`sbi` leave SREG alone.
-    unsafe {
-        core::arch::asm!(
-            "sbrc {s}, 0",
-            "sbi 0x11, 0",
-            "sbrc {s}, 1",
-            "sbi 0x11, 6",
-            "sbrc {s}, 3",
-            "sbi 0x02, 4",
-            s = in(reg) steps,
-            options(nostack, preserves_flags),
-        );
-    }
-    if steps & 4 != 0 {
-        // SAFETY: any bit pattern is valid for this port register.
-        portl().portl.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 3) });
-    }
+    for_each_motor_pin!(crate::pins::STEP, |motor| {
+        if IO.is_some() {
+            // SAFETY: sets one STEP bit of an I/O-space port (any value is
+            // valid for a port register; interrupts are off here, so `sbi`'s
+            // read-modify-write cannot interleave with another writer);
+            // `sbrc`/`sbi` leave SREG and memory alone.
+            unsafe {
+                core::arch::asm!(
+                    "sbrc {s}, {m}",
+                    "sbi {io}, {bit}",
+                    s = in(reg) steps,
+                    m = const motor!(),
+                    io = const IO_OR_0,
+                    bit = const PIN.bit,
+                    options(nostack, preserves_flags),
+                )
+            }
+        } else if steps & (1 << motor!()) != 0 {
+            write_port_bit(PIN, true);
+        }
+    });
 }
 
 #[cfg(feature = "motion")]
@@ -404,11 +426,28 @@ fn step_high(steps: u8) {
 /// step mask across the computation.
 #[inline(always)]
 fn step_low() {
-    // SAFETY: any bit pattern is valid for these port registers.
-    portf().portf.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 0)) });
-    portf().portf.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 6)) });
-    porta().porta.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 4)) });
-    portl().portl.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 3)) });
+    for_each_motor_pin!(crate::pins::STEP, |_motor| {
+        if IO.is_some() {
+            // SAFETY: clears one STEP bit of an I/O-space port (as above).
+            unsafe { core::arch::asm!("cbi {io}, {bit}", io = const IO_OR_0, bit = const PIN.bit, options(nostack, preserves_flags)) }
+        } else {
+            write_port_bit(PIN, false);
+        }
+    });
+}
+
+/// Set (`high`) or clear one bit of a port's PORTx register (a port beyond
+/// I/O space: a load, an or/and and a store). Interrupts must be off or the
+/// port not shared (the step interrupt's callers).
+#[cfg(feature = "motion")]
+#[inline(always)]
+fn write_port_bit(pin: crate::pins::Pin, high: bool) {
+    let port = pin.port.pin_register().wrapping_add(2);
+    // SAFETY: PORTx of an existing port; any bit pattern is valid there.
+    unsafe {
+        let value = port.read_volatile();
+        port.write_volatile(if high { value | 1 << pin.bit } else { value & !(1 << pin.bit) });
+    }
 }
 
 #[cfg(feature = "motion")]
@@ -427,32 +466,28 @@ fn schedule_next(timer: &avr_device::atmega2560::tc1::RegisterBlock, interval: u
 }
 
 #[cfg(feature = "motion")]
-/// The port registers the step interrupt writes, at their fixed addresses
-/// (no `Peripherals::steal`, which costs the interrupt a store).
-fn portf() -> &'static avr_device::atmega2560::portf::RegisterBlock {
-    // SAFETY: a fixed MMIO address; writers keep to the rules above.
-    unsafe { &*avr_device::atmega2560::PORTF::ptr() }
-}
-#[cfg(feature = "motion")]
-fn porta() -> &'static avr_device::atmega2560::porta::RegisterBlock {
-    // SAFETY: as for `portf`.
-    unsafe { &*avr_device::atmega2560::PORTA::ptr() }
-}
-#[cfg(feature = "motion")]
-fn portl() -> &'static avr_device::atmega2560::portl::RegisterBlock {
-    // SAFETY: as for `portf`.
-    unsafe { &*avr_device::atmega2560::PORTL::ptr() }
-}
-
-#[cfg(feature = "motion")]
-/// DIR levels: X PF1, Y PF7, Z PL1, E0 PA6.
+/// DIR levels (bit m: motor m high), on the machine file's `pins::DIR`.
 #[inline(always)]
 fn write_dirs(dir: u8) {
-    let f = (dir & 1) << 1 | (dir & 2) << 6;
-    let l = (dir & 4) >> 1;
-    let a = (dir & 8) << 3;
-    // SAFETY: any bit pattern is valid for these port registers.
-    portf().portf.modify(|r, w| unsafe { w.bits(r.bits() & !0b1000_0010 | f) });
-    portl().portl.modify(|r, w| unsafe { w.bits(r.bits() & !0b0000_0010 | l) });
-    porta().porta.modify(|r, w| unsafe { w.bits(r.bits() & !0b0100_0000 | a) });
+    for_each_motor_pin!(crate::pins::DIR, |motor| {
+        if IO.is_some() {
+            // SAFETY: sets or clears one DIR bit of an I/O-space port (as in
+            // `step_high`).
+            unsafe {
+                core::arch::asm!(
+                    "sbrc {d}, {m}",
+                    "sbi {io}, {bit}",
+                    "sbrs {d}, {m}",
+                    "cbi {io}, {bit}",
+                    d = in(reg) dir,
+                    m = const motor!(),
+                    io = const IO_OR_0,
+                    bit = const PIN.bit,
+                    options(nostack, preserves_flags),
+                )
+            }
+        } else {
+            write_port_bit(PIN, dir & (1 << motor!()) != 0);
+        }
+    });
 }

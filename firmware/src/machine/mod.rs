@@ -436,7 +436,8 @@ impl<'q> Machine<'q> {
                     }
                     LoadError::TooSmall => out.write_str("echo:EEPROM too small for the settings\n")?,
                     LoadError::OtherMachine => {
-                        out.write_str("echo:Stored settings belong to another machine file: not loaded (M500 saves this machine's)\n")?
+                        crate::flash_str!("echo:Stored settings belong to another machine file: not loaded (M500 saves this machine's)\n")
+                            .write_to(out)?
                     }
                 }
                 self.settings = self.defaults.clone();

@@ -399,6 +399,18 @@ pub fn board_source(machine: &Machine) -> String {
             }
         }
     }
+    match machine.heaters.iter().find_map(|h| match h.control {
+        Control::SsrWindow { window_ms, min_slot_ms, .. } => Some((h.output, window_ms, min_slot_ms)),
+        _ => None,
+    }) {
+        Some((pin, period, slot)) => writeln!(
+            w,
+            "/// The heater behind a solid-state relay: its pin and window.\npub const RELAY: Option<(Pin, firmware::thermal::TimeProportioning)> = Some(({}, firmware::thermal::TimeProportioning {{ period_ms: {period}, min_slot_ms: {slot} }}));",
+            pin_literal(pin)
+        )
+        .unwrap(),
+        None => writeln!(w, "pub const RELAY: Option<(Pin, firmware::thermal::TimeProportioning)> = None;").unwrap(),
+    }
     match machine.fan {
         Some(pin) => writeln!(
             w,
