@@ -49,7 +49,7 @@ pub fn mega2560_elf() -> PathBuf {
             );
             return path;
         }
-        build_variant(&target_dir(), &[], false).unwrap_or_else(|e| panic!("{e}"))
+        build_variant(&target_dir(), &Machine::DEFAULT, false).unwrap_or_else(|e| panic!("{e}"))
     })
     .clone()
 }
@@ -67,7 +67,7 @@ pub fn newest_source_mtime() -> Option<SystemTime> {
     for file in ["Cargo.toml", "Cargo.lock", ".cargo/config.toml"] {
         visit(&root.join(file));
     }
-    for dir in ["firmware", "boards/mega2560-ramps"] {
+    for dir in ["firmware", "boards/mega2560-ramps", "machines", "tools/machine-file"] {
         walk(&root.join(dir), &mut visit);
     }
     newest
@@ -98,36 +98,81 @@ pub fn is_stale(elf: &Path) -> bool {
     newest_source_mtime().is_some_and(|src| src > built)
 }
 
-/// Build `mega2560-ramps` with `cargo +nightly avr` and `features` into
-/// `target`; returns the ELF's path. Without `force` the build is skipped
-/// when the ELF there is newer than its sources (and was built with the
-/// same features); with `force` cargo always runs (it decides itself, and
-/// takes a second when nothing changed). Builds are serialised within the
-/// process.
-pub fn build_variant(target: &Path, features: &[&str], force: bool) -> Result<PathBuf, String> {
+/// A machine to build: a shipped machine file, or the Prusa i3's with
+/// some of its text replaced (each `(from, to)` must occur exactly once):
+/// the variants a test needs (250000 baud, the bed on a relay, …).
+#[derive(Clone, Copy, Debug)]
+pub enum Machine {
+    /// A file under `machines/`, e.g. `"delta.toml"`.
+    Shipped(&'static str),
+    /// `machines/prusa-i3.toml` with these replacements.
+    PrusaWith(&'static [(&'static str, &'static str)]),
+}
+
+impl Machine {
+    /// What `cargo +nightly avr` builds without `FERROSTEP_MACHINE`.
+    pub const DEFAULT: Machine = Machine::Shipped("prusa-i3.toml");
+    /// The Prusa i3 at 250000 baud.
+    pub const PRUSA_250000_BAUD: Machine = Machine::PrusaWith(&[("baud = 115200", "baud = 250000")]);
+    /// The Prusa i3 with its RepRapDiscount display.
+    pub const PRUSA_DISPLAY: Machine =
+        Machine::PrusaWith(&[("enabled = false            # the display", "enabled = true             # the display")]);
+    /// The Prusa i3 with its NSE-5310 encoder loops.
+    pub const PRUSA_ENCODERS: Machine =
+        Machine::PrusaWith(&[("enabled = false            # the encoder loops", "enabled = true             # the encoder loops")]);
+    /// The Prusa i3 with its bed behind a solid-state relay.
+    pub const PRUSA_BED_SSR: Machine = Machine::PrusaWith(&[(
+        "control = \"pid\"            # \"bang-bang\"",
+        "control = \"ssr-window\"     # \"bang-bang\"",
+    )]);
+
+    /// The machine file's text.
+    pub fn text(&self) -> Result<String, String> {
+        let read = |name: &str| {
+            let path = workspace_root().join("machines").join(name);
+            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))
+        };
+        match *self {
+            Machine::Shipped(name) => read(name),
+            Machine::PrusaWith(replacements) => {
+                let mut text = read("prusa-i3.toml")?;
+                for (from, to) in replacements {
+                    if text.matches(from).count() != 1 {
+                        return Err(format!("{from:?} does not occur exactly once in machines/prusa-i3.toml"));
+                    }
+                    text = text.replacen(from, to, 1);
+                }
+                Ok(text)
+            }
+        }
+    }
+}
+
+/// Build `mega2560-ramps` for `machine` with `cargo +nightly avr` into
+/// `target` (its machine file written there as `machine.toml` and named by
+/// `FERROSTEP_MACHINE`); returns the ELF's path. Without `force` the build
+/// is skipped when the ELF there is newer than its sources and was built
+/// from the same file; with `force` cargo always runs (it decides itself,
+/// and takes a second when nothing changed). Builds are serialised within
+/// the process.
+pub fn build_variant(target: &Path, machine: &Machine, force: bool) -> Result<PathBuf, String> {
     static LOCK: Mutex<()> = Mutex::new(());
     let _guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let elf = target.join("avr-none/release/mega2560-ramps.elf");
-    if !force && !is_stale(&elf) && features_match(target, features) {
+    let text = machine.text()?;
+    let file = target.join("machine.toml");
+    if !force && !is_stale(&elf) && std::fs::read_to_string(&file).is_ok_and(|t| t == text) {
         return Ok(elf);
     }
+    std::fs::create_dir_all(target).map_err(|e| format!("{}: {e}", target.display()))?;
+    std::fs::write(&file, &text).map_err(|e| format!("{}: {e}", file.display()))?;
     let mut command = Command::new("cargo");
     command
         .args(["+nightly", "avr"])
         .current_dir(workspace_root())
-        .env("CARGO_TARGET_DIR", target);
-    // `--no-default-features` may come first (the extrusion line and the
-    // powder bed are built without the printers); the rest are features.
-    let (no_default, named) = match features.split_first() {
-        Some((&"--no-default-features", rest)) => (true, rest),
-        _ => (false, features),
-    };
-    if no_default {
-        command.arg("--no-default-features");
-    }
-    if !named.is_empty() {
-        command.arg("--features").arg(named.join(","));
-    }
+        .env("CARGO_TARGET_DIR", target)
+        .env("FERROSTEP_MACHINE", &file)
+        .env_remove("FERROSTEP_ALL_OPTIONS");
     // Tests run under `cargo test`, which sets variables for the host
     // toolchain; the nested build must pick its own.
     for var in [
@@ -141,12 +186,8 @@ pub fn build_variant(target: &Path, features: &[&str], force: bool) -> Result<Pa
         command.env_remove(var);
     }
     eprintln!(
-        "avr-bench: building the Mega 2560 ELF: cargo +nightly avr{} (CARGO_TARGET_DIR={})",
-        if features.is_empty() {
-            String::new()
-        } else {
-            format!(" --features {}", features.join(","))
-        },
+        "avr-bench: building the Mega 2560 ELF for {machine:?}: FERROSTEP_MACHINE={} cargo +nightly avr (CARGO_TARGET_DIR={})",
+        file.display(),
         target.display()
     );
     let status = command
@@ -155,17 +196,6 @@ pub fn build_variant(target: &Path, features: &[&str], force: bool) -> Result<Pa
     if !status.success() {
         return Err(format!("`cargo +nightly avr` failed ({status})"));
     }
-    let _ = std::fs::write(
-        target.join("avr-none/release/.avr-bench-features"),
-        features.join(","),
-    );
     Ok(elf)
 }
 
-/// The features the ELF in `target` was last built with by this helper
-/// (a plain `cargo +nightly avr` leaves no record: no features).
-fn features_match(target: &Path, features: &[&str]) -> bool {
-    let recorded = std::fs::read_to_string(target.join("avr-none/release/.avr-bench-features"))
-        .unwrap_or_default();
-    recorded == features.join(",")
-}

@@ -6,6 +6,7 @@
 //! `cargo +nightly avr` once per test process when missing or stale.
 
 use avr_bench::bench::{self, exchange, stack_budget, STATIC_RAM_BUDGET_BYTES};
+use avr_bench::build::Machine;
 use avr_bench::board::{Board, Endstop, Nse5310Pair, RampsConfig, CPU_HZ, E0, X, Y, Z};
 use avr_bench::build::mega2560_elf;
 use avr_bench::elf::ElfInfo;
@@ -22,10 +23,10 @@ fn boot_raw() -> Board {
 
 /// Boot a variant of the firmware (built with `feature` into
 /// `target/machines/<dir>`, as the test command does) with a raw host.
-/// A machine's build (`features` as `build_variant` takes them) on simavr.
-fn boot_variant(dir: &str, features: &[&str]) -> Board {
-    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join(dir), features, false)
-        .unwrap_or_else(|e| panic!("the {features:?} build: {e}"));
+/// A machine's build on simavr.
+fn boot_variant(dir: &str, machine: Machine) -> Board {
+    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join(dir), &machine, false)
+        .unwrap_or_else(|e| panic!("the {machine:?} build: {e}"));
     let mut config = RampsConfig::stock(115_200);
     config.host = HostConfig::raw(115_200);
     bench::boot(&elf, config).expect("the firmware boots")
@@ -257,7 +258,7 @@ fn a_host_with_numbering_streams_a_slicer_file() {
 /// session 8 it did, hidden by a bench host that sent at half the rate.
 #[test]
 fn a_stream_at_250000_baud_loses_no_byte() {
-    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join("baud-250000"), &["baud-250000"], false)
+    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join("baud-250000"), &Machine::PRUSA_250000_BAUD, false)
         .unwrap_or_else(|e| panic!("the 250000-baud build: {e}"));
     let mut board = bench::boot(&elf, RampsConfig::stock(250_000)).expect("the firmware boots");
     assert_eq!(board.avr_frame_cycles(), 640);
@@ -745,7 +746,7 @@ fn a_hung_main_loop_is_reset_by_the_watchdog_with_everything_off() {
 /// a kill lowers the pin for good, though the window runs in the tick.
 #[test]
 fn the_ssr_bed_switches_in_200_ms_windows_with_slots_of_at_least_10_ms() {
-    let mut board = boot_variant("bed-ssr", &["mega2560-ramps/bed-ssr"]);
+    let mut board = boot_variant("bed-ssr", Machine::PRUSA_BED_SSR);
     // A few degrees short of the target: the PID asks for part power.
     board.set_plant_celsius(14, 59.5);
     board.record_bed_edges(true);
@@ -816,7 +817,7 @@ fn one_stepper_holds_15000_steps_per_s_beside_the_other_interrupts() {
 /// rewritten twice a second.
 #[test]
 fn the_display_build_shows_state_z_and_temperatures() {
-    let mut board = boot_variant("display", &["mega2560-ramps/display-hd44780"]);
+    let mut board = boot_variant("display", Machine::PRUSA_DISPLAY);
     board.run_for_ms(700.0);
     assert_eq!(board.lcd().rows(), ["Ready      Z0.00".to_string(), "T25/0 B25/0     ".to_string()]);
     assert_eq!(replies(&mut board, &["M104 S210", "G92 Z12.345"]), ["ok", "ok"]);
@@ -849,7 +850,7 @@ fn fixed_point_is_the_faster_loop_arithmetic_on_the_avr() {
 /// moves are refused, and M112 stops both at once.
 #[test]
 fn the_extrusion_line_build_turns_its_screw_and_puller_at_their_set_speeds() {
-    let mut board = boot_variant("extrusion-line", &["--no-default-features", "mega2560-ramps/machine-extrusion-line"]);
+    let mut board = boot_variant("extrusion-line", Machine::Shipped("extrusion-line.toml"));
     let said = replies(&mut board, &["M115"]);
     assert!(said.iter().any(|l| l == "Cap:EXTRUSION_LINE:1"), "{said:?}");
     let refused = replies(&mut board, &["M3 S10"]);
@@ -898,7 +899,7 @@ fn the_extrusion_line_build_turns_its_screw_and_puller_at_their_set_speeds() {
 /// roller follows M3/M5 on D10.
 #[test]
 fn the_powder_bed_build_measures_its_feed_platform_travel() {
-    let mut board = boot_variant("powder-bed", &["--no-default-features", "mega2560-ramps/machine-powder-bed"]);
+    let mut board = boot_variant("powder-bed", Machine::Shipped("powder-bed.toml"));
     // The bench counts DIR high as +, the platform's down: bench −(platform).
     // A closes at platform −200 steps, B at +800: 1 000 steps = 5 mm apart.
     board.set_endstop(4, Some(Endstop { axis: Z, at_steps: 200, is_min: false, pressed_level: false }));
@@ -922,7 +923,7 @@ fn the_powder_bed_build_measures_its_feed_platform_travel() {
     board.run_for_ms(5.0);
     assert_eq!(portb(&board) & (1 << 4), 0, "roller off");
     // This build's static RAM is the fullest: its stack still fits.
-    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join("powder-bed"), &["--no-default-features", "mega2560-ramps/machine-powder-bed"], false).unwrap();
+    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join("powder-bed"), &Machine::Shipped("powder-bed.toml"), false).unwrap();
     let ram_static = ElfInfo::read(&elf).unwrap().ram_static_bytes();
     let stack = board.stack_peak_sp();
     println!("powder bed: static RAM {ram_static} B, stack peak {stack} B of {} B", stack_budget(ram_static));
@@ -936,7 +937,7 @@ fn the_powder_bed_build_measures_its_feed_platform_travel() {
 /// carriage jams; moves then wait for G28.
 #[test]
 fn the_encoder_build_corrects_a_belt_slip_and_stops_the_job_on_a_jam_or_a_silent_encoder() {
-    let mut board = boot_variant("encoders", &["mega2560-ramps/encoders"]);
+    let mut board = boot_variant("encoders", Machine::PRUSA_ENCODERS);
     board.attach_nse5310(Nse5310Pair::prusa());
     // Off at boot: nothing on the bus.
     board.run_for_ms(50.0);
@@ -1046,7 +1047,7 @@ fn the_encoder_build_corrects_a_belt_slip_and_stops_the_job_on_a_jam_or_a_silent
     assert!(all.contains("Error:X following error "), "{all}\n{texts:?}");
     // The loops run in the tick with the step interrupt nesting inside:
     // the stack still fits with its margin.
-    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join("encoders"), &["mega2560-ramps/encoders"], false).unwrap();
+    let elf = avr_bench::build::build_variant(&avr_bench::build::target_dir().join("machines").join("encoders"), &Machine::PRUSA_ENCODERS, false).unwrap();
     let ram_static = ElfInfo::read(&elf).unwrap().ram_static_bytes();
     let stack = board.stack_peak_sp();
     println!("encoders: static RAM {ram_static} B, stack peak {stack} B of {} B", stack_budget(ram_static));

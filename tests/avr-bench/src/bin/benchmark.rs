@@ -11,7 +11,7 @@
 //! elsewhere.
 
 use avr_bench::bench::{self, PhaseLog};
-use avr_bench::build::{build_variant, target_dir};
+use avr_bench::build::{build_variant, target_dir, Machine};
 use avr_bench::elf::{FLASH_BYTES, RAM_BYTES};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -47,16 +47,12 @@ fn main() {
     let prebuilt = elf.is_some();
     let elf = match elf {
         Some(e) => e,
-        None => build_variant(&target_dir(), &[], true).unwrap_or_else(|e| fail(&e)),
+        None => build_variant(&target_dir(), &Machine::DEFAULT, true).unwrap_or_else(|e| fail(&e)),
     };
     let elf_250k: Result<PathBuf, String> = match (elf_250k, prebuilt) {
         (Some(e), _) => Ok(e),
         (None, true) => Err("no --elf-250000 given with --elf".into()),
-        (None, false) => build_variant(
-            &target_dir().join("avr-bench-baud250000"),
-            &["baud-250000"],
-            true,
-        ),
+        (None, false) => build_variant(&target_dir().join("avr-bench-baud250000"), &Machine::PRUSA_250000_BAUD, true),
     };
     eprintln!("benchmark: ELF {}", elf.display());
 
