@@ -12,8 +12,8 @@ device=${1:-}
 if [ -n "$device" ]; then export SETUP_FLASH=1; fi
 SETUP_PROFILE=run source tests/scripts/setup.sh
 
-say "building the firmware: cargo +nightly avr"
-cargo +nightly avr
+say "building the firmware: cargo avr"
+cargo avr
 elf=${CARGO_TARGET_DIR:-target}/avr-none/release/mega2560-ramps.elf
 avr-size "$elf"
 

@@ -13,22 +13,11 @@ profile=${SETUP_PROFILE:-test}
 
 # --- Rust toolchains -------------------------------------------------------
 command -v rustup >/dev/null || die "rustup is not installed: see https://rustup.rs, then run this again."
-if ! rustup toolchain list | grep -q '^nightly'; then
-  say "installing the nightly toolchain (the AVR target needs it)"
-  rustup toolchain install nightly --profile minimal || die "could not install the nightly toolchain"
-fi
-if ! rustup component list --toolchain nightly --installed 2>/dev/null | grep -q '^rust-src'; then
-  say "adding rust-src to nightly (for -Z build-std=core on avr-none)"
-  rustup component add rust-src --toolchain nightly || die "could not add rust-src to nightly"
-fi
-
-if ! rustup target list --installed | grep -qx thumbv7em-none-eabihf; then
-  say "adding the thumbv7em-none-eabihf target (the SKR Pro build)"
-  rustup target add thumbv7em-none-eabihf || die "could not add the thumbv7em-none-eabihf target"
-fi
-if ! rustup component list --installed | grep -q '^llvm-tools'; then
-  say "adding llvm-tools (llvm-size / llvm-objcopy for the ARM build)"
-  rustup component add llvm-tools || die "could not add llvm-tools"
+# rust-toolchain.toml pins one nightly (with rust-src, llvm-tools and the
+# thumbv7em target) for every build; install it if missing.
+if ! rustup toolchain list | grep -q "^$(sed -n 's/^channel = "\(.*\)"/\1/p' rust-toolchain.toml)"; then
+  say "installing the pinned toolchain of rust-toolchain.toml"
+  rustup toolchain install || die "could not install the toolchain rust-toolchain.toml names"
 fi
 
 # --- Debian packages -------------------------------------------------------

@@ -8,8 +8,8 @@ SETUP_PROFILE=test source tests/scripts/setup.sh
 target=${CARGO_TARGET_DIR:-target}
 elf=$target/avr-none/release/mega2560-ramps.elf
 
-say "building the Mega 2560 release firmware once: cargo +nightly avr"
-cargo +nightly avr
+say "building the Mega 2560 release firmware once: cargo avr"
+cargo avr
 
 say "checking the firmware against its budgets"
 bash tests/scripts/size-check.sh "$elf"
@@ -24,8 +24,8 @@ mkdir -p "$machines_dir"
 table="machine file (every option)     flash  of 128 KiB    RAM  of 6 KiB"
 for file in machines/*.toml; do
   name=$(basename "$file" .toml)
-  say "building $file with every option: FERROSTEP_MACHINE=$file FERROSTEP_ALL_OPTIONS=1 cargo +nightly avr"
-  FERROSTEP_MACHINE=$file FERROSTEP_ALL_OPTIONS=1 CARGO_TARGET_DIR=$machines_dir/build cargo +nightly avr
+  say "building $file with every option: FERROSTEP_MACHINE=$file FERROSTEP_ALL_OPTIONS=1 cargo avr"
+  FERROSTEP_MACHINE=$file FERROSTEP_ALL_OPTIONS=1 CARGO_TARGET_DIR=$machines_dir/build cargo avr
   cp "$machines_dir/build/avr-none/release/mega2560-ramps.elf" "$machines_dir/$name.elf"
   row=$(bash tests/scripts/size-check.sh "$machines_dir/$name.elf" "$name")
   table+=$'\n'"$row"

@@ -17,7 +17,7 @@ pub fn workspace_root() -> PathBuf {
 
 /// The release ELF of the Mega 2560 board: `$FERROSTEP_ELF` if set (the
 /// test command builds it once and passes it), otherwise built here with
-/// `cargo +nightly avr` once per test process.
+/// `cargo avr` once per test process.
 pub fn mega2560_elf() -> PathBuf {
     static ELF: OnceLock<PathBuf> = OnceLock::new();
     ELF.get_or_init(|| {
@@ -29,11 +29,11 @@ pub fn mega2560_elf() -> PathBuf {
         let root = workspace_root();
         let target = std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| root.join("target"));
         let status = Command::new("cargo")
-            .args(["+nightly", "avr"])
+            .args(["avr"])
             .current_dir(&root)
             .env("CARGO_TARGET_DIR", &target)
             .status()
-            .expect("cannot run cargo +nightly avr (run bash tests/scripts/test.sh to set up the toolchain)");
+            .expect("cannot run cargo avr (run bash tests/scripts/test.sh to set up the toolchain)");
         assert!(status.success(), "building the Mega 2560 firmware failed");
         target.join("avr-none/release/mega2560-ramps.elf")
     })

@@ -3,7 +3,7 @@
 //! Order: `$FERROSTEP_ELF` if set (the test command builds the ELF once
 //! and passes it on; it is used as is); otherwise
 //! `$CARGO_TARGET_DIR/avr-none/release/mega2560-ramps.elf` (default target
-//! dir `target/` at the workspace root), rebuilt with `cargo +nightly avr`
+//! dir `target/` at the workspace root), rebuilt with `cargo avr`
 //! when it is missing or older than any source it is built from. The build
 //! runs at most once per process.
 
@@ -110,7 +110,7 @@ pub enum Machine {
 }
 
 impl Machine {
-    /// What `cargo +nightly avr` builds without `FERROSTEP_MACHINE`.
+    /// What `cargo avr` builds without `FERROSTEP_MACHINE`.
     pub const DEFAULT: Machine = Machine::Shipped("prusa-i3.toml");
     /// The Prusa i3 at 250000 baud.
     pub const PRUSA_250000_BAUD: Machine = Machine::PrusaWith(&[("baud = 115200", "baud = 250000")]);
@@ -148,7 +148,7 @@ impl Machine {
     }
 }
 
-/// Build `mega2560-ramps` for `machine` with `cargo +nightly avr` into
+/// Build `mega2560-ramps` for `machine` with `cargo avr` into
 /// `target` (its machine file written there as `machine.toml` and named by
 /// `FERROSTEP_MACHINE`); returns the ELF's path. Without `force` the build
 /// is skipped when the ELF there is newer than its sources and was built
@@ -168,7 +168,7 @@ pub fn build_variant(target: &Path, machine: &Machine, force: bool) -> Result<Pa
     std::fs::write(&file, &text).map_err(|e| format!("{}: {e}", file.display()))?;
     let mut command = Command::new("cargo");
     command
-        .args(["+nightly", "avr"])
+        .args(["avr"])
         .current_dir(workspace_root())
         .env("CARGO_TARGET_DIR", target)
         .env("FERROSTEP_MACHINE", &file)
@@ -186,15 +186,15 @@ pub fn build_variant(target: &Path, machine: &Machine, force: bool) -> Result<Pa
         command.env_remove(var);
     }
     eprintln!(
-        "avr-bench: building the Mega 2560 ELF for {machine:?}: FERROSTEP_MACHINE={} cargo +nightly avr (CARGO_TARGET_DIR={})",
+        "avr-bench: building the Mega 2560 ELF for {machine:?}: FERROSTEP_MACHINE={} cargo avr (CARGO_TARGET_DIR={})",
         file.display(),
         target.display()
     );
     let status = command
         .status()
-        .map_err(|e| format!("cannot run `cargo +nightly avr` ({e}); run `bash tests/scripts/test.sh` once to set up the toolchain"))?;
+        .map_err(|e| format!("cannot run `cargo avr` ({e}); run `bash tests/scripts/test.sh` once to set up the toolchain"))?;
     if !status.success() {
-        return Err(format!("`cargo +nightly avr` failed ({status})"));
+        return Err(format!("`cargo avr` failed ({status})"));
     }
     Ok(elf)
 }

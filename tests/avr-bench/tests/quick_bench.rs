@@ -3,7 +3,7 @@
 //! counts, so the bench behind `cargo benchmark` cannot rot.
 //!
 //! The ELF comes from `$FERROSTEP_ELF`, or is built with
-//! `cargo +nightly avr` once per test process when missing or stale.
+//! `cargo avr` once per test process when missing or stale.
 
 use avr_bench::bench::{self, exchange, stack_budget, STATIC_RAM_BUDGET_BYTES};
 use avr_bench::build::Machine;
