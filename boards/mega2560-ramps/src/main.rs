@@ -123,6 +123,9 @@ fn main() -> ! {
             #[cfg(feature = "heaters")]
             {
                 let [hotend, bed] = readings.take();
+                // A machine without a bed (its file has none) has no bed
+                // thermistor to judge: the input would read open.
+                let bed = if pins::BED.is_some() { bed } else { None };
                 let _ = link.machine.on_thermal_samples(hotend, bed, &mut tx);
             }
             link.machine.set_endstop_levels(pins::endstop_levels(&dp));

@@ -5,7 +5,9 @@
 //! the simulated Mega 2560 + RAMPS.
 
 use avr_bench::bench::{self, exchange};
-use avr_bench::board::{Board, Endstop, HostConfig, RampsConfig, SensorInput, X, Y, Z};
+use avr_bench::board::{Board, Endstop, RampsConfig, X, Y, Z};
+use avr_bench::host::HostConfig;
+use avr_bench::thermal::SensorInput;
 use avr_bench::build::{build_variant, target_dir, Machine};
 use avr_bench::thermal::Thermistor;
 use std::path::PathBuf;
