@@ -21,7 +21,7 @@
 //!   the highest index; the next save goes to the first page after the last
 //!   one that is not blank (a torn page is skipped, never reused).
 //! - Only when no blank page is left is the sector erased (once every
-//!   `SIZE / (N + 4)` saves: 504 on the F407 with `N` = 256), and the image
+//!   `SIZE / (N + 4)` saves: 334 in the F407's 128 KiB sector with `N` = 384), and the image
 //!   written to page 0 at once. A power loss in that window loses the
 //!   stored settings (the board then boots with its defaults and says so);
 //!   the core's two-slot image (`storage`) still guards every other moment.
@@ -200,7 +200,7 @@ mod tests {
         }
     }
 
-    type Store = PagedStore<FakeFlash, 256>;
+    type Store = PagedStore<FakeFlash, 384>;
 
     fn custom_settings(x: i32) -> Settings {
         let mut settings = Settings::default();
@@ -210,7 +210,7 @@ mod tests {
 
     #[test]
     fn saved_settings_survive_a_reopen_of_the_sector() {
-        let mut store = Store::open(FakeFlash::new(16 * 260));
+        let mut store = Store::open(FakeFlash::new(16 * 388));
         storage::save(&mut store, &custom_settings(12_345)).unwrap();
         let mut reopened = Store::open(store.flash);
         let (loaded, _) = storage::load(&mut reopened).unwrap();
@@ -220,7 +220,7 @@ mod tests {
 
     #[test]
     fn each_save_appends_a_page_and_the_newest_wins() {
-        let mut store = Store::open(FakeFlash::new(16 * 260));
+        let mut store = Store::open(FakeFlash::new(16 * 388));
         for x in 1..=3 {
             storage::save(&mut store, &custom_settings(x * 1000)).unwrap();
         }
@@ -231,7 +231,7 @@ mod tests {
 
     #[test]
     fn a_save_with_nothing_changed_writes_no_page() {
-        let mut store = Store::open(FakeFlash::new(16 * 260));
+        let mut store = Store::open(FakeFlash::new(16 * 388));
         storage::save(&mut store, &custom_settings(7)).unwrap();
         let page = store.next_page();
         assert!(store.commit());
@@ -240,7 +240,7 @@ mod tests {
 
     #[test]
     fn a_full_sector_is_erased_once_and_writing_starts_over() {
-        let mut store = Store::open(FakeFlash::new(4 * 260));
+        let mut store = Store::open(FakeFlash::new(4 * 388));
         for x in 1..=5 {
             storage::save(&mut store, &custom_settings(x)).unwrap();
         }
@@ -254,11 +254,11 @@ mod tests {
     /// not taken, the previous image loads, and the next save goes after it.
     #[test]
     fn a_torn_page_is_skipped_and_the_previous_image_loads() {
-        let mut store = Store::open(FakeFlash::new(16 * 260));
+        let mut store = Store::open(FakeFlash::new(16 * 388));
         storage::save(&mut store, &custom_settings(1)).unwrap();
         let mut flash = store.flash;
         // Page 1 got half an image and no commit word.
-        for byte in &mut flash.bytes[260..260 + 100] {
+        for byte in &mut flash.bytes[388..388 + 100] {
             *byte = 0x12;
         }
         let mut reopened = Store::open(flash);
@@ -273,7 +273,7 @@ mod tests {
     /// for one.
     #[test]
     fn zeroed_flash_holds_no_image() {
-        let mut flash = FakeFlash::new(4 * 260);
+        let mut flash = FakeFlash::new(4 * 388);
         flash.bytes.fill(0);
         let mut store = Store::open(flash);
         assert_eq!(storage::load(&mut store).map(|_| ()), Err(storage::LoadError::NoImage));
@@ -282,7 +282,7 @@ mod tests {
     /// Flash that does not take the write is reported, not believed.
     #[test]
     fn flash_that_does_not_program_fails_the_save() {
-        let mut flash = FakeFlash::new(4 * 260);
+        let mut flash = FakeFlash::new(4 * 388);
         flash.broken = true;
         let mut store = Store::open(flash);
         assert_eq!(storage::save(&mut store, &custom_settings(3)).map(|_| ()), Err(SaveError::WriteFailed));

@@ -43,6 +43,11 @@ pub struct Settings {
     /// (see `thermal::Gains`); `M303 U1` sets them too.
     pub hotend_pid: [i32; 3],
     pub bed_pid: [i32; 3],
+    /// `M665 L R H` (a delta): rod length, radius and homed height, µm
+    /// (zeros on other machines).
+    pub delta_geometry_um: [i32; 3],
+    /// `M666 X Y Z` (a delta): each tower's endstop trim, µm.
+    pub delta_trim_um: [i32; 3],
 }
 
 /// Numbers of the fields [`Settings::field_mut`] reaches (the per-axis
@@ -69,7 +74,7 @@ impl Default for Settings {
 }
 
 /// Number of `i32` fields of [`Settings`] (its only fields).
-const FIELDS: usize = 27;
+const FIELDS: usize = 33;
 const _: () = assert!(core::mem::size_of::<Settings>() == FIELDS * 4);
 
 /// Fields of [`Settings`] taken from the motion configuration (the
@@ -149,6 +154,15 @@ impl Settings {
             // and nothing else (asserted above), so `index` is in it.
             unsafe { values.add(index).write(value) };
         }
+        // A delta's geometry and trims (M665, M666), saved with the rest.
+        #[cfg(feature = "delta")]
+        if let crate::motion::kinematics::MachineKinematics::Delta(delta) = &config.kinematics {
+            let um = |mm: f32| crate::motion::math::round_to_i32(mm * 1000.0);
+            // SAFETY: every field was written by the loop above.
+            let settings = unsafe { slot.assume_init_mut() };
+            settings.delta_geometry_um = [um(delta.rod_length()), um(delta.radius()), um(delta.homed_height)];
+            settings.delta_trim_um = delta.endstop_trim.map(um);
+        }
     }
 
     /// SPEC §1: the Cartesian Prusa i3 on RAMPS (A4988 at 1/16, GT2 16-tooth
@@ -170,6 +184,8 @@ impl Settings {
             // Marlin's DEFAULT_Kp/Ki/Kd and DEFAULT_bedKp/Ki/Kd.
             hotend_pid: [222_000, 10_800, 1_140_000],
             bed_pid: [100_000, 230, 3_054_000],
+            delta_geometry_um: [0; 3],
+            delta_trim_um: [0; 3],
         }
     }
 
@@ -197,7 +213,23 @@ impl Settings {
                 gains.write_as(code, out)?;
             }
         }
-        out.write_str("\n")
+        out.write_str("\n")?;
+        // A delta's geometry and trims (zeros on other machines).
+        if self.delta_geometry_um[0] > 0 {
+            for (title, code, letters, values) in [
+                ("echo:; Delta settings (L<diagonal rod> R<radius> H<height>):\n", 665u16, b"LRH", &self.delta_geometry_um),
+                ("echo:; Endstop adjustment:\n", 666, b"XYZ", &self.delta_trim_um),
+            ] {
+                out.write_str(title)?;
+                ufmt::uwrite!(out, "echo:  M{}", crate::reply::Whole(code))?;
+                for (&letter, &um) in letters.iter().zip(values) {
+                    let hundredths = if um >= 0 { (um + 5) / 10 } else { (um - 5) / 10 };
+                    ufmt::uwrite!(out, " {}{}", char::from(letter), Fixed { mantissa: hundredths, digits: 2 })?;
+                }
+                out.write_str("\n")?;
+            }
+        }
+        Ok(())
     }
 
     /// The `i32` field numbered `index` (0 past the last).
@@ -326,7 +358,7 @@ const _: () = {
             && JUNCTION_DEVIATION == 15
     );
     assert!(MIN_FEED == 16 && MIN_SEGMENT_TIME == 18 && FEED_PERCENT == 19 && FLOW_PERCENT == 20);
-    assert!(HOTEND_PID == FLOW_PERCENT + 1 && BED_PID == HOTEND_PID + 3 && BED_PID + 3 == FIELDS);
+    assert!(HOTEND_PID == FLOW_PERCENT + 1 && BED_PID == HOTEND_PID + 3 && BED_PID + 3 + 6 == FIELDS);
 };
 
 #[cfg(test)]

@@ -33,8 +33,8 @@ use crate::settings::Settings;
 pub const LAYOUT_VERSION: u8 = 3;
 const MAGIC: u16 = 0xF5E7;
 const HEADER_LEN: usize = 13;
-/// Payload: 21 `i32` fields of [`Settings`].
-pub const PAYLOAD_LEN: usize = 27 * 4;
+/// Payload: the 33 `i32` fields of [`Settings`].
+pub const PAYLOAD_LEN: usize = 33 * 4;
 /// Bytes one slot occupies.
 pub const SLOT_LEN: usize = HEADER_LEN + PAYLOAD_LEN;
 /// Storage the two slots need.
@@ -316,7 +316,7 @@ mod tests {
         let (settings, loaded) = load(&mut eeprom).unwrap();
         assert_eq!(settings, custom());
         assert_eq!(stored, loaded);
-        assert_eq!(stored.bytes, 121);
+        assert_eq!(stored.bytes, 145);
     }
 
     #[test]

@@ -19,6 +19,19 @@ if ! rustup toolchain list | grep -q "^$(sed -n 's/^channel = "\(.*\)"/\1/p' rus
   say "installing the pinned toolchain of rust-toolchain.toml"
   rustup toolchain install || die "could not install the toolchain rust-toolchain.toml names"
 fi
+# (Its components and target too, if the toolchain came without them.)
+if ! rustup component list --installed 2>/dev/null | grep -q '^rust-src'; then
+  say "adding rust-src (for -Z build-std=core on avr-none)"
+  rustup component add rust-src || die "could not add rust-src"
+fi
+if ! rustup target list --installed | grep -qx thumbv7em-none-eabihf; then
+  say "adding the thumbv7em-none-eabihf target (the SKR Pro build)"
+  rustup target add thumbv7em-none-eabihf || die "could not add the thumbv7em-none-eabihf target"
+fi
+if ! rustup component list --installed | grep -q '^llvm-tools'; then
+  say "adding llvm-tools (llvm-size / llvm-objcopy for the ARM build)"
+  rustup component add llvm-tools || die "could not add llvm-tools"
+fi
 
 # --- Debian packages -------------------------------------------------------
 # avr-gcc links the AVR firmware and avr-size measures it; QEMU runs it;

@@ -24,8 +24,8 @@ use crate::watchdog;
 use firmware::flash_pages::{FlashSector, PagedStore};
 use stm32f4::stm32f407 as pac;
 
-/// Bytes of settings image (the core's two slots need 234).
-pub const CAPACITY: usize = 256;
+/// Bytes of settings image (the core's two slots need 290).
+pub const CAPACITY: usize = 384;
 
 /// The settings store the main loop hands to the core.
 pub type SettingsStore = PagedStore<Sector11, CAPACITY>;

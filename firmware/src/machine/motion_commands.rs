@@ -458,6 +458,13 @@ impl<'q> Machine<'q> {
             delta.homed_height = values[2];
         }
         self.motion.kinematics_changed();
+        // Kept with the settings: M500 saves them, M502 restores the file's.
+        let um = values.map(|mm| crate::motion::math::round_to_i32(mm * 1000.0));
+        if trim {
+            self.settings.delta_trim_um = um;
+        } else {
+            self.settings.delta_geometry_um = um;
+        }
         Ok(())
     }
 }

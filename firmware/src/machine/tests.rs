@@ -366,9 +366,9 @@ fn m500_saves_and_m501_restores_over_later_changes() {
         machine.poll(0, &mut eeprom, out).unwrap();
     };
     send(&mut machine, "M92 X80\nM500\n", &mut out);
-    assert!(out.0.starts_with("ok\necho:Settings Stored (121 bytes; crc "), "{}", out.0);
+    assert!(out.0.starts_with("ok\necho:Settings Stored (145 bytes; crc "), "{}", out.0);
     send(&mut machine, "M92 X90\nM501\n", &mut out);
-    assert!(out.0.contains("echo:V3 stored settings retrieved (121 bytes; crc "), "{}", out.0);
+    assert!(out.0.contains("echo:V3 stored settings retrieved (145 bytes; crc "), "{}", out.0);
     assert_eq!(machine.settings().steps_per_mm_milli[0], 80_000);
 }
 
@@ -630,4 +630,46 @@ fn m115_names_the_machine_files_machine() {
     let mut out = Text(String::new());
     super::write_capabilities(&mut out).unwrap();
     assert!(out.0.contains(" MACHINE_TYPE:Prusa i3 EXTRUDER_COUNT:1\n"), "{}", out.0);
+}
+
+/// A delta's calibration survives a reset: `M665`/`M666` are settings,
+/// saved by `M500`, loaded at boot, printed by `M503`, and `M502`
+/// returns to the machine's own geometry.
+#[test]
+fn a_deltas_m665_and_m666_are_saved_loaded_and_reported() {
+    let delta = || {
+        let queues: &'static mut StepQueues = Box::leak(Box::new(StepQueues::new()));
+        let config = MotionConfig::spec_delta(false);
+        let (feeder, _generator) = queues.split(config.stepper());
+        Machine::new(Motion::new(config, feeder))
+    };
+    let mut eeprom = MemoryStorage::<4096>::new();
+    let mut machine = delta();
+    let mut out = Text::default();
+    for line in ["M665 L360.5 R226 H298.25\n", "M666 X-1.2 Y0 Z0.75\n", "M500\n"] {
+        let mut assembler = LineAssembler::new();
+        for &b in line.as_bytes() {
+            if let Some(l) = assembler.push(b) {
+                machine.receive_line(l, &mut out).unwrap();
+            }
+        }
+        machine.poll(0, &mut eeprom, &mut out).unwrap();
+    }
+    assert!(out.0.contains("echo:Settings Stored (145 bytes;"), "{}", out.0);
+
+    let mut rebooted = delta();
+    let mut out = Text::default();
+    rebooted.load_settings(&mut eeprom, &mut out).unwrap();
+    assert!(out.0.contains("stored settings retrieved"), "{}", out.0);
+    let crate::motion::kinematics::MachineKinematics::Delta(loaded) = rebooted.motion.config.kinematics else { panic!("a delta") };
+    assert_eq!((loaded.rod_length(), loaded.radius(), loaded.homed_height), (360.5, 226.0, 298.25));
+    assert_eq!(loaded.endstop_trim, [-1.2, 0.0, 0.75]);
+    let report = converse(&mut rebooted, 0, "M503\n");
+    assert!(report.contains("echo:  M665 L360.50 R226.00 H298.25\n"), "{report}");
+    assert!(report.contains("echo:  M666 X-1.20 Y0.00 Z0.75\n"), "{report}");
+
+    converse(&mut rebooted, 0, "M502\n");
+    let crate::motion::kinematics::MachineKinematics::Delta(restored) = rebooted.motion.config.kinematics else { panic!("a delta") };
+    assert_eq!((restored.rod_length(), restored.radius(), restored.homed_height), (361.0, 227.0, 300.0));
+    assert_eq!(restored.endstop_trim, [0.0; 3]);
 }

@@ -330,6 +330,16 @@ impl MotionConfig {
         self.junction_deviation = milli(settings.junction_deviation_um);
         self.feed_factor = centi(settings.feed_percent);
         self.flow_factor = centi(settings.flow_percent);
+        // A delta's saved M665/M666 (none saved yet: zeros, keep the file's).
+        #[cfg(feature = "delta")]
+        if let MachineKinematics::Delta(delta) = &mut self.kinematics {
+            let [rod, radius, height] = settings.delta_geometry_um;
+            if rod > radius && radius > 0 && height > 0 {
+                delta.set_geometry(milli(rod), milli(radius));
+                delta.homed_height = milli(height);
+            }
+            delta.endstop_trim = settings.delta_trim_um.map(milli);
+        }
     }
 
     /// Steps per motor unit of every motor. Out of line: inlined into its
