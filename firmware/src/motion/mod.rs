@@ -1059,7 +1059,7 @@ impl<'q> Motion<'q> {
         // By reference: copies of the configuration's parts cost flash.
         let home = match (&self.config.home, &self.config.kinematics) {
             #[cfg(feature = "delta")]
-            (HomePosition::DeltaTop, MachineKinematics::Delta(delta)) => delta.homed_heights(),
+            (HomePosition::DeltaTop, MachineKinematics::Delta(delta)) => Ok(delta.homed_carriage_heights()),
             (HomePosition::Cartesian(point), kinematics) => kinematics.inverse(*point),
             (HomePosition::DeltaTop, kinematics) => kinematics.inverse([0.0; LINEAR_AXES]),
         };
