@@ -72,11 +72,18 @@ fn another_printers_machine_file_homes_moves_reads_and_reports_its_own_values() 
     );
     assert_eq!([X, Y, Z].map(|a| board.position(a)), [1234 - 1200, -567 + 400, 890 - 4000]);
 
-    // Outside its travel (X −5 … 295, Z 0 … 300) nothing moves.
-    for line in ["G1 X296", "G1 X-6", "G1 Z301"] {
-        assert_eq!(replies(&mut board, &[line]), ["Error:Move outside the soft limits", "ok"], "{line}");
+    // Never outside its travel (X −5 … 295, Z 0 … 300): as Marlin does
+    // with software endstops, a homed axis stops at the end of its travel
+    // and not one step beyond it.
+    for (line, expected) in [
+        ("G1 X296", "X:295.00 Y:5.00 Z:290.00 E:0.00 Count X:23600 Y:400 Z:116000"),
+        ("G1 X-6", "X:-5.00 Y:5.00 Z:290.00 E:0.00 Count X:-400 Y:400 Z:116000"),
+        ("G1 Z301", "X:-5.00 Y:5.00 Z:300.00 E:0.00 Count X:-400 Y:400 Z:120000"),
+    ] {
+        assert_eq!(replies(&mut board, &[line, "M400", "M114"]), ["ok", "ok", expected, "ok"], "{line}");
     }
-    assert_eq!(replies(&mut board, &["M400", "M114"])[1], "X:10.00 Y:5.00 Z:290.00 E:0.00 Count X:800 Y:400 Z:116000");
+    // Back on the switches exactly where homing left them.
+    assert_eq!([X, Y, Z].map(|a| board.position(a)), [1234, -567 + 400, 890]);
 
     // The Semitec table: 25 °C and 200 °C as the part reads them (the
     // stock β 3950 table would read 200 °C's counts as ≈ 223 °C).
@@ -94,13 +101,22 @@ fn another_printers_machine_file_homes_moves_reads_and_reports_its_own_values() 
 
     // M503 prints the file's values.
     let m503 = replies(&mut board, &["M503"]).join("\n");
-    for expected in [
+    let expected = [
         "M92 X80.00 Y80.00 Z400.00 E415.00",
         "M203 X250.00 Y250.00 Z8.00 E40.00",
         "M201 X2000.00 Y2000.00 Z200.00 E5000.00",
         "M204 P1000.00 R2000.00 T1500.00",
         "M301 P18.00 I1.20 D65.00",
-    ] {
-        assert!(m503.contains(expected), "{expected:?} not in:\n{m503}");
+    ];
+    for line in expected {
+        assert!(m503.contains(line), "{line:?} not in:\n{m503}");
+    }
+    // M502 returns to the file's values, not the Prusa's.
+    replies(&mut board, &["M92 X100 E93", "M301 P22.2 I1.08 D114"]);
+    assert!(replies(&mut board, &["M503"]).join("\n").contains("M92 X100.00 Y80.00 Z400.00 E93.00"));
+    replies(&mut board, &["M502"]);
+    let m503 = replies(&mut board, &["M503"]).join("\n");
+    for line in expected {
+        assert!(m503.contains(line), "after M502: {line:?} not in:\n{m503}");
     }
 }
