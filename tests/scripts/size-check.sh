@@ -6,7 +6,7 @@
 #
 # Fails when static RAM is over budget or when flash is over the 64 KiB
 # budget. A build that is known to be over (an optional feature, or a
-# machine still being shrunk: README, "Sizes") passes --over-budget-known:
+# machine still being shrunk: docs/benchmarks.md) passes --over-budget-known:
 # its overshoot is printed as OVER BUDGET and it fails only past what the
 # chip holds (248 KiB: 256 KiB less the 8 KiB bootloader).
 # Also refuses code known to be miscompiled on avr-none (see below).
@@ -27,7 +27,7 @@ printf 'RAM:   %6d bytes of %6d (%d%%) static (.data + .bss)\n' "$ram" "$ram_bud
 status=0
 if [ "$flash" -gt "$flash_capacity" ]; then echo "FAIL: flash over the chip's capacity ($flash_capacity bytes)" >&2; status=1
 elif [ "$flash" -gt "$flash_budget" ]; then
-  if [ "$over_known" = "--over-budget-known" ]; then echo "OVER BUDGET: flash $((flash - flash_budget)) bytes over the 64 KiB budget (known, see README \"Sizes\")"
+  if [ "$over_known" = "--over-budget-known" ]; then echo "OVER BUDGET: flash $((flash - flash_budget)) bytes over the 64 KiB budget (known, see docs/benchmarks.md)"
   else echo "FAIL: flash $((flash - flash_budget)) bytes over the 64 KiB budget" >&2; status=1; fi
 fi
 if [ "$ram" -gt "$ram_budget" ]; then echo "FAIL: static RAM over budget" >&2; status=1; fi
