@@ -15,7 +15,8 @@ use firmware::emergency::{Emergency, Pending};
 use firmware::host_link::SerialLink;
 use firmware::rx::{RxConsumer, RxProducer};
 
-/// Baud rate: Marlin's default 115200, or 250000 with `--features baud-250000`.
+/// Baud rate: 115200, our default (Marlin's example configuration uses
+/// 250000), or 250000 with `--features baud-250000`.
 #[cfg(not(feature = "baud-250000"))]
 pub const BAUD: u32 = 115_200;
 #[cfg(feature = "baud-250000")]
