@@ -195,6 +195,10 @@ fn main() {
     let mut ended_at: Option<f64> = None;
     let mut last_status = String::new();
     let mut last_status_at = Instant::now() - Duration::from_secs(1);
+    // Lines typed (or piped) before the firmware is up wait, as a host
+    // waits for the banner: then the first M105 already has readings.
+    let mut held: std::collections::VecDeque<String> = std::collections::VecDeque::new();
+    let mut accepting_at: Option<f64> = None;
     let mut stdout = std::io::stdout();
     // The firmware is in the middle of a line on stdout: the status line
     // waits, so that the two never mix on one terminal line.
@@ -203,17 +207,23 @@ fn main() {
         // Lines typed (or piped) on stdin.
         loop {
             match lines_rx.try_recv() {
-                Ok(line) => {
-                    if is_urgent(&line) {
-                        board.host_mut().send_now(line.trim());
-                    } else {
-                        board.send([line.trim_end().to_string()]);
-                    }
-                }
+                Ok(line) => held.push_back(line),
                 Err(mpsc::TryRecvError::Empty) => break,
                 Err(mpsc::TryRecvError::Disconnected) => {
                     input_ended = true;
                     break;
+                }
+            }
+        }
+        if accepting_at.is_none() && board.host().replies.iter().any(|r| r.text.ends_with(" ready")) {
+            accepting_at = Some(board.seconds() + 0.5);
+        }
+        if accepting_at.is_some_and(|at| board.seconds() >= at) {
+            for line in held.drain(..) {
+                if is_urgent(&line) {
+                    board.host_mut().send_now(line.trim());
+                } else {
+                    board.send([line.trim_end().to_string()]);
                 }
             }
         }
@@ -267,7 +277,7 @@ fn main() {
             }
         }
 
-        if input_ended && board.host().is_done() && board.host().wire_len() == 0 {
+        if input_ended && held.is_empty() && board.host().is_done() && board.host().wire_len() == 0 {
             // Let the last replies (e.g. M114 after M400) arrive, then stop.
             let now = board.seconds();
             if now - *ended_at.get_or_insert(now) > 0.2 {
