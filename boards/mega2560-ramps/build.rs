@@ -4,7 +4,7 @@
 //! ahead of the program code, instead of after all of it.
 //!
 //! Why: the start-up code copies `.data` with `elpm` and RAMPZ; QEMU 7.2's
-//! AVR (Debian 12's, which the end-to-end tests and `main.sh` run) ignores
+//! AVR (Debian 12's, which the end-to-end tests run) ignores
 //! RAMPZ, so once the image passes 64 KiB it copied the wrong bytes and the
 //! firmware panicked at boot there. Real chips and simavr read either
 //! layout; with this one every tool reads the same bytes.

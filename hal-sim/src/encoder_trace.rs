@@ -104,6 +104,78 @@ pub fn write(comment: &str, rows: &[TraceRow]) -> String {
     out
 }
 
+/// A capture streamed by the firmware's `M828` (the `TR:` lines of a
+/// host's log; `firmware::closed_loop::trace` documents the format), as
+/// one trace per axis.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Capture {
+    pub loop_hz: u16,
+    /// X's and Y's steps/mm, from the start line.
+    pub steps_per_mm: [f64; 2],
+    /// X's and Y's rows, one per sample received (`time_s` from the sample
+    /// numbers, so a dropped sample leaves a gap in time).
+    pub axes: [Vec<TraceRow>; 2],
+    /// Samples the firmware recorded and dropped (from the end line, if the
+    /// log has one).
+    pub totals: Option<(u32, u32)>,
+    /// Samples missing between received ones (from the numbering).
+    pub gaps: u32,
+}
+
+/// Read the `TR:` lines out of a host log (anything else, `ok` and other
+/// replies, is skipped). The first `TR:start` begins the capture.
+pub fn parse_capture(text: &str) -> Result<Capture, TraceError> {
+    let mut capture: Option<Capture> = None;
+    let mut last_number: Option<u8> = None;
+    let mut sample_index: u64 = 0;
+    for (number, line) in text.lines().enumerate() {
+        let line = line.trim();
+        let Some(body) = line.strip_prefix("TR:") else { continue };
+        let error = |message: &str| TraceError { line: number + 1, message: message.into() };
+        if let Some(rest) = body.strip_prefix("start ") {
+            if capture.is_some() {
+                break;
+            }
+            let fields: Vec<&str> = rest.split_whitespace().collect();
+            let [hz, x, y] = fields[..] else { return Err(error("expected TR:start <hz> <x steps/mm x1000> <y steps/mm x1000>")) };
+            let loop_hz: u16 = hz.parse().ok().filter(|hz| *hz > 0).ok_or_else(|| error("bad loop rate"))?;
+            let milli = |field: &str| field.parse::<i64>().ok().filter(|m| *m > 0).map(|m| m as f64 / 1000.0).ok_or_else(|| error("bad steps/mm"));
+            capture = Some(Capture { loop_hz, steps_per_mm: [milli(x)?, milli(y)?], axes: [Vec::new(), Vec::new()], totals: None, gaps: 0 });
+            continue;
+        }
+        let Some(capture) = capture.as_mut() else { continue };
+        if let Some(rest) = body.strip_prefix("end ") {
+            let fields: Vec<u32> = rest.split_whitespace().filter_map(|f| f.parse().ok()).collect();
+            let [recorded, dropped] = fields[..] else { return Err(error("expected TR:end <recorded> <dropped>")) };
+            capture.totals = Some((recorded, dropped));
+            break;
+        }
+        let bytes = body.as_bytes();
+        if bytes.len() != 22 {
+            return Err(error("a sample line has 22 characters after TR:"));
+        }
+        let hex = |range: std::ops::Range<usize>| u32::from_str_radix(&body[range], 16).map_err(|_| error("bad hexadecimal"));
+        let sample_number = hex(0..2)? as u8;
+        if let Some(last) = last_number {
+            let step = sample_number.wrapping_sub(last);
+            capture.gaps += u32::from(step.max(1) - 1);
+            sample_index += u64::from(step.max(1));
+        }
+        last_number = Some(sample_number);
+        let time_s = sample_index as f64 / f64::from(capture.loop_hz);
+        for axis in 0..2 {
+            let at = 2 + axis * 10;
+            let raw = if &body[at..at + 3] == "---" { None } else { Some(hex(at..at + 3)? as u16) };
+            let index = hex(at + 3..at + 4)? as u8;
+            // 24-bit two's complement.
+            let steps = ((hex(at + 4..at + 10)? << 8) as i32) >> 8;
+            let commanded_mm = Some(f64::from(steps) / capture.steps_per_mm[axis]);
+            capture.axes[axis].push(TraceRow { time_s, raw, index, commanded_mm });
+        }
+    }
+    capture.ok_or(TraceError { line: 0, message: "no TR:start line (M828 S1 starts a capture)".into() })
+}
+
 /// What the firmware made of a trace.
 #[derive(Clone, Debug)]
 pub struct ReplayReport {
@@ -342,4 +414,30 @@ pub fn render_shipped(name: &str) -> Option<String> {
 /// Encoder faults are [`AxisFault::Encoder`]; a helper for tests.
 pub fn is_encoder_fault(fault: AxisFault, kind: EncoderFault) -> bool {
     fault == AxisFault::Encoder(kind)
+}
+
+#[cfg(test)]
+mod capture_tests {
+    use super::*;
+
+    #[test]
+    fn a_host_log_with_tr_lines_becomes_one_trace_per_axis() {
+        let log = "ok\nTR:start 250 100000 80000\nok\nTR:00ABC10007D0---FFFFFFF\necho:busy: processing\nTR:0200010007D10002FFFFFF\nTR:end 4 1\n";
+        let capture = parse_capture(log).unwrap();
+        assert_eq!(capture.loop_hz, 250);
+        assert_eq!(capture.steps_per_mm, [100.0, 80.0]);
+        assert_eq!(capture.totals, Some((4, 1)));
+        assert_eq!(capture.gaps, 1);
+        let [x, y] = &capture.axes;
+        assert_eq!(x[0], TraceRow { time_s: 0.0, raw: Some(0xABC), index: 1, commanded_mm: Some(20.0) });
+        assert_eq!(y[0], TraceRow { time_s: 0.0, raw: None, index: 15, commanded_mm: Some(-1.0 / 80.0) });
+        assert_eq!(x[1].time_s, 2.0 / 250.0);
+        assert_eq!((x[1].raw, x[1].commanded_mm), (Some(0), Some(20.01)));
+        assert_eq!((y[1].raw, y[1].index, y[1].commanded_mm), (Some(0), 2, Some(-1.0 / 80.0)));
+    }
+
+    #[test]
+    fn a_log_without_a_start_line_is_refused() {
+        assert!(parse_capture("ok\nTR:00ABC10007D0---FFFFFFF\n").is_err());
+    }
 }

@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Install what the build, the emulators and the tests need, if missing.
-# Idempotent: a second run installs nothing. Sourced by main.sh and test.sh.
+# Idempotent: a second run installs nothing. Sourced by scripts/run.sh and
+# tests/scripts/test.sh.
 #
-#   SETUP_PROFILE=run   : AVR toolchain + QEMU (+ avrdude when flashing)
+#   SETUP_PROFILE=run   : AVR toolchain + what simavr builds with (+ avrdude
+#                         when flashing)
 #   SETUP_PROFILE=test  : everything the test command uses
 set -euo pipefail
 
@@ -34,12 +36,13 @@ if ! rustup component list --installed | grep -q '^llvm-tools'; then
 fi
 
 # --- Debian packages -------------------------------------------------------
-# avr-gcc links the AVR firmware and avr-size measures it; QEMU runs it;
-# the simavr-based bench builds simavr from source (libelf, clang for bindgen);
-# avrdude flashes a real board; python3-venv hosts Printrun's printcore.
-packages=(gcc-avr avr-libc binutils-avr qemu-system-misc)
+# avr-gcc links the AVR firmware and avr-size measures it; the simavr-based
+# bench (the run command's simulator and the tests) builds simavr from source
+# (gcc and make, libelf, clang for bindgen); QEMU runs the firmware in the
+# tests; avrdude flashes a real board; python3-venv hosts Printrun's printcore.
+packages=(gcc-avr avr-libc binutils-avr gcc make libelf-dev libclang-dev pkg-config libzstd-dev zlib1g-dev)
 if [ "$profile" = test ]; then
-  packages+=(qemu-system-arm libelf-dev libclang-dev pkg-config libzstd-dev zlib1g-dev python3-venv)
+  packages+=(qemu-system-misc qemu-system-arm python3-venv)
 fi
 if [ "${SETUP_FLASH:-0}" = 1 ]; then
   packages+=(avrdude)

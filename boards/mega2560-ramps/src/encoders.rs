@@ -1,5 +1,5 @@
-//! SPEC §1's NSE-5310 linear encoders on X and Y (`M820`–`M824`; the
-//! loops themselves: `firmware::closed_loop::printer`).
+//! SPEC §1's NSE-5310 linear encoders on X and Y (`M820`–`M824`, `M828`
+//! traces; the loops themselves: `firmware::closed_loop::printer`).
 //!
 //! Wiring (configuration, see the README):
 //! - both chips on the Mega's TWI bus (SDA D20, SCL D21, 400 kHz), X at
@@ -23,6 +23,7 @@ use core::mem::MaybeUninit;
 use core::ptr::addr_of_mut;
 use firmware::closed_loop::nse5310::{decode_frame, IndexDebouncer};
 use firmware::closed_loop::printer::{AxisReport, EncoderLoops, AXES, LOOP_PERIOD_MS};
+use firmware::closed_loop::trace;
 use firmware::closed_loop::{AxisFault, Reading};
 use firmware::machine::Machine;
 use ufmt::uWrite;
@@ -105,7 +106,7 @@ pub fn with_loops<R>(dp: &Peripherals, f: impl FnOnce(&mut EncoderLoops) -> R) -
     let result = loops_if_ready().map(|loops| {
         let result = f(loops);
         // SAFETY: as above.
-        unsafe { *addr_of_mut!(ACTIVE) = loops.any_enabled() };
+        unsafe { *addr_of_mut!(ACTIVE) = loops.needs_readings() };
         result
     });
     crate::clock::mask_tick(dp, false);
@@ -169,6 +170,21 @@ pub fn service<W: uWrite + ?Sized>(dp: &Peripherals, machine: &mut Machine, refr
     }
     if let Some(Some((axis, fault))) = with_loops(dp, |loops| loops.take_fault()) {
         machine.on_encoder_fault(axis, fault, out)?;
+    }
+    // M828: start or stop recording; the samples out as `TR:` lines (one
+    // every 4 ms, 26 bytes: 2.3 ms of this pass at 115200 baud), then,
+    // after a stop, the totals.
+    let request = machine.take_trace_request();
+    if let Some(on) = request {
+        with_loops(dp, |loops| loops.set_tracing(on));
+    }
+    while let Some(Some(sample)) = with_loops(dp, |loops| loops.take_trace_sample()) {
+        sample.write_line(out)?;
+    }
+    if request == Some(false) {
+        if let Some((recorded, dropped)) = with_loops(dp, |loops| loops.trace_totals()) {
+            trace::write_end(recorded, dropped, out)?;
+        }
     }
     if refresh_report {
         if let Some(reports) = with_loops(dp, |loops| [loops.report(0), loops.report(1)]) {

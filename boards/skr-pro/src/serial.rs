@@ -21,7 +21,8 @@ use stm32f4::stm32f407 as pac;
 use crate::clock::Clocks;
 use crate::pins;
 
-/// Baud rate: Marlin's default 115200, or 250000 with `--features baud-250000`.
+/// Baud rate: 115200, our default (Marlin's example configuration uses
+/// 250000), or 250000 with `--features baud-250000`.
 #[cfg(not(feature = "baud-250000"))]
 pub const BAUD: u32 = 115_200;
 #[cfg(feature = "baud-250000")]

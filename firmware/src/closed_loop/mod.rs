@@ -106,6 +106,8 @@ pub mod printer;
 pub mod quadrature;
 pub mod reference;
 pub mod relay;
+#[cfg(feature = "encoders")]
+pub mod trace;
 pub mod tuning;
 
 pub use axis::{EncoderAxis, Reading};

@@ -40,6 +40,7 @@
 use super::control::{AxisController, DriverStatus, FollowingErrorLimit, LoopGains, Reference};
 use super::nse5310::{LinearTracker, TrackerConfig, TrackerCounters, UNITS_PER_MM};
 use super::output::StepperScale;
+use super::trace::{TraceRecorder, TraceSample};
 use super::tuning::{Strategy, TuningError};
 use super::{AxisFault, EncoderAxis, Reading};
 use crate::num::{mul_q16, Q16};
@@ -174,6 +175,8 @@ pub struct EncoderLoops {
     axes: [CorrectedAxis; AXES],
     /// The first fault since the main loop last looked.
     posted: Option<(u8, AxisFault)>,
+    /// `M828`'s capture of every sample.
+    trace: TraceRecorder,
 }
 
 impl EncoderLoops {
@@ -185,12 +188,35 @@ impl EncoderLoops {
         Some(Self {
             axes: [CorrectedAxis::new(steps_per_mm[0], max_speed_mm_s[0])?, CorrectedAxis::new(steps_per_mm[1], max_speed_mm_s[1])?],
             posted: None,
+            trace: TraceRecorder::new(),
         })
     }
 
     /// Whether any axis' loop is on (the board skips the I²C reads if not).
     pub fn any_enabled(&self) -> bool {
         self.axes.iter().any(|axis| axis.enabled)
+    }
+
+    /// Whether the board must read the encoders every sample: a loop is
+    /// on, or `M828` records (loops off: the readings are recorded and
+    /// nothing is corrected).
+    pub fn needs_readings(&self) -> bool {
+        self.any_enabled() || self.trace.is_on()
+    }
+
+    /// `M828`: start (from sample number 0) or stop recording every sample.
+    pub fn set_tracing(&mut self, on: bool) {
+        self.trace.set(on);
+    }
+
+    /// The oldest recorded sample not yet taken (main loop).
+    pub fn take_trace_sample(&mut self) -> Option<TraceSample> {
+        self.trace.take()
+    }
+
+    /// Samples recorded and dropped (ring full) since the capture started.
+    pub fn trace_totals(&self) -> (u32, u32) {
+        self.trace.totals()
     }
 
     /// Install one axis' settings (gains from [`LoopSettings::gains`]).
@@ -249,6 +275,7 @@ impl EncoderLoops {
     /// `steps_now` from the step interrupt, the two readings and the
     /// debounced Index edges since the last sample.
     pub fn tick(&mut self, steps_now: [i32; AXES], readings: [Reading; AXES], index_edges: [u8; AXES]) {
+        self.trace.record(readings, index_edges, steps_now);
         for index in 0..AXES {
             let corrected = &mut self.axes[index];
             // A latched fault was posted when it happened; it stays until

@@ -16,6 +16,7 @@
 //! | `M822` | encoder and loop report | `echo:X loop:1 enc:12.345 ref:12.340 err:-0.005 corr:-2 idx:6 glitch:0 bounce:0 missed:0 bad:0 fault:none` |
 //! | `M823 X\|Y E<mm> [T<s>]` | following-error limit and how long it may last | `echo:X following error 1.000 mm for 0.500 s` |
 //! | `M824 X\|Y T<θ s>` | the dead time the robust PID is tuned for | `echo:X S2 P4.300 G0.500 theta 0.020 s` |
+//! | `M828 S1` / `S0` | start / stop streaming every loop sample (raw X/Y counts, Index edges, commanded steps) as `TR:` lines; bare: report | `TR:start 250 100000 100000`; after `S0`: `TR:end <recorded> <dropped>`; bare: `echo:Trace off` |
 //!
 //! Without an axis letter `M821`, `M823` and `M824` report both axes.
 //! Bad values answer `Error:Value out of range for <letter>` and change
@@ -51,11 +52,22 @@ pub struct EncoderState {
     changed: u8,
     rehome: bool,
     reports: [AxisReport; AXES],
+    /// `M828`: whether the host asked for the trace, and whether the
+    /// board has yet to start or stop it.
+    tracing: bool,
+    trace_changed: bool,
 }
 
 impl EncoderState {
     pub const fn new() -> Self {
-        Self { settings: [LoopSettings::DEFAULT; AXES], changed: 0, rehome: false, reports: [AxisReport::EMPTY; AXES] }
+        Self {
+            settings: [LoopSettings::DEFAULT; AXES],
+            changed: 0,
+            rehome: false,
+            reports: [AxisReport::EMPTY; AXES],
+            tracing: false,
+            trace_changed: false,
+        }
     }
 }
 
@@ -76,6 +88,12 @@ impl Machine<'_> {
         // The settings were checked when they were set: the tuning cannot
         // fail here; open loop if it ever did.
         Some((axis, settings, settings.gains().unwrap_or(<LoopGains>::OPEN_LOOP)))
+    }
+
+    /// `M828` switched the trace on (`Some(true)`) or off since the board
+    /// last looked.
+    pub fn take_trace_request(&mut self) -> Option<bool> {
+        core::mem::replace(&mut self.encoders.trace_changed, false).then_some(self.encoders.tracing)
     }
 
     /// Whether a homing of X or Y finished (the board re-zeroes the
@@ -115,6 +133,7 @@ impl Machine<'_> {
             Code::M(820) => self.switch_loops(command, out)?,
             Code::M(822) => self.report_loops(out).map(Ok)?,
             Code::M(code @ (821 | 823 | 824)) => self.change_loops(code, command, out)?,
+            Code::M(828) => self.trace_command(command, out)?,
             // M114 adds the measured position (issue #7: "where there is
             // one"), then runs as always.
             Code::M(114) => {
@@ -146,6 +165,35 @@ impl Machine<'_> {
         field(out, flash_str!("echo:Closed loop X:"), u8::from(enabled[0]))?;
         field(out, flash_str!(" Y:"), u8::from(enabled[1]))?;
         out.write_str("\n")?;
+        Ok(Ok(()))
+    }
+
+    /// `M828 S1`: the start line (loop rate, X's and Y's steps/mm) and the
+    /// request to the board; `S0`: the request to stop (the board writes
+    /// the end line once the last samples are out); bare: the state.
+    #[inline(never)]
+    fn trace_command<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<Result<(), CommandError>, W::Error> {
+        let on = match command.value(b'S').map(|value| value.map(|v| v.to_int())) {
+            Err(error) => return Ok(Err(error.into())),
+            Ok(None) => {
+                flash_str!("echo:Trace ").write_to(out)?;
+                let state = if self.encoders.tracing { flash_str!("on\n") } else { flash_str!("off\n") };
+                return state.write_to(out).map(Ok);
+            }
+            Ok(Some(Some(on @ (0 | 1)))) => on == 1,
+            Ok(Some(_)) => return Ok(Err(CommandError::OutOfRange(b'S'))),
+        };
+        if on {
+            let milli = &self.settings.steps_per_mm_milli;
+            crate::closed_loop::trace::write_start(LOOP_HZ, [milli[0], milli[1]], out)?;
+        }
+        if on != self.encoders.tracing {
+            self.encoders.tracing = on;
+            self.encoders.trace_changed = true;
+        } else if on {
+            // Again while on: start over from sample 0 (a new start line).
+            self.encoders.trace_changed = true;
+        }
         Ok(Ok(()))
     }
 

@@ -167,6 +167,21 @@ impl Host {
         }
     }
 
+    /// Put `line` on the wire now, behind the bytes already there, without
+    /// waiting for an `ok`: a host that paces itself (Pronterface or
+    /// OctoPrint on the run command's pty), or `M112`/`M108`/`M410`, which
+    /// the firmware reads in its receive interrupt even while a command
+    /// waits. Not recorded in `sent`.
+    pub fn send_now(&mut self, line: &str) {
+        self.wire.extend(line.bytes());
+        self.wire.push_back(b'\n');
+    }
+
+    /// Bytes still to go out on the wire (of lines already started).
+    pub fn wire_len(&self) -> usize {
+        self.wire.len()
+    }
+
     /// Every queued line has been sent and (with ok flow) acknowledged.
     pub fn is_done(&self) -> bool {
         self.next >= self.job.len()

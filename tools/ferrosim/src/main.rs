@@ -63,7 +63,8 @@ enum Command {
         #[arg(long, default_value_t = 10.0)]
         minutes: f64,
     },
-    /// Replay a recorded encoder trace (hal-sim/traces/README.md format).
+    /// Replay a recorded encoder trace: a CSV trace (hal-sim/traces/README.md)
+    /// or a host log of an M828 capture (its TR: lines, X and Y).
     Replay {
         trace: PathBuf,
         /// Where the error plot goes (PNG and SVG).
@@ -137,6 +138,18 @@ fn run(cli: Cli) -> Result<(), String> {
         }
         Command::Replay { trace, out } => {
             let text = std::fs::read_to_string(&trace).map_err(|e| format!("{}: {e}", trace.display()))?;
+            if replay::is_capture(&text) {
+                let replayed = replay::replay_capture_text(&text)?;
+                print!("{}", replayed.summary());
+                std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
+                let name = trace.file_stem().unwrap_or_default().to_string_lossy().into_owned();
+                for (letter, axis) in ["x", "y"].iter().zip(&replayed.axes) {
+                    for path in axis.plot(&out.join(format!("{name}_{letter}_error")))? {
+                        println!("wrote {}", path.display());
+                    }
+                }
+                return Ok(());
+            }
             let replayed = replay::replay_text(&text)?;
             print!("{}", replayed.summary());
             std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
