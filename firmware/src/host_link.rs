@@ -74,13 +74,42 @@ impl<'q> HostLink<'q> {
         // count only feeds statistics.
         let _ = link.take_dropped();
         // Take bytes only while the queue has room for a line; the rest
-        // waits in the receive ring (hosts wait for `ok` anyway).
+        // waits in the receive ring (hosts wait for `ok` anyway). A refused
+        // line ends the pass: its reply is longer than the line, so a host
+        // that sends on every reply could otherwise keep this loop busy for
+        // ever (accepted lines are bounded by the queue), and the watchdog,
+        // fed once a pass, reset the board (issue 22: a noisy line ended in
+        // a reset).
         while self.machine.can_accept_line() {
             let Some(byte) = link.pop() else { break };
             if let Some(line) = self.assembler.push(byte) {
+                let queued = self.machine.queued_lines();
                 self.machine.receive_line(line, out)?;
+                if self.machine.take_resend_request() {
+                    self.discard_in_flight(link);
+                }
+                if self.machine.queued_lines() == queued {
+                    break;
+                }
             }
         }
         self.machine.poll(now_ms, storage, out)
+    }
+
+    /// After a resend request, as Marlin: throw away what the receive ring
+    /// holds. The host sent those lines before it saw the request; each
+    /// would be refused as out of order, each refusal would carry an `ok`
+    /// and a `Resend:`, and a host that sends a line on each (printcore
+    /// does) would keep the errors going. A line cut in two by the discard
+    /// loses its rest too, up to its end. Bounded by the ring's size.
+    fn discard_in_flight(&mut self, link: &mut impl SerialLink) {
+        let mut last = b'\n';
+        for _ in 0..crate::rx::RX_RING_SLOTS {
+            let Some(byte) = link.pop() else { break };
+            last = byte;
+        }
+        if last != b'\n' && last != b'\r' {
+            self.assembler.discard_to_line_end();
+        }
     }
 }
