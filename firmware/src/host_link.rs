@@ -25,11 +25,13 @@ pub trait SerialLink {
 pub struct HostLink<'q> {
     pub machine: Machine<'q>,
     assembler: LineAssembler,
+    /// When the last byte was taken from the receive ring.
+    last_byte_ms: u32,
 }
 
 impl<'q> HostLink<'q> {
     pub fn new(machine: Machine<'q>) -> Self {
-        Self { machine, assembler: LineAssembler::new() }
+        Self { machine, assembler: LineAssembler::new(), last_byte_ms: 0 }
     }
 
     /// The link and its machine built directly in `slot` (a `static` on the
@@ -46,6 +48,7 @@ impl<'q> HostLink<'q> {
         unsafe {
             Machine::init_in(&mut *core::ptr::addr_of_mut!((*p).machine).cast(), config, feeder);
             core::ptr::addr_of_mut!((*p).assembler).write(LineAssembler::new());
+            core::ptr::addr_of_mut!((*p).last_byte_ms).write(0);
             slot.assume_init_mut()
         }
     }
@@ -81,7 +84,20 @@ impl<'q> HostLink<'q> {
         // fed once a pass, reset the board (issue 22: a noisy line ended in
         // a reset).
         while self.machine.can_accept_line() {
-            let Some(byte) = link.pop() else { break };
+            let Some(byte) = link.pop() else {
+                // A numbered line whose end was lost to noise: refuse it
+                // (and ask for it again) rather than wait for ever, as
+                // both the host and this side would.
+                if self.assembler.holds_protocol_line() && now_ms.wrapping_sub(self.last_byte_ms) >= crate::line::LINE_END_TIMEOUT_MS {
+                    let line = self.assembler.abandon();
+                    self.machine.receive_line(line, out)?;
+                    if self.machine.take_resend_request() {
+                        self.discard_in_flight(link);
+                    }
+                }
+                break;
+            };
+            self.last_byte_ms = now_ms;
             if let Some(line) = self.assembler.push(byte) {
                 let queued = self.machine.queued_lines();
                 self.machine.receive_line(line, out)?;

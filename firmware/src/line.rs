@@ -23,7 +23,17 @@ pub enum Line<'a> {
     /// `numbered`: whether its first non-blank byte was `N`; `None` when
     /// the loss came before any byte of it survived.
     Damaged { numbered: Option<bool> },
+    /// A numbered (or checksummed) line whose end never came: no byte for
+    /// [`LINE_END_TIMEOUT_MS`] (see [`LineAssembler::abandon`]).
+    Unterminated { numbered: bool },
 }
+
+/// How long a started line that carries a line number or a checksum may
+/// wait for its next byte before it is refused: a host sends such a line
+/// in one go (8 ms for the longest at 115200 baud) and then waits for its
+/// `ok`, so a line end lost to noise would otherwise hang both sides (a
+/// person typing in a terminal types no `N…*…` lines; their lines wait).
+pub const LINE_END_TIMEOUT_MS: u32 = 250;
 
 /// Collects bytes until a line terminator.
 pub struct LineAssembler {
@@ -64,6 +74,25 @@ impl LineAssembler {
             in_paren: false,
             discarding: false,
         }
+    }
+
+    /// Whether the line being received carries a number or a checksum, so
+    /// it may be given up when its end does not come.
+    pub fn holds_protocol_line(&self) -> bool {
+        !self.handed_out && !self.discarding && (matches!(self.first, b'N' | b'n') || self.buffer.contains(&b'*'))
+    }
+
+    /// Give up the line being received (its end never came): the bytes
+    /// are dropped, and the line is reported so that it gets its reply.
+    pub fn abandon(&mut self) -> Line<'static> {
+        let numbered = matches!(self.first, b'N' | b'n');
+        self.buffer.clear();
+        self.overflowed = false;
+        self.damaged = false;
+        self.first = 0;
+        self.in_comment = false;
+        self.in_paren = false;
+        Line::Unterminated { numbered }
     }
 
     /// Drop everything up to and including the next line end, silently:

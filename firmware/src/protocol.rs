@@ -32,6 +32,8 @@ pub enum LineRejection {
     TooLong,
     /// Bytes of the line were lost in reception.
     Damaged,
+    /// A numbered line's end never came ([`crate::line::LINE_END_TIMEOUT_MS`]).
+    Unterminated,
 }
 
 impl LineRejection {
@@ -45,6 +47,7 @@ impl LineRejection {
             Self::MalformedHeader => crate::flash_str!("Malformed line number or checksum"),
             Self::TooLong => crate::flash_str!("Line too long"),
             Self::Damaged => crate::flash_str!("Serial receive overrun, line lost (checksum not verified)"),
+            Self::Unterminated => crate::flash_str!("Line without its end, dropped (checksum not verified)"),
         }
     }
 }
@@ -93,6 +96,10 @@ impl HostProtocol {
             Line::Damaged { numbered } => {
                 self.resend = numbered.unwrap_or(self.numbered);
                 return Err(LineRejection::Damaged);
+            }
+            Line::Unterminated { numbered } => {
+                self.resend = numbered;
+                return Err(LineRejection::Unterminated);
             }
         };
         let star = text.iter().position(|&b| b == b'*');
