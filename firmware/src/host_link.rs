@@ -90,19 +90,21 @@ impl<'q> HostLink<'q> {
                 // both the host and this side would.
                 if self.assembler.holds_protocol_line() && now_ms.wrapping_sub(self.last_byte_ms) >= crate::line::LINE_END_TIMEOUT_MS {
                     let line = self.assembler.abandon();
-                    self.machine.receive_line(line, out)?;
-                    if self.machine.take_resend_request() {
-                        self.discard_in_flight(link);
-                    }
+                    let assembler = &mut self.assembler;
+                    self.machine.receive_line_then(line, out, || discard_in_flight(assembler, link))?;
                 }
                 break;
             };
             self.last_byte_ms = now_ms;
             if let Some(line) = self.assembler.push(byte) {
                 let queued = self.machine.queued_lines();
-                self.machine.receive_line(line, out)?;
-                if self.machine.take_resend_request() {
-                    self.discard_in_flight(link);
+                // The line borrows the assembler's buffer: the discard
+                // works on the ring and a flag (`discard_to_line_end`
+                // after the line is handed back).
+                let mut cut = false;
+                self.machine.receive_line_then(line, out, || cut = discard_ring(link))?;
+                if cut {
+                    self.assembler.discard_to_line_end();
                 }
                 if self.machine.queued_lines() == queued {
                     break;
@@ -112,20 +114,26 @@ impl<'q> HostLink<'q> {
         self.machine.poll(now_ms, storage, out)
     }
 
-    /// After a resend request, as Marlin: throw away what the receive ring
-    /// holds. The host sent those lines before it saw the request; each
-    /// would be refused as out of order, each refusal would carry an `ok`
-    /// and a `Resend:`, and a host that sends a line on each (printcore
-    /// does) would keep the errors going. A line cut in two by the discard
-    /// loses its rest too, up to its end. Bounded by the ring's size.
-    fn discard_in_flight(&mut self, link: &mut impl SerialLink) {
-        let mut last = b'\n';
-        for _ in 0..crate::rx::RX_RING_SLOTS {
-            let Some(byte) = link.pop() else { break };
-            last = byte;
-        }
-        if last != b'\n' && last != b'\r' {
-            self.assembler.discard_to_line_end();
-        }
+}
+
+/// After a resend request, as Marlin: throw away what the receive ring
+/// holds. The host sent those lines before it saw the request; each would
+/// be refused as out of order, each refusal would carry an `ok` and a
+/// `Resend:`, and a host that sends a line on each (printcore does) would
+/// keep the errors going. Returns whether the discard cut a line in two
+/// (its rest is then skipped up to its end). Bounded by the ring's size.
+fn discard_ring(link: &mut impl SerialLink) -> bool {
+    let mut last = b'\n';
+    for _ in 0..crate::rx::RX_RING_SLOTS {
+        let Some(byte) = link.pop() else { break };
+        last = byte;
+    }
+    last != b'\n' && last != b'\r'
+}
+
+/// [`discard_ring`], and the assembler skips the rest of a cut line.
+fn discard_in_flight(assembler: &mut LineAssembler, link: &mut impl SerialLink) {
+    if discard_ring(link) {
+        assembler.discard_to_line_end();
     }
 }

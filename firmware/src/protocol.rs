@@ -59,9 +59,6 @@ pub struct HostProtocol {
     numbered: bool,
     /// The line refused last was numbered: its reply asks for a resend.
     resend: bool,
-    /// A resend was asked for and the receive side has not yet discarded
-    /// what the host sent before it saw the request.
-    flush_owed: bool,
 }
 
 impl Default for HostProtocol {
@@ -72,7 +69,7 @@ impl Default for HostProtocol {
 
 impl HostProtocol {
     pub const fn new() -> Self {
-        Self { last_line: 0, numbered: false, resend: false, flush_owed: false }
+        Self { last_line: 0, numbered: false, resend: false }
     }
 
     pub fn last_line(&self) -> i32 {
@@ -140,26 +137,31 @@ impl HostProtocol {
         Ok(body)
     }
 
-    /// Whether a resend was asked for since the last call: the receive
-    /// side then discards what it holds (see `HostLink::service`).
-    pub fn take_resend_request(&mut self) -> bool {
-        core::mem::take(&mut self.flush_owed)
-    }
-
     /// Write the reply to a refused line: the error, a resend request when
     /// the line was numbered, and `ok` (Marlin's order).
     pub fn write_rejection<W: uWrite + ?Sized>(&mut self, rejection: LineRejection, out: &mut W) -> Result<(), W::Error> {
-        self.flush_owed |= self.resend;
+        self.write_rejection_then(rejection, out, || ())
+    }
+
+    /// [`Self::write_rejection`], calling `before_resend` between the error
+    /// line and the `Resend:` when there is one. The receive side discards
+    /// the lines in flight there, as Marlin: after the request the host
+    /// sends the line asked for at once (printcore on `Resend:` itself),
+    /// and a discard after the reply would throw that line away too (seen
+    /// on the bench: the same resend for ever).
+    pub fn write_rejection_then<W: uWrite + ?Sized>(
+        &mut self,
+        rejection: LineRejection,
+        out: &mut W,
+        before_resend: impl FnOnce(),
+    ) -> Result<(), W::Error> {
         out.write_str("Error:")?;
         rejection.message().write_to(out)?;
         // The `ok` joined to the last piece: one call fewer.
         if self.resend {
-            ufmt::uwrite!(
-                out,
-                ", Last Line: {}\nResend: {}\nok\n",
-                crate::reply::Fixed::whole(self.last_line),
-                crate::reply::Fixed::whole(self.last_line.wrapping_add(1))
-            )
+            ufmt::uwrite!(out, ", Last Line: {}\n", crate::reply::Fixed::whole(self.last_line))?;
+            before_resend();
+            ufmt::uwrite!(out, "Resend: {}\nok\n", crate::reply::Fixed::whole(self.last_line.wrapping_add(1)))
         } else {
             out.write_str("\nok\n")
         }

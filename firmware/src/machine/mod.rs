@@ -328,12 +328,6 @@ impl<'q> Machine<'q> {
         ufmt::uwrite!(out, "Error:Driver alarm on {}: motion stopped, home with G28\n", char::from(letter))
     }
 
-    /// Whether a resend was asked for since the last call (the board's
-    /// receive side then discards the lines already in flight).
-    pub fn take_resend_request(&mut self) -> bool {
-        self.protocol.take_resend_request()
-    }
-
     /// Lines waiting in the command queue.
     pub fn queued_lines(&self) -> usize {
         self.queue.len()
@@ -387,9 +381,16 @@ impl<'q> Machine<'q> {
     /// Free to inline into the board's one caller (`HostLink::service`),
     /// as `poll`: measured smaller on the AVR.
     pub fn receive_line<W: uWrite + ?Sized>(&mut self, line: Line<'_>, out: &mut W) -> Result<(), W::Error> {
+        self.receive_line_then(line, out, || ())
+    }
+
+    /// [`Self::receive_line`]; a refusal that asks for a resend calls
+    /// `before_resend` just before its `Resend:` line (the board discards
+    /// the lines in flight there, see `HostLink::service`).
+    pub fn receive_line_then<W: uWrite + ?Sized>(&mut self, line: Line<'_>, out: &mut W, before_resend: impl FnOnce()) -> Result<(), W::Error> {
         let body = match self.protocol.accept(line) {
             Ok(body) => body,
-            Err(rejection) => return self.protocol.write_rejection(rejection, out),
+            Err(rejection) => return self.protocol.write_rejection_then(rejection, out, before_resend),
         };
         // Queue an empty line and fill it in place: no line-sized copy.
         if self.queue.push_back(LineText::new()).is_err() {

@@ -288,6 +288,7 @@ fn a_burst_without_flow_control_reports_lost_input() {
         flow: Flow::Burst,
         numbering: false,
         resend: false,
+        ..HostConfig::raw(115_200)
     };
     let mut board = bench::boot(&mega2560_elf(), config).unwrap();
     let mut lines = vec!["G4 P100".to_string()];
@@ -335,6 +336,7 @@ fn lines_spliced_by_a_receive_overflow_are_never_executed() {
         flow: Flow::Burst,
         numbering: false,
         resend: false,
+        ..HostConfig::raw(115_200)
     };
     let mut board = bench::boot(&mega2560_elf(), config).unwrap();
     let mut lines = vec!["G4 P100".to_string()];
