@@ -201,9 +201,10 @@ pub struct HeaterGuard {
     runaway: Runaway,
     runaway_samples: u16,
     /// Below the runaway band while holding: the temperature at the start
-    /// of the current fall window, and the samples into it.
-    fall_from: Celsius,
-    fall_samples: u16,
+    /// of the current fall window, centi-°C (≤ the maximum, so an `i16`:
+    /// the channel's size is budgeted); the window counts on
+    /// `runaway_samples`.
+    fall_from: i16,
     /// Samples left in the current watch period (0: not watching).
     watch_samples: u16,
     /// The temperature to reach by the end of the watch period;
@@ -238,8 +239,7 @@ impl HeaterGuard {
             bad: 0,
             runaway: Runaway::Off,
             runaway_samples: 0,
-            fall_from: Celsius(0),
-            fall_samples: 0,
+            fall_from: 0,
             watch_samples: 0,
             watch_goal: Celsius(0),
         }
@@ -357,17 +357,15 @@ impl HeaterGuard {
                 if config.runaway_fall_window_s == 0 {
                     return Verdict::Run(measured);
                 }
+                let now = measured.0.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16;
+                let window = samples(config.runaway_fall_window_s, period_ms);
                 if self.runaway_samples == 1 {
-                    self.fall_from = measured;
-                    self.fall_samples = 0;
-                }
-                self.fall_samples = self.fall_samples.saturating_add(1);
-                if self.fall_samples >= samples(config.runaway_fall_window_s, period_ms) {
-                    if measured.0 <= self.fall_from.0.saturating_sub(FALL_CENTI) {
+                    self.fall_from = now;
+                } else if (self.runaway_samples - 1) % window == 0 {
+                    if i32::from(now) <= i32::from(self.fall_from) - FALL_CENTI {
                         return self.latch(ThermalFault::ThermalRunaway);
                     }
-                    self.fall_from = measured;
-                    self.fall_samples = 0;
+                    self.fall_from = now;
                 }
             }
         }
