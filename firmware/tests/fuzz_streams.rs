@@ -172,3 +172,52 @@ fn one_corrupted_line_costs_one_resend() {
     assert!(run.flips > 0);
     assert!(run.resends <= 2 * run.flips, "flips {} resends {}\n{}", run.flips, run.resends, run.output);
 }
+
+/// A host that sends faster than the firmware takes lines (a burst of 40
+/// numbered lines at once into the 128-byte ring), then slows down to
+/// printcore's flow: the overrun costs resends, and once the host slows
+/// the stream converges, every line once and in order.
+#[test]
+fn after_an_overrun_the_stream_recovers_as_soon_as_the_host_slows() {
+    let mut board = SimBoard::new();
+    board.take_output();
+    board.receive(format!("{}\n", with_checksum("N-1 M110")).as_bytes());
+    board.advance(20);
+    board.take_output();
+    let line = |n: usize| format!("{}\n", with_checksum(&format!("N{n} M118 JOB{n}")));
+    let burst: String = (0..40).map(line).collect();
+    board.inject(burst.as_bytes());
+    let (mut next, mut clear, mut pending, mut output) = (40usize, false, String::new(), String::new());
+    let mut executed = Vec::new();
+    let mut resends = 0;
+    for _ in 0..20_000 {
+        if clear && next < 100 {
+            board.receive(line(next).as_bytes());
+            next += 1;
+            clear = false;
+        }
+        board.advance(1);
+        pending.push_str(&board.take_output());
+        while let Some(end) = pending.find('\n') {
+            let text: String = pending.drain(..=end).collect();
+            let text = text.trim_end().to_string();
+            output.push_str(&text);
+            output.push('\n');
+            if text.starts_with("ok") {
+                clear = true;
+            } else if let Some(n) = text.strip_prefix("Resend:") {
+                resends += 1;
+                next = n.trim().parse().unwrap();
+                clear = true;
+            } else if let Some(k) = text.strip_prefix("JOB") {
+                executed.push(k.parse::<usize>().unwrap());
+            }
+        }
+        if executed.last() == Some(&99) {
+            break;
+        }
+    }
+    assert_eq!(executed, (0..100).collect::<Vec<_>>(), "{output}");
+    assert!(output.contains("Serial receive overrun"), "{output}");
+    assert!(resends <= 3, "{resends} resends\n{output}");
+}
