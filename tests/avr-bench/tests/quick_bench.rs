@@ -175,8 +175,11 @@ fn boots_answers_and_stays_within_its_budgets() {
 fn line_numbers_checksums_and_long_lines_follow_marlin() {
     let mut board = boot_raw();
     // Before any numbered line: no resend request.
-    let long = format!("G1 X1 ; {}", "x".repeat(120));
+    let long = format!("G1 X1 ({})", "x".repeat(120));
     assert_eq!(replies(&mut board, &[&long]), ["Error:Line too long", "ok"]);
+    // A `;` comment may be any length (Marlin; issue 22).
+    let commented = format!("M400 ; {}", "x".repeat(120));
+    assert_eq!(replies(&mut board, &[&commented]), ["ok"]);
     assert_eq!(replies(&mut board, &["M110 N0"]), ["ok"]);
     let good = with_checksum("N1 M114");
     assert_eq!(
@@ -204,8 +207,11 @@ fn line_numbers_checksums_and_long_lines_follow_marlin() {
             "ok"
         ]
     );
+    // Unnumbered: never a resend request (issue 22); numbered: one.
+    assert_eq!(replies(&mut board, &[&long]), ["Error:Line too long", "ok"]);
+    let long_numbered = format!("N2 {long}*1");
     assert_eq!(
-        replies(&mut board, &[&long]),
+        replies(&mut board, &[&long_numbered]),
         ["Error:Line too long, Last Line: 1", "Resend: 2", "ok"]
     );
     let resent = with_checksum("N2 M114");
