@@ -77,3 +77,29 @@ fn printcore_through_noise_at_1_percent_ends_exactly() {
 fn printcore_on_a_clean_line_ends_exactly() {
     stream_through_noise(0, 1);
 }
+
+/// Issue 22, finding 6: a line waiting for room in the planner behind long
+/// moves heard nothing for 6.4 s, and OctoPrint timed out. Now `busy:
+/// processing` comes every 2 s while a line waits: no silence over ≈ 2 s.
+#[test]
+fn a_line_waiting_behind_long_moves_hears_busy_every_two_seconds() {
+    let mut config = RampsConfig::stock(115_200);
+    config.host = HostConfig::printcore(115_200);
+    let mut board = bench::boot(&mega2560_elf(), config).expect("the firmware boots");
+    board.host_mut().clear_log();
+    // 4 s moves: the planner (16 blocks) fills and the next lines wait.
+    let lines: Vec<String> = (0..40).map(|i| format!("G1 X{} F1500", if i % 2 == 0 { 100 } else { 0 })).collect();
+    board.send(lines.iter());
+    // The planner takes about 24 lines at once; the rest wait 4 s each,
+    // well past the 16 s watched.
+    board.run_for_ms(16_000.0);
+    let host = board.host();
+    assert!(!host.is_done(), "no line waited");
+    let cpu = f64::from(avr_bench::board::CPU_HZ);
+    let busy = host.reply_texts().iter().filter(|t| **t == "echo:busy: processing").count();
+    assert!(busy >= 2, "{}", host.transcript());
+    let arrivals: Vec<f64> = host.replies.iter().map(|r| r.arrived_cycle as f64 / cpu).collect();
+    let longest = arrivals.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
+    eprintln!("{busy} busy lines, longest silence {longest:.2} s");
+    assert!(longest < 2.3, "silent for {longest:.2} s\n{}", host.transcript());
+}
