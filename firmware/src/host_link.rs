@@ -25,11 +25,13 @@ pub trait SerialLink {
 pub struct HostLink<'q> {
     pub machine: Machine<'q>,
     assembler: LineAssembler,
+    /// When the last byte was taken from the receive ring.
+    last_byte_ms: u32,
 }
 
 impl<'q> HostLink<'q> {
     pub fn new(machine: Machine<'q>) -> Self {
-        Self { machine, assembler: LineAssembler::new() }
+        Self { machine, assembler: LineAssembler::new(), last_byte_ms: 0 }
     }
 
     /// The link and its machine built directly in `slot` (a `static` on the
@@ -46,6 +48,7 @@ impl<'q> HostLink<'q> {
         unsafe {
             Machine::init_in(&mut *core::ptr::addr_of_mut!((*p).machine).cast(), config, feeder);
             core::ptr::addr_of_mut!((*p).assembler).write(LineAssembler::new());
+            core::ptr::addr_of_mut!((*p).last_byte_ms).write(0);
             slot.assume_init_mut()
         }
     }
@@ -74,13 +77,63 @@ impl<'q> HostLink<'q> {
         // count only feeds statistics.
         let _ = link.take_dropped();
         // Take bytes only while the queue has room for a line; the rest
-        // waits in the receive ring (hosts wait for `ok` anyway).
+        // waits in the receive ring (hosts wait for `ok` anyway). A refused
+        // line ends the pass: its reply is longer than the line, so a host
+        // that sends on every reply could otherwise keep this loop busy for
+        // ever (accepted lines are bounded by the queue), and the watchdog,
+        // fed once a pass, reset the board (issue 22: a noisy line ended in
+        // a reset).
         while self.machine.can_accept_line() {
-            let Some(byte) = link.pop() else { break };
+            let Some(byte) = link.pop() else {
+                // A numbered line whose end was lost to noise: refuse it
+                // (and ask for it again) rather than wait for ever, as
+                // both the host and this side would.
+                if self.assembler.holds_protocol_line() && now_ms.wrapping_sub(self.last_byte_ms) >= crate::line::LINE_END_TIMEOUT_MS {
+                    let line = self.assembler.abandon();
+                    let assembler = &mut self.assembler;
+                    self.machine.receive_line_then(line, out, || discard_in_flight(assembler, link))?;
+                }
+                break;
+            };
+            self.last_byte_ms = now_ms;
             if let Some(line) = self.assembler.push(byte) {
-                self.machine.receive_line(line, out)?;
+                let queued = self.machine.queued_lines();
+                // The line borrows the assembler's buffer: the discard
+                // works on the ring and a flag (`discard_to_line_end`
+                // after the line is handed back).
+                let mut cut = false;
+                self.machine.receive_line_then(line, out, || cut = discard_ring(link))?;
+                if cut {
+                    self.assembler.discard_to_line_end();
+                }
+                if self.machine.queued_lines() == queued {
+                    break;
+                }
             }
         }
         self.machine.poll(now_ms, storage, out)
+    }
+
+}
+
+/// After a resend request, as Marlin: throw away what the receive ring
+/// holds. The host sent those lines before it saw the request; each would
+/// be refused as out of order, each refusal would carry an `ok` and a
+/// `Resend:`, and a host that sends a line on each (printcore does) would
+/// keep the errors going. Returns whether the discard cut a line in two
+/// (its rest is then skipped up to its end). Bounded by the ring's size.
+fn discard_ring(link: &mut impl SerialLink) -> bool {
+    let mut last = b'\n';
+    for _ in 0..crate::rx::RX_RING_SLOTS {
+        let Some(byte) = link.pop() else { break };
+        last = byte;
+    }
+    last != b'\n' && last != b'\r'
+}
+
+/// [`discard_ring`], and the assembler skips the rest of a cut line.
+fn discard_in_flight(assembler: &mut LineAssembler, link: &mut impl SerialLink) {
+    if discard_ring(link) {
+        assembler.discard_to_line_end();
     }
 }

@@ -9,9 +9,13 @@
 //! line is accepted as is (plain terminals), and a numbered line without a
 //! checksum is refused (a number without a checksum protects nothing).
 //!
-//! A line that lost bytes in reception is refused the same way once the host
-//! has used line numbers; without them there is nothing to resend, and the
-//! error alone tells the user that a line was lost.
+//! A line that lost bytes in reception is refused the same way when it was
+//! numbered (or, when its start was lost, once the host has used line
+//! numbers); an unnumbered line is never answered with `Resend:` (the host
+//! has no number to resend), and the error alone tells the user that a line
+//! was lost. The overrun's text says "checksum": OctoPrint treats an
+//! `Error:` as fatal unless it names "line number", "checksum", "format
+//! error" or "expected line".
 
 use crate::line::Line;
 use ufmt::uWrite;
@@ -28,6 +32,8 @@ pub enum LineRejection {
     TooLong,
     /// Bytes of the line were lost in reception.
     Damaged,
+    /// A numbered line's end never came ([`crate::line::LINE_END_TIMEOUT_MS`]).
+    Unterminated,
 }
 
 impl LineRejection {
@@ -40,7 +46,8 @@ impl LineRejection {
             Self::NoLineNumberWithChecksum => crate::flash_str!("No Line Number with checksum"),
             Self::MalformedHeader => crate::flash_str!("Malformed line number or checksum"),
             Self::TooLong => crate::flash_str!("Line too long"),
-            Self::Damaged => crate::flash_str!("Serial receive overrun, line lost"),
+            Self::Damaged => crate::flash_str!("Serial receive overrun, line lost (checksum not verified)"),
+            Self::Unterminated => crate::flash_str!("Line without its end, dropped (checksum not verified)"),
         }
     }
 }
@@ -50,6 +57,8 @@ pub struct HostProtocol {
     last_line: i32,
     /// The host has sent numbered lines: lost lines can be resent.
     numbered: bool,
+    /// The line refused last was numbered: its reply asks for a resend.
+    resend: bool,
 }
 
 impl Default for HostProtocol {
@@ -60,7 +69,7 @@ impl Default for HostProtocol {
 
 impl HostProtocol {
     pub const fn new() -> Self {
-        Self { last_line: 0, numbered: false }
+        Self { last_line: 0, numbered: false, resend: false }
     }
 
     pub fn last_line(&self) -> i32 {
@@ -77,12 +86,23 @@ impl HostProtocol {
     pub fn accept<'a>(&mut self, line: Line<'a>) -> Result<&'a [u8], LineRejection> {
         let text = match line {
             Line::Text(text) => text,
-            Line::TooLong => return Err(LineRejection::TooLong),
-            Line::Damaged => return Err(LineRejection::Damaged),
+            Line::TooLong { numbered } => {
+                self.resend = numbered;
+                return Err(LineRejection::TooLong);
+            }
+            Line::Damaged { numbered } => {
+                self.resend = numbered.unwrap_or(self.numbered);
+                return Err(LineRejection::Damaged);
+            }
+            Line::Unterminated { numbered } => {
+                self.resend = numbered;
+                return Err(LineRejection::Unterminated);
+            }
         };
         let star = text.iter().position(|&b| b == b'*');
         let start = text.iter().position(|&b| b != b' ').unwrap_or(text.len());
         let numbered = matches!(text.get(start), Some(b'N' | b'n'));
+        self.resend = numbered;
         // The body and its line number (`None`: an unnumbered line).
         let (body, number) = if numbered {
             self.numbered = true;
@@ -118,18 +138,30 @@ impl HostProtocol {
     }
 
     /// Write the reply to a refused line: the error, a resend request when
-    /// the host numbers its lines, and `ok` (Marlin's order).
-    pub fn write_rejection<W: uWrite + ?Sized>(&self, rejection: LineRejection, out: &mut W) -> Result<(), W::Error> {
+    /// the line was numbered, and `ok` (Marlin's order).
+    pub fn write_rejection<W: uWrite + ?Sized>(&mut self, rejection: LineRejection, out: &mut W) -> Result<(), W::Error> {
+        self.write_rejection_then(rejection, out, || ())
+    }
+
+    /// [`Self::write_rejection`], calling `before_resend` between the error
+    /// line and the `Resend:` when there is one. The receive side discards
+    /// the lines in flight there, as Marlin: after the request the host
+    /// sends the line asked for at once (printcore on `Resend:` itself),
+    /// and a discard after the reply would throw that line away too (seen
+    /// on the bench: the same resend for ever).
+    pub fn write_rejection_then<W: uWrite + ?Sized>(
+        &mut self,
+        rejection: LineRejection,
+        out: &mut W,
+        before_resend: impl FnOnce(),
+    ) -> Result<(), W::Error> {
         out.write_str("Error:")?;
         rejection.message().write_to(out)?;
         // The `ok` joined to the last piece: one call fewer.
-        if self.numbered {
-            ufmt::uwrite!(
-                out,
-                ", Last Line: {}\nResend: {}\nok\n",
-                crate::reply::Fixed::whole(self.last_line),
-                crate::reply::Fixed::whole(self.last_line.wrapping_add(1))
-            )
+        if self.resend {
+            ufmt::uwrite!(out, ", Last Line: {}\n", crate::reply::Fixed::whole(self.last_line))?;
+            before_resend();
+            ufmt::uwrite!(out, "Resend: {}\nok\n", crate::reply::Fixed::whole(self.last_line.wrapping_add(1)))
         } else {
             out.write_str("\nok\n")
         }
@@ -264,10 +296,10 @@ mod tests {
     fn a_number_without_checksum_and_a_checksum_without_number_are_refused() {
         let mut p = HostProtocol::new();
         assert_eq!(accept(&mut p, "N1 G28"), Err(LineRejection::NoChecksum));
-        assert_eq!(accept(&mut p, "G28*18"), Err(LineRejection::NoLineNumberWithChecksum));
         let mut out = Text::default();
         p.write_rejection(LineRejection::NoChecksum, &mut out).unwrap();
         assert_eq!(out.0, "Error:No Checksum with line number, Last Line: 0\nResend: 1\nok\n");
+        assert_eq!(accept(&mut p, "G28*18"), Err(LineRejection::NoLineNumberWithChecksum));
     }
 
     #[test]
@@ -277,6 +309,35 @@ mod tests {
         let mut out = Text::default();
         p.write_rejection(LineRejection::TooLong, &mut out).unwrap();
         assert_eq!(out.0, "Error:Line too long\nok\n");
+    }
+
+    /// Finding 4 of issue 22: after numbered lines, an unnumbered line that
+    /// is too long, or a lone `*`, was answered with `Resend:`.
+    #[test]
+    fn unnumbered_refusals_never_ask_for_a_resend_even_after_numbered_lines() {
+        let mut p = HostProtocol::new();
+        accept(&mut p, &with_checksum("N1 G28")).unwrap();
+        let cases: [(Line<'_>, LineRejection); 4] = [
+            (Line::TooLong { numbered: false }, LineRejection::TooLong),
+            (Line::Text(b"*"), LineRejection::NoLineNumberWithChecksum),
+            (Line::Text(b"G1 X5*12"), LineRejection::NoLineNumberWithChecksum),
+            (Line::Damaged { numbered: Some(false) }, LineRejection::Damaged),
+        ];
+        for (line, expected) in cases {
+            let rejection = p.accept(line).unwrap_err();
+            assert_eq!(rejection, expected);
+            let mut out = Text::default();
+            p.write_rejection(rejection, &mut out).unwrap();
+            assert!(!out.0.contains("Resend"), "{}", out.0);
+        }
+        // Numbered ones do, and a damaged line whose start was lost counts
+        // as numbered once the host numbers its lines.
+        for line in [Line::TooLong { numbered: true }, Line::Damaged { numbered: None }, Line::Damaged { numbered: Some(true) }] {
+            let rejection = p.accept(line).unwrap_err();
+            let mut out = Text::default();
+            p.write_rejection(rejection, &mut out).unwrap();
+            assert!(out.0.contains("Resend: 2"), "{}", out.0);
+        }
     }
 
     #[test]

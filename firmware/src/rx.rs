@@ -21,9 +21,15 @@ pub type RxQueue = Ring<u8, RX_RING_SLOTS>;
 /// Put into the byte stream where bytes were lost (the ring was full, or
 /// the UART overran): the line assembler refuses the line it falls in, so
 /// the damage is charged to the line that lost bytes, not to whichever
-/// line the main loop happens to be assembling. NUL never belongs in
-/// G-code, so a NUL that arrives on the wire is refused the same way.
+/// line the main loop happens to be assembling. A NUL that arrives on the
+/// wire is stored as [`NUL_ON_THE_WIRE`] instead, so it is refused as the
+/// unexpected character it is, not reported as a receive overrun.
 pub const LOST_BYTES: u8 = 0;
+
+/// What a NUL received from the host is stored as: a byte no G-code
+/// uses (the parser refuses it, a checksum over it fails), and never the
+/// loss marker.
+pub const NUL_ON_THE_WIRE: u8 = 0xFF;
 
 pub struct RxProducer<'a> {
     queue: Producer<'a, u8, RX_RING_SLOTS>,
@@ -81,7 +87,8 @@ impl RxProducer<'_> {
         }
         // What is owed goes in before this byte, in the gap's place; until
         // all of it fits, this byte is lost too.
-        let stored = self.nothing_owed() && self.queue.enqueue(byte).is_ok();
+        let data = if byte == LOST_BYTES { NUL_ON_THE_WIRE } else { byte };
+        let stored = self.nothing_owed() && self.queue.enqueue(data).is_ok();
         if !stored {
             self.lose(byte);
         }
@@ -277,6 +284,19 @@ mod tests {
         }
         let found: std::vec::Vec<_> = b"M112\n".iter().filter_map(|&b| p.push(b, false)).collect();
         assert_eq!(found, [Emergency::Kill]);
+    }
+
+    /// Issue 22, finding 4: a NUL from the host travelled as the loss
+    /// marker and was reported as an overrun.
+    #[test]
+    fn a_nul_on_the_wire_is_not_the_loss_marker() {
+        let mut q = RxQueue::new();
+        let (mut p, mut c) = split(&mut q);
+        for b in b"G1\0\n" {
+            p.push(*b, false);
+        }
+        assert_eq!(drain(&mut c), b"G1\xff\n");
+        assert_eq!(p.take_dropped(), 0);
     }
 
     #[test]

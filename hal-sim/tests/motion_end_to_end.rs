@@ -293,6 +293,8 @@ fn g18_and_g19_arcs_land_on_their_exact_end_points() {
         "G1 X10 Z10 F600\nG18 G2 X20 Z10 I5 K0\nG2 X10 J5\nG19 G3 Y10 Z10 J5 K0\nM400\nM114\n",
         60_000,
     );
+    // Lines waiting for the planner hear `busy` (issue 22): not counted.
+    let output: String = output.lines().filter(|l| *l != "echo:busy: processing").map(|l| format!("{l}\n")).collect();
     assert_eq!(
         output,
         "ok\nok\nError:Missing R word\nok\nok\nok\nX:20.00 Y:10.00 Z:10.00 E:0.00 Count X:2000 Y:1000 Z:4000\nok\n"

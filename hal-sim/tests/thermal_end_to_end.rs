@@ -97,9 +97,10 @@ fn a_heater_lost_while_holding_is_a_thermal_runaway() {
     board.hotend_plant.disconnect_heater();
     let output = run_until_output(&mut board, "kill() called", 120_000);
     assert!(output.contains("Error:Thermal Runaway, system stopped! Heater_ID: 0\n"), "{output}");
-    // 4 °C below the target for 40 s.
+    // Issue 22: within 20 s (was 4 °C below the target for 40 s, ≈ 45 s):
+    // below the band and still falling 8 s later.
     let after = board.now_ms() - reached;
-    assert!((40_000..=80_000).contains(&after), "{after} ms");
+    assert!(after <= 20_000, "{after} ms");
     assert_halted_and_cold(&mut board);
 }
 

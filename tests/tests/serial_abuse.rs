@@ -133,7 +133,7 @@ fn a_receive_overrun_is_reported_and_the_damaged_line_never_runs() {
     board.receive(checksummed(31, "M118 E1 seq 31").as_bytes());
     board.advance(50);
     let output = board.take_output();
-    assert!(output.contains("Error:Serial receive overrun, line lost, Last Line: "), "{output}");
+    assert!(output.contains("Error:Serial receive overrun, line lost (checksum not verified), Last Line: "), "{output}");
     assert!(output.contains("Resend: "), "{output}");
     let executed: Vec<i32> =
         output.lines().filter_map(|l| l.strip_prefix("echo:seq ")).map(|s| s.parse().unwrap()).collect();

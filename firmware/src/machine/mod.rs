@@ -51,8 +51,11 @@ use ufmt::uWrite;
 
 /// Lines the command queue holds (Marlin's BUFSIZE is 4).
 pub const COMMAND_QUEUE_DEPTH: usize = 4;
-/// Interval of `echo:busy: processing` while a command blocks, ms.
+/// Interval of `echo:busy: processing` while a line waits, ms (Marlin's
+/// default host keep-alive, 2 s; `M113 S<s>` changes it, `S0` stops it).
 pub const BUSY_INTERVAL_MS: u32 = 2_000;
+/// Longest `M113` interval, seconds (Marlin's).
+pub const MAX_KEEPALIVE_S: u8 = 60;
 
 /// Number of extruders (`T0` only).
 pub const EXTRUDERS: u16 = 1;
@@ -105,6 +108,8 @@ pub struct Machine<'q> {
     /// `M108` arrived while a command waited: it finishes at the next poll.
     wait_cancelled: bool,
     last_busy_ms: u32,
+    /// `M113 S<s>`: seconds between `busy: processing` lines (0: none).
+    keepalive_s: u8,
     /// `M155 S<n>`: automatic temperature reports.
     auto_report: AutoReport,
     /// Last temperature line of a heating wait.
@@ -203,6 +208,7 @@ impl<'q> Machine<'q> {
             addr_of_mut!((*p).running).write(Running::Idle);
             addr_of_mut!((*p).wait_cancelled).write(false);
             addr_of_mut!((*p).last_busy_ms).write(0);
+            addr_of_mut!((*p).keepalive_s).write((BUSY_INTERVAL_MS / 1000) as u8);
             addr_of_mut!((*p).auto_report).write(AutoReport::new());
             addr_of_mut!((*p).last_report_ms).write(0);
             addr_of_mut!((*p).halted).write(false);
@@ -239,6 +245,7 @@ impl<'q> Machine<'q> {
             running: _,
             wait_cancelled: _,
             last_busy_ms: _,
+            keepalive_s: _,
             auto_report: _,
             last_report_ms: _,
             halted: _,
@@ -321,6 +328,11 @@ impl<'q> Machine<'q> {
         ufmt::uwrite!(out, "Error:Driver alarm on {}: motion stopped, home with G28\n", char::from(letter))
     }
 
+    /// Lines waiting in the command queue.
+    pub fn queued_lines(&self) -> usize {
+        self.queue.len()
+    }
+
     /// Whether another line fits in the command queue.
     pub fn can_accept_line(&self) -> bool {
         !self.queue.is_full()
@@ -369,9 +381,16 @@ impl<'q> Machine<'q> {
     /// Free to inline into the board's one caller (`HostLink::service`),
     /// as `poll`: measured smaller on the AVR.
     pub fn receive_line<W: uWrite + ?Sized>(&mut self, line: Line<'_>, out: &mut W) -> Result<(), W::Error> {
+        self.receive_line_then(line, out, || ())
+    }
+
+    /// [`Self::receive_line`]; a refusal that asks for a resend calls
+    /// `before_resend` just before its `Resend:` line (the board discards
+    /// the lines in flight there, see `HostLink::service`).
+    pub fn receive_line_then<W: uWrite + ?Sized>(&mut self, line: Line<'_>, out: &mut W, before_resend: impl FnOnce()) -> Result<(), W::Error> {
         let body = match self.protocol.accept(line) {
             Ok(body) => body,
-            Err(rejection) => return self.protocol.write_rejection(rejection, out),
+            Err(rejection) => return self.protocol.write_rejection_then(rejection, out, before_resend),
         };
         // Queue an empty line and fill it in place: no line-sized copy.
         if self.queue.push_back(LineText::new()).is_err() {
@@ -470,11 +489,7 @@ impl<'q> Machine<'q> {
         loop {
             if !matches!(self.running, Running::Idle) {
                 if !self.running_done(now_ms, out)? {
-                    if now_ms.wrapping_sub(self.last_busy_ms) >= BUSY_INTERVAL_MS {
-                        self.last_busy_ms = now_ms;
-                        out.write_str("echo:busy: processing\n")?;
-                    }
-                    return Ok(());
+                    return self.keep_alive(now_ms, out);
                 }
                 self.running = Running::Idle;
                 self.wait_cancelled = false;
@@ -484,12 +499,43 @@ impl<'q> Machine<'q> {
             // next command (as Marlin blocks in its planner), so commands
             // take effect in the order they were sent.
             if !self.motion.ready() {
+                // A line waits for room in the planner: the host waits for
+                // its `ok`, so it hears `busy` as during `G28` or `M109`
+                // (issue 22: 6.4 s of silence and OctoPrint timed out).
+                if !self.queue.is_empty() {
+                    return self.keep_alive(now_ms, out);
+                }
                 return Ok(());
             }
             let Some(text) = self.queue.pop_front() else { return Ok(()) };
             self.last_busy_ms = now_ms;
             self.run_line(&text, now_ms, storage, out)?;
         }
+    }
+
+    /// `echo:busy: processing` when a line has waited another keep-alive
+    /// interval (Marlin's host keep-alive; `M113 S0`: never).
+    fn keep_alive<W: uWrite + ?Sized>(&mut self, now_ms: u32, out: &mut W) -> Result<(), W::Error> {
+        let interval = u32::from(self.keepalive_s) * 1000;
+        if interval != 0 && now_ms.wrapping_sub(self.last_busy_ms) >= interval {
+            self.last_busy_ms = now_ms;
+            out.write_str("echo:busy: processing\n")?;
+        }
+        Ok(())
+    }
+
+    /// `M113 S<s>` sets the keep-alive interval (0–60 s, 0: off); bare
+    /// `M113` reports it, as Marlin.
+    fn keep_alive_command<W: uWrite + ?Sized>(&mut self, command: &Command, out: &mut W) -> Result<Result<(), CommandError>, W::Error> {
+        match command.value(b'S') {
+            Err(error) => return Ok(Err(error.into())),
+            Ok(Some(value)) => match value.to_int() {
+                Some(seconds @ 0..=60) => self.keepalive_s = seconds as u8,
+                _ => return Ok(Err(CommandError::OutOfRange(b'S'))),
+            },
+            Ok(None) => ufmt::uwrite!(out, "echo:M113 S{}\n", Whole(self.keepalive_s.into()))?,
+        }
+        Ok(Ok(()))
     }
 
     /// Execute one line and answer it (or start it). Out of line, with the
@@ -719,7 +765,10 @@ impl<'q> Machine<'q> {
             #[cfg(feature = "printer")]
             Code::M(114) => self.report_position(out).map(Ok)?,
             Code::M(115) => write_capabilities(out).map(Ok)?,
-            Code::M(117) => Ok(()),
+            // M73 (PrusaSlicer's progress): no display here, accepted
+            // silently as Marlin without one; M117 likewise.
+            Code::M(73 | 117) => Ok(()),
+            Code::M(113) => self.keep_alive_command(command, out)?,
             Code::M(118) => self.echo(text, out).map(Ok)?,
             #[cfg(feature = "printer")]
             Code::M(119) => self.report_endstops(out).map(Ok)?,
@@ -982,7 +1031,7 @@ const KNOWN_G: [(u16, u16); 11] =
     [(0, 4), (10, 11), (17, 21), (28, 28), (40, 40), (49, 49), (53, 59), (61, 61), (64, 64), (80, 80), (90, 94)];
 /// The M codes the executor runs, as ranges (first, last).
 const KNOWN_M: [(u16, u16); 21] = [
-    (2, 5), (7, 9), (17, 18), (30, 30), (82, 84), (92, 92), (104, 110), (112, 112), (114, 121), (140, 140), (155, 155),
+    (2, 5), (7, 9), (17, 18), (30, 30), (73, 73), (82, 84), (92, 92), (104, 110), (112, 121), (140, 140), (155, 155),
     (190, 190), (201, 201), (203, 205), (220, 221), (301, 304), (400, 400), (410, 410), (500, 503), (665, 666),
     (820, 824),
 ];
@@ -1029,7 +1078,7 @@ fn refused_while_halted(code: Code) -> bool {
 /// Bit `n - 105`: `Mn` (105 ≤ n ≤ 119) still runs on a halted machine.
 const HALTED_M105_TO_M119: u16 = {
     let mut mask = 0u16;
-    let codes = [105, 108, 110, 112, 114, 115, 117, 118, 119];
+    let codes = [105, 108, 110, 112, 113, 114, 115, 117, 118, 119];
     let mut i = 0;
     while i < codes.len() {
         mask |= 1 << (codes[i] - 105);
@@ -1235,6 +1284,7 @@ Cap:MOTION_MODES:0
 Cap:ARCS:1
 Cap:BABYSTEPPING:0
 Cap:CHAMBER_TEMPERATURE:0
+Cap:PAREN_COMMENTS:1
 ";
 
 #[cfg(test)]

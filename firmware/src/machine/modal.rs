@@ -65,6 +65,15 @@ pub struct ModalState {
     /// Where the machine is (or will be, once queued motion completes), in
     /// machine coordinates.
     pub position: Position,
+    /// What the program asked for beyond the µm of `position`, in nm per
+    /// axis (within ±500): the exact position is `position + residue/1000`
+    /// µm. Carried into the next relative move (round and carry), so a
+    /// file's steps add up to its exact positions however many decimals it
+    /// writes (issue 22: 200 × `G1 E.04929` made 49 µm each, 0.6 % short).
+    pub residue_nm: [i16; AXES],
+    /// The residues of the target [`ModalState::target`] computed last,
+    /// committed with it ([`ModalState::commit`]).
+    pending_residue_nm: core::cell::Cell<[i16; AXES]>,
     /// `G92` shift: logical = machine + offset.
     pub offset: Position,
     /// `G17`/`G18`/`G19`: the plane of arcs.
@@ -104,6 +113,8 @@ impl ModalState {
             units: Units::Millimetres,
             feed_um_per_s: 25_000,
             position: [0; AXES],
+            residue_nm: [0; AXES],
+            pending_residue_nm: core::cell::Cell::new([0; AXES]),
             offset: [0; AXES],
             plane: Plane::Xy,
             unsupported: None,
@@ -202,10 +213,21 @@ impl ModalState {
     /// target once the move is accepted.
     pub fn target(&self, command: &Command) -> Result<Position, CommandError> {
         let mut target = self.position;
+        let mut residues = self.residue_nm;
         for (axis, &letter) in AXIS_LETTERS.iter().enumerate() {
             let Some(value) = command.value(letter)? else { continue };
             let um = self.length_um(letter, value)?;
             let distance = if letter == b'E' { self.extruder_distance } else { self.distance };
+            let relative = distance == Distance::Relative && !(self.machine_frame && letter != b'E');
+            // The value in nm (millimetres only, and within `i32`: ±2 m);
+            // otherwise µm as before, and no residue.
+            let nm = if self.units == Units::Millimetres { value.to_scaled(6) } else { None };
+            let (um, residue) = match nm {
+                Some(nm) if relative => split_nm(nm.saturating_add(i32::from(residues[axis]))),
+                Some(nm) => split_nm(nm),
+                None => (um, 0),
+            };
+            residues[axis] = residue;
             // Checked `i32` rather than `i64` (half the code on the AVR): a
             // sum that overflows `i32` lies beyond MAX_COORDINATE_UM anyway.
             let machine = match distance {
@@ -218,7 +240,15 @@ impl ModalState {
                 _ => return Err(CommandError::OutOfRange(letter)),
             }
         }
+        self.pending_residue_nm.set(residues);
         Ok(target)
+    }
+
+    /// The move to `target` (from [`ModalState::target`]) was accepted: it
+    /// is the position now, with the residues computed for it.
+    pub fn commit(&mut self, target: &Position) {
+        self.position = *target;
+        self.residue_nm = self.pending_residue_nm.get();
     }
 
     /// `G92`: declare the named axes' logical position (all axes to zero
@@ -234,6 +264,8 @@ impl ModalState {
             };
             // logical = machine + G92 − work zero = value
             offset[axis] = sat_add(sat_sub(value, self.position[axis]), self.work_zero(axis));
+            // The program's frame starts again at exactly `value`.
+            self.residue_nm[axis] = 0;
         }
         self.offset = offset;
         Ok(())
@@ -293,6 +325,25 @@ fn sat_sub(a: i32, b: i32) -> i32 {
     a.saturating_sub(b)
 }
 
+/// nm to µm, rounded half away from zero, and what is left (nm, within
+/// ±500): no 32-bit division (n / 1000 = n / 125 / 8, by the shared
+/// small divider).
+fn split_nm(nm: i32) -> (i32, i16) {
+    let magnitude = nm.unsigned_abs();
+    let (by_125, rest) = crate::gcode::number::div_rem_small(magnitude, 125);
+    let mut um = (by_125 >> 3) as i32;
+    let mut left = ((by_125 & 7) * 125) as i32 + i32::from(rest);
+    if left >= 500 {
+        um += 1;
+        left -= 1000;
+    }
+    if nm < 0 {
+        (-um, -left as i16)
+    } else {
+        (um, left as i16)
+    }
+}
+
 /// Inches to µm without float: `value · 25 400`, from units of 10⁻⁵ in
 /// (0.254 µm each), split so that no product leaves `i32` (64-bit division
 /// costs almost 3 KiB of flash on the AVR). `to_scaled(5)` already bounds
@@ -312,6 +363,36 @@ mod tests {
 
     fn target(state: &ModalState, line: &str) -> Result<Position, CommandError> {
         state.target(&parse(line.as_bytes()).unwrap())
+    }
+
+    #[test]
+    fn nm_split_into_um_and_a_residue() {
+        assert_eq!(split_nm(49_290), (49, 290));
+        assert_eq!(split_nm(49_500), (50, -500));
+        assert_eq!(split_nm(-49_500), (-50, 500));
+        assert_eq!(split_nm(-1_499), (-1, -499));
+        assert_eq!(split_nm(0), (0, 0));
+        assert_eq!(split_nm(i32::MAX), (2_147_484, -353));
+    }
+
+    /// Issue 22, finding 3: relative moves of 0.04929 mm lost 0.29 µm each.
+    #[test]
+    fn relative_moves_carry_what_the_micrometre_cannot_hold() {
+        let mut state = ModalState::new();
+        state.extruder_distance = Distance::Relative;
+        let line = parse(b"G1 E.04929").unwrap();
+        for _ in 0..200 {
+            let t = state.target(&line).unwrap();
+            state.commit(&t);
+        }
+        assert_eq!(state.position[3], 9_858);
+        // Six decimals, both signs.
+        let line = parse(b"G1 E-0.000333").unwrap();
+        for _ in 0..3000 {
+            let t = state.target(&line).unwrap();
+            state.commit(&t);
+        }
+        assert_eq!(state.position[3], 9_858 - 999);
     }
 
     #[test]

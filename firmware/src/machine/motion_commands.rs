@@ -173,6 +173,15 @@ impl<'q> Machine<'q> {
             Code::G(1) => MotionMode::Linear,
             _ => self.modal.motion_mode,
         };
+        // A line with no axis word and no code (`F300` after `G2 …`, as
+        // dxf2gcode writes) moves nothing in any motion mode (Grbl,
+        // LinuxCNC, Marlin): its `F` is a modal setting.
+        if command.code == Code::Modal && !super::modal::AXIS_LETTERS.iter().any(|&letter| command.has(letter)) {
+            if let Some(feed) = self.modal.read_feed(command)? {
+                self.modal.feed_um_per_s = feed;
+            }
+            return Ok(());
+        }
         if matches!(
             mode,
             MotionMode::ClockwiseArc | MotionMode::CounterClockwiseArc
@@ -299,7 +308,7 @@ impl<'q> Machine<'q> {
     ) -> Result<(), CommandError> {
         match result {
             Ok(()) => {
-                self.modal.position = *target;
+                self.modal.commit(target);
                 self.steppers_enabled = true;
                 Ok(())
             }
@@ -365,6 +374,7 @@ impl<'q> Machine<'q> {
             bit <<= 1;
         }
         self.modal.position[..3].copy_from_slice(&position[..3]);
+        self.modal.residue_nm[..3].fill(0);
         if homed & 0b111 == 0b111 {
             self.position_lost = false;
         }

@@ -63,8 +63,9 @@ fn malformed_lines_get_an_error_then_ok_and_nothing_changes() {
         ("G1 X\n", "Error:Missing value after X\nok\n"),
         ("G1 (oops X1\n", "Error:Unterminated comment\nok\n"),
         // NUL is the receive ring's lost-bytes marker: the line is refused
-        // as damaged in reception.
-        ("G1 X1 \u{0}\n", "Error:Serial receive overrun, line lost\nok\n"),
+        // as damaged in reception (a NUL from the wire never is the marker:
+        // the receive ring stores it as 0xFF, see `rx::NUL_ON_THE_WIRE`).
+        ("G1 X1 \u{0}\n", "Error:Serial receive overrun, line lost (checksum not verified)\nok\n"),
         ("G1 X\u{e9}\n", "Error:Unexpected character (byte 195)\nok\n"),
         ("G92 X3000000\n", "Error:Value out of range for X\nok\n"),
     ] {
@@ -76,8 +77,16 @@ fn malformed_lines_get_an_error_then_ok_and_nothing_changes() {
 
 #[test]
 fn a_three_hundred_byte_line_is_refused_and_the_next_line_works() {
-    let long = format!("G1 X1 ;{}\nM114\n", "x".repeat(300));
+    let long = format!("G1 X1 ({})\nM114\n", "x".repeat(300));
     assert_eq!(reply(&long), "Error:Line too long\nok\nX:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0 \nok\n".replace(" \nok", "\nok"));
+}
+
+/// Issue 22, finding 4: Marlin ignores a `;` comment whatever its
+/// length; only the command before it must fit.
+#[test]
+fn an_overlong_semicolon_comment_is_ignored() {
+    let long = format!("G1 X1 ;{}\nM114\n", "x".repeat(300));
+    assert_eq!(reply(&long), "ok\nX:1.00 Y:0.00 Z:0.00 E:0.00 Count X:100 Y:0 Z:0\nok\n");
 }
 
 #[test]
@@ -129,6 +138,57 @@ fn g4_blocks_the_queue_and_reports_busy_every_two_seconds() {
     assert_eq!(out.0, "echo:busy: processing\necho:busy: processing\n");
     machine.poll(5_000, &mut MemoryStorage::<512>::new(), &mut out).unwrap();
     assert!(out.0.ends_with("busy: processing\nok\nX:0.00 Y:0.00 Z:0.00 E:0.00 Count X:0 Y:0 Z:0\nok\n"), "{}", out.0);
+}
+
+/// Issue 22, finding 6: a line waiting for room in the planner got no
+/// `busy` (OctoPrint timed out after 6.4 s of silence).
+#[test]
+fn a_line_waiting_for_the_planner_hears_busy_every_two_seconds_and_m113_sets_it() {
+    let mut machine = new_machine();
+    let mut out = Text::default();
+    let mut assembler = LineAssembler::new();
+    let storage = &mut MemoryStorage::<512>::new();
+    let mut x = 0;
+    // The step interrupt never runs: the planner fills, then lines wait.
+    while machine.can_accept_line() && x < 200 {
+        x += 1;
+        for &b in format!("G1 X{x}\n").as_bytes() {
+            if let Some(l) = assembler.push(b) {
+                machine.receive_line(l, &mut out).unwrap();
+            }
+        }
+        machine.poll_motion(&StepperStatus::default(), 0, &mut out).unwrap();
+        machine.poll(0, storage, &mut out).unwrap();
+    }
+    assert!(!machine.can_accept_line(), "the planner never filled");
+    out.0.clear();
+    for now in [1_000, 1_999, 2_000, 3_000, 4_000] {
+        machine.poll(now, storage, &mut out).unwrap();
+    }
+    assert_eq!(out.0, "echo:busy: processing\necho:busy: processing\n");
+    // M113 S0 (taken once the queue moves) stops it; M113 S1 sets 1 s.
+    let mut m = new_machine();
+    assert_eq!(converse(&mut m, 0, "M113\n"), "echo:M113 S2\nok\n");
+    assert_eq!(converse(&mut m, 0, "M113 S0\nM113\n"), "ok\necho:M113 S0\nok\n");
+    assert_eq!(converse(&mut m, 0, "G4 S5\n"), "");
+    let mut out = Text::default();
+    for now in [2_000, 4_000] {
+        m.poll(now, storage, &mut out).unwrap();
+    }
+    assert_eq!(out.0, "");
+    assert_eq!(converse(&mut m, 0, "M113 S61\n"), "");
+    let mut out = Text::default();
+    m.poll(5_000, storage, &mut out).unwrap();
+    m.poll(5_000, storage, &mut out).unwrap();
+    assert_eq!(out.0, "ok\nError:Value out of range for S\nok\n");
+}
+
+/// Issue 22, finding 4: PrusaSlicer's M73 got `Unknown command`; M115
+/// did not say that `( … )` comments are parsed.
+#[test]
+fn m73_is_accepted_silently_and_m115_reports_paren_comments() {
+    assert_eq!(reply("M73 P10 R35\nM73 Q10 S35\n"), "ok\nok\n");
+    assert!(reply("M115\n").contains("\nCap:PAREN_COMMENTS:1\n"));
 }
 
 #[test]
@@ -335,6 +395,29 @@ fn fan_commands_set_the_duty() {
     assert_eq!(converse(&mut machine, 0, "M106 S256\n"), "Error:Value out of range for S\nok\n");
     converse(&mut machine, 0, "M107\n");
     assert_eq!(machine.fan_duty(), 0);
+}
+
+/// Issue 22, finding 2: `F300` after an arc was refused with `Missing R
+/// word`; a line without axis words moves nothing, and its F is modal.
+#[test]
+fn a_feed_only_line_after_an_arc_moves_nothing_and_sets_the_feed() {
+    // The arc modes as a `G2`/`G3` leaves them (with no step interrupt
+    // here, a real arc fills the planner and the next line waits).
+    for mode in [MotionMode::ClockwiseArc, MotionMode::CounterClockwiseArc] {
+        let mut machine = new_machine();
+        machine.modal.motion_mode = mode;
+        assert_eq!(converse(&mut machine, 0, "F300\n"), "ok\n");
+        assert_eq!(machine.modal().feed_um_per_s, 5_000);
+        assert_eq!(converse(&mut machine, 0, " F600 (feed)\n"), "ok\n");
+        assert_eq!(machine.modal().feed_um_per_s, 10_000);
+        assert_eq!(converse(&mut machine, 0, "F0\n"), "Error:Invalid feed rate (F must be > 0)\nok\n");
+        assert_eq!(machine.modal().logical_position(), [0; AXES]);
+        assert_eq!(machine.modal().motion_mode, mode);
+    }
+    // An arc followed by its feed line, as dxf2gcode writes them.
+    let mut machine = new_machine();
+    assert_eq!(converse(&mut machine, 0, "G2 X1 Y1 I1\n"), "ok\n");
+    assert_eq!(machine.modal().logical_position()[..2], [1_000, 1_000]);
 }
 
 #[test]
@@ -560,7 +643,7 @@ fn the_known_codes_bitmap_holds_exactly_the_codes_the_executor_runs() {
             Code::G(n) => matches!(n, 0..=4 | 10 | 11 | 17..=21 | 28 | 40 | 49 | 53..=59 | 61 | 64 | 80 | 90..=94),
             Code::M(n) => matches!(
                 n,
-                2..=5 | 7..=9 | 30 | 17 | 18 | 82..=84 | 92 | 104..=110 | 112 | 114..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221
+                2..=5 | 7..=9 | 30 | 17 | 18 | 73 | 82..=84 | 92 | 104..=110 | 112..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221
                     | 301..=304 | 400 | 410 | 500..=503 | 665 | 666 | 820..=824
             ),
             Code::T(_) | Code::Modal => true,

@@ -84,6 +84,11 @@ pub struct GuardConfig {
     pub target_margin_c: u8,
     pub runaway_period_s: u16,
     pub runaway_hysteresis_c: u8,
+    /// Below the runaway band while holding, a fall of 2 °C over this many
+    /// seconds is a runaway too (0: off). Only for heaters whose fall a
+    /// working controller turns around within it: a hot end (dead time
+    /// 2–3 s); not a bed or a barrel, whose dead time is longer.
+    pub runaway_fall_window_s: u16,
     /// 0: no heating watch.
     pub watch_period_s: u16,
     pub watch_increase_c: u8,
@@ -100,6 +105,7 @@ impl GuardConfig {
         target_margin_c: 15,
         runaway_period_s: 40,
         runaway_hysteresis_c: 4,
+        runaway_fall_window_s: FALL_WINDOW_S,
         watch_period_s: 20,
         watch_increase_c: 2,
         bad_readings: 3,
@@ -112,6 +118,7 @@ impl GuardConfig {
         target_margin_c: 10,
         runaway_period_s: 20,
         runaway_hysteresis_c: 2,
+        runaway_fall_window_s: 0,
         watch_period_s: 60,
         watch_increase_c: 2,
         bad_readings: 3,
@@ -126,6 +133,7 @@ impl GuardConfig {
         target_margin_c: 10,
         runaway_period_s: 60,
         runaway_hysteresis_c: 3,
+        runaway_fall_window_s: 0,
         watch_period_s: 180,
         watch_increase_c: 2,
         bad_readings: 3,
@@ -141,6 +149,7 @@ impl GuardConfig {
         target_margin_c: 15,
         runaway_period_s: 120,
         runaway_hysteresis_c: 5,
+        runaway_fall_window_s: 0,
         watch_period_s: 300,
         watch_increase_c: 2,
         bad_readings: 3,
@@ -150,6 +159,12 @@ impl GuardConfig {
 /// Margin below the target under which the heating watch stays armed
 /// (Marlin's `TEMP_HYSTERESIS + 1`), added to `watch_increase_c`.
 const WATCH_ARM_MARGIN: i32 = 400;
+
+/// The hot end's fall window of the runaway check: below the band while
+/// holding, a fall of [`FALL_CENTI`] over this many seconds is a runaway.
+pub const FALL_WINDOW_S: u16 = 8;
+/// See [`FALL_WINDOW_S`]: 2 °C, in hundredths.
+const FALL_CENTI: i32 = 200;
 
 /// A target was set before any reading: arm the watch at the first one.
 const WATCH_PENDING: Celsius = Celsius(i32::MIN);
@@ -185,6 +200,11 @@ pub struct HeaterGuard {
     bad: u8,
     runaway: Runaway,
     runaway_samples: u16,
+    /// Below the runaway band while holding: the temperature at the start
+    /// of the current fall window, centi-°C (≤ the maximum, so an `i16`:
+    /// the channel's size is budgeted); the window counts on
+    /// `runaway_samples`.
+    fall_from: i16,
     /// Samples left in the current watch period (0: not watching).
     watch_samples: u16,
     /// The temperature to reach by the end of the watch period;
@@ -214,7 +234,15 @@ fn samples(seconds: u16, period_ms: u16) -> u16 {
 
 impl HeaterGuard {
     pub const fn new() -> Self {
-        Self { fault: None, bad: 0, runaway: Runaway::Off, runaway_samples: 0, watch_samples: 0, watch_goal: Celsius(0) }
+        Self {
+            fault: None,
+            bad: 0,
+            runaway: Runaway::Off,
+            runaway_samples: 0,
+            fall_from: 0,
+            watch_samples: 0,
+            watch_goal: Celsius(0),
+        }
     }
 
     /// The latched fault, if any.
@@ -319,6 +347,25 @@ impl HeaterGuard {
                 self.runaway_samples = self.runaway_samples.saturating_add(1);
                 if self.runaway_samples >= samples(config.runaway_period_s, period_ms) {
                     return self.latch(ThermalFault::ThermalRunaway);
+                }
+                // Below the band and still falling a whole window later: a
+                // heater that works turns the fall around within seconds
+                // (the controller is at full power by then), whatever
+                // cooled the nozzle (the fan to full, a long travel); a
+                // dead one keeps falling. Caught in ≈ 15 s instead of the
+                // period's 40 (issue 22).
+                if config.runaway_fall_window_s == 0 {
+                    return Verdict::Run(measured);
+                }
+                let now = measured.0.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16;
+                let window = samples(config.runaway_fall_window_s, period_ms);
+                if self.runaway_samples == 1 {
+                    self.fall_from = now;
+                } else if (self.runaway_samples - 1) % window == 0 {
+                    if i32::from(now) <= i32::from(self.fall_from) - FALL_CENTI {
+                        return self.latch(ThermalFault::ThermalRunaway);
+                    }
+                    self.fall_from = now;
                 }
             }
         }

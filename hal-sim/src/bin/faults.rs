@@ -44,6 +44,7 @@ fn main() {
         thermal_fault("thermistor shorted", "hot-end input at 0 counts while heating to 200 °C", "Error:MAXTEMP triggered (thermistor shorted)", |b| b.hotend_sensor = Thermistor::Count(0), 2_000),
         thermistor_intermittent(),
         thermal_fault("heater disconnected", "the hot end's heater wire cut at M104 S200", "Error:Heating failed", |b| b.hotend_plant.disconnect_heater(), 30_000),
+        heater_dies_while_holding(),
         thermal_fault("heater stuck on", "a shorted MOSFET: full power whatever the firmware drives", "Error:MAXTEMP triggered", |b| b.hotend_plant.stick_output(1.0), 400_000),
         encoder_disconnected(),
         watchdog_reset_mid_print(),
@@ -425,6 +426,41 @@ fn thermal_fault(
         },
         safe_after_ms: safe,
         passed: safe.is_some() && named.is_some(),
+    }
+}
+
+/// Issue 22: the thermal-runaway case. Hold 200 °C, then the heater dies
+/// (wire cut): caught within 20 s. Before that, the part fan to full and a
+/// long travel's air (harder cooling for a while) must not trip it.
+fn heater_dies_while_holding() -> Outcome {
+    let mut board = booted();
+    board.run_gcode("M104 S200\n", 1_000);
+    // Reach and settle at 200 °C.
+    run_until(&mut board, 300_000, |b| b.hotend_plant.temperature_c() > 199.5);
+    board.advance(60_000);
+    board.take_output();
+    // The fan to full for a minute (a quarter of the power blown away),
+    // then a long travel's worth of air on top, then back.
+    for (cooling, ms) in [(0.25, 60_000), (0.4, 20_000), (0.0, 60_000)] {
+        board.hotend_plant.set_extra_cooling(cooling);
+        board.advance(ms);
+    }
+    let false_trip = board.link.machine.is_halted();
+    board.hotend_plant.disconnect_heater();
+    let safe = run_until(&mut board, 60_000, |b| b.link.machine.is_halted() && b.link.machine.heater_duties() == (0, 0));
+    let output = board.take_output();
+    let named = output.lines().find(|l| l.starts_with("Error:Thermal Runaway")).map(str::to_string);
+    Outcome {
+        fault: "heater dies while holding",
+        injected: "wire cut after holding 200 °C through fan-to-full and travel cooling",
+        expected: "no trip on the cooling; Thermal Runaway within 20 s of the cut",
+        observed: match (&named, false_trip) {
+            (_, true) => "halted by the cooling alone (false trip)".to_string(),
+            (Some(line), _) => format!("{line}; heaters off, halted"),
+            (None, _) => "no Thermal Runaway line".to_string(),
+        },
+        safe_after_ms: safe,
+        passed: !false_trip && named.is_some() && safe.is_some_and(|ms| ms <= 20_000),
     }
 }
 

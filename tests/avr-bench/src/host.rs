@@ -37,6 +37,16 @@ pub struct HostConfig {
     pub numbering: bool,
     /// Honour `Resend: <n>` (only meaningful with `numbering`).
     pub resend: bool,
+    /// printcore's flow: a `Resend:` line, like an `ok`, lets the next line
+    /// go (its `clear` flag is set by both), so after a refusal two lines
+    /// go out: the one asked for and the next.
+    pub send_on_resend: bool,
+    /// Bit flips on the way to the firmware: in this many millionths of
+    /// the job's bytes, one bit flipped (at most one per line: Marlin's
+    /// checksum is an XOR, which two flips of the same bit cancel).
+    pub flips_per_million: u32,
+    /// Seed of the flips.
+    pub noise_seed: u64,
 }
 
 impl HostConfig {
@@ -46,7 +56,16 @@ impl HostConfig {
             flow: Flow::OkPerLine,
             numbering: true,
             resend: true,
+            send_on_resend: false,
+            flips_per_million: 0,
+            noise_seed: 1,
         }
+    }
+
+    /// printcore as it is (a line on every `ok` and every `Resend:`),
+    /// through a line that flips bits in `flips_per_million` of the bytes.
+    pub fn noisy_printcore(baud: u32, flips_per_million: u32, noise_seed: u64) -> Self {
+        Self { send_on_resend: true, flips_per_million, noise_seed, ..Self::printcore(baud) }
     }
 
     /// Lines verbatim, one at a time after `ok` (for protocol tests that
@@ -57,6 +76,9 @@ impl HostConfig {
             flow: Flow::OkPerLine,
             numbering: false,
             resend: false,
+            send_on_resend: false,
+            flips_per_million: 0,
+            noise_seed: 1,
         }
     }
 }
@@ -116,13 +138,15 @@ pub struct Host {
     pub resends: Vec<i64>,
     /// Raw bytes received, with the cycle each was written to UDR0.
     pub rx_bytes: Vec<(u64, u8)>,
+    /// Bits flipped on the way (see [`HostConfig::flips_per_million`]).
+    pub flips: usize,
+    noise_state: u64,
 }
 
 impl Host {
     pub fn new(config: HostConfig, cpu_hz: u32) -> Self {
         let frame_cycles = 10.0 * f64::from(cpu_hz) / f64::from(config.baud);
         Self {
-            config,
             job: Vec::new(),
             next: 0,
             line_number: 0,
@@ -140,7 +164,18 @@ impl Host {
             oks: 0,
             resends: Vec::new(),
             rx_bytes: Vec::new(),
+            flips: 0,
+            noise_state: config.noise_seed | 1,
+            config,
         }
+    }
+
+    /// xorshift64*: the flips, reproducibly.
+    fn noise(&mut self) -> u64 {
+        self.noise_state ^= self.noise_state >> 12;
+        self.noise_state ^= self.noise_state << 25;
+        self.noise_state ^= self.noise_state >> 27;
+        self.noise_state.wrapping_mul(0x2545_F491_4F6C_DD1D)
     }
 
     /// Queue lines to send (comments and blank lines are stripped, as hosts do;
@@ -254,8 +289,18 @@ impl Host {
             return false;
         };
         let start = self.next_start.max(now as f64) as u64;
-        self.wire.extend(text.bytes());
-        self.wire.push_back(b'\n');
+        let mut bytes: Vec<u8> = text.bytes().chain([b'\n']).collect();
+        if job_index.is_some() && self.config.flips_per_million > 0 {
+            for i in 0..bytes.len() {
+                if self.noise() % 1_000_000 < u64::from(self.config.flips_per_million) {
+                    let bit = self.noise() % 8;
+                    bytes[i] ^= 1 << bit;
+                    self.flips += 1;
+                    break;
+                }
+            }
+        }
+        self.wire.extend(bytes);
         self.sent.push(SentLine {
             job_index,
             text,
@@ -308,6 +353,10 @@ impl Host {
                 if self.config.resend && self.config.numbering {
                     self.rewind_to(n);
                 }
+                if self.config.send_on_resend && self.config.flow == Flow::OkPerLine {
+                    self.awaiting_ok = false;
+                    self.next_start = self.next_start.max((cycle + avr_frame) as f64);
+                }
             }
         }
         if text.starts_with("ok") {
@@ -315,7 +364,7 @@ impl Host {
             if let Some(line) = self.sent.iter_mut().find(|l| l.ok_reply.is_none()) {
                 line.ok_reply = Some(index);
             }
-            if self.config.flow == Flow::OkPerLine && self.wire.is_empty() {
+            if self.config.flow == Flow::OkPerLine && (self.wire.is_empty() || self.config.send_on_resend) {
                 self.awaiting_ok = false;
                 self.next_start = self.next_start.max(arrived as f64);
             }

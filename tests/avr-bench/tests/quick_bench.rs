@@ -176,8 +176,11 @@ fn boots_answers_and_stays_within_its_budgets() {
 fn line_numbers_checksums_and_long_lines_follow_marlin() {
     let mut board = boot_raw();
     // Before any numbered line: no resend request.
-    let long = format!("G1 X1 ; {}", "x".repeat(120));
+    let long = format!("G1 X1 ({})", "x".repeat(120));
     assert_eq!(replies(&mut board, &[&long]), ["Error:Line too long", "ok"]);
+    // A `;` comment may be any length (Marlin; issue 22).
+    let commented = format!("M400 ; {}", "x".repeat(120));
+    assert_eq!(replies(&mut board, &[&commented]), ["ok"]);
     assert_eq!(replies(&mut board, &["M110 N0"]), ["ok"]);
     let good = with_checksum("N1 M114");
     assert_eq!(
@@ -205,8 +208,11 @@ fn line_numbers_checksums_and_long_lines_follow_marlin() {
             "ok"
         ]
     );
+    // Unnumbered: never a resend request (issue 22); numbered: one.
+    assert_eq!(replies(&mut board, &[&long]), ["Error:Line too long", "ok"]);
+    let long_numbered = format!("N2 {long}*1");
     assert_eq!(
-        replies(&mut board, &[&long]),
+        replies(&mut board, &[&long_numbered]),
         ["Error:Line too long, Last Line: 1", "Resend: 2", "ok"]
     );
     let resent = with_checksum("N2 M114");
@@ -289,6 +295,7 @@ fn a_burst_without_flow_control_reports_lost_input() {
         flow: Flow::Burst,
         numbering: false,
         resend: false,
+        ..HostConfig::raw(115_200)
     };
     let mut board = bench::boot(&mega2560_elf(), config).unwrap();
     let mut lines = vec!["G4 P100".to_string()];
@@ -318,7 +325,7 @@ fn a_burst_without_flow_control_reports_lost_input() {
         ]
     );
     assert!(
-        texts.contains(&"Error:Serial receive overrun, line lost"),
+        texts.contains(&"Error:Serial receive overrun, line lost (checksum not verified)"),
         "{texts:?}"
     );
     // Every line the firmware took got exactly one ok (G4 has no other
@@ -336,6 +343,7 @@ fn lines_spliced_by_a_receive_overflow_are_never_executed() {
         flow: Flow::Burst,
         numbering: false,
         resend: false,
+        ..HostConfig::raw(115_200)
     };
     let mut board = bench::boot(&mega2560_elf(), config).unwrap();
     let mut lines = vec!["G4 P100".to_string()];
