@@ -343,6 +343,22 @@ fn cold_call(what: u8) -> u16 {
 extern "C" fn cold_path(what: u8) -> u16 {
     // SAFETY: see above.
     let Some(generator) = (unsafe { (*addr_of_mut!(GENERATOR)).as_mut() }) else { return IDLE_TICKS };
+    // The block change first, with interrupts off: the main loop prepared
+    // the block, so this is a pointer and a few bytes (≈ a segment change),
+    // and the first event is computed inline by the handler.
+    if what == COLD_GENERAL && generator.take_next_block() {
+        return 0;
+    }
+    general_path(what)
+}
+
+#[cfg(feature = "motion")]
+/// [`cold_path`]'s rare cases, out of its line so that the block change
+/// pays only for the few registers it uses.
+#[inline(never)]
+fn general_path(what: u8) -> u16 {
+    // SAFETY: as in `cold_path`.
+    let Some(generator) = (unsafe { (*addr_of_mut!(GENERATOR)).as_mut() }) else { return IDLE_TICKS };
     if what == COLD_ENDSTOPS {
         // SAFETY: only the pin registers are read.
         generator.on_endstops(endstops(&unsafe { Peripherals::steal() }));
