@@ -88,7 +88,7 @@ fn main() {
                 .map(|(&(a, b), v)| format!("v{v} {}..{}", a as i64 - t0 as i64, b as i64 - t0 as i64))
                 .collect();
             println!("worst interval: edges at 0 and {}; interrupts {around:?}", t1 - t0);
-            println!("samples: {:?}", board.timeline_between(t0, t1).into_iter().take(40).collect::<Vec<_>>());
+            println!("samples: {:?}", board.timeline_between(t1.saturating_sub(250), t1 + 100).into_iter().take(40).collect::<Vec<_>>());
         }
         let mut locks = board.main_loop_interrupt_locks().to_vec();
         locks.sort_by_key(|l| std::cmp::Reverse(l.1));

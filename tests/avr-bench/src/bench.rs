@@ -1015,6 +1015,12 @@ pub struct EvenRateResult {
     pub log: PhaseLog,
 }
 
+impl EvenRateResult {
+    pub fn total_hz(&self) -> f64 {
+        self.per_axis_hz * self.axes as f64
+    }
+}
+
 /// The highest per-axis rate whose cruise over block boundaries keeps
 /// every interval within ±10 % of the median (see [`even_trial`]).
 pub fn even_step_rate(elf: &Path, axes: usize) -> Result<EvenRateResult, String> {
