@@ -330,7 +330,10 @@ fn cold_call(what: u8) -> u16 {
 /// returns the ticks to the next compare, or 0 when the running segment's
 /// next event is still to be computed (by the handler, inline).
 ///
-/// The general path (a new block: up to ≈ 1 600 cycles) lets the serial
+/// A block change in the same directions (prepared by the main loop,
+/// `StepGenerator::take_next_block`: ≈ 600 cycles from entry to `reti`)
+/// is taken first, with interrupts off. The general path (a start from
+/// idle, a direction change: up to ≈ 1 000 cycles) lets the serial
 /// receive interrupt in: at 250 000 baud a byte arrives every 640 cycles
 /// and the UART holds two, so a step interrupt that long with interrupts
 /// off lost bytes (the bench's 250 000-baud stream, once its host sent at
