@@ -364,6 +364,14 @@ pub struct StepGenerator<'a> {
     origin: [i32; ENCODED_MOTORS],
 }
 
+// SAFETY: the only field that is not Send on its own is `block`, a
+// pointer into the block ring that `blocks` (this generator's consumer
+// end, borrowed for 'a) reads; the producer does not reuse that slot
+// before the generator releases it. Moving the generator to another
+// thread moves the pointer with the one consumer that may read through
+// it, exactly as moving the consumer alone (which is Send) would.
+unsafe impl Send for StepGenerator<'_> {}
+
 /// X and Y: the motors an encoder watches (SPEC §1).
 #[cfg(feature = "encoders")]
 pub const ENCODED_MOTORS: usize = 2;
