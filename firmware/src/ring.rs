@@ -214,6 +214,21 @@ impl<T: Copy, const N: usize> Consumer<'_, T, N> {
         Some(unsafe { (*self.ring.slot(head)).assume_init_ref() })
     }
 
+    /// The item after the oldest, read in place (the step generator keeps
+    /// its running block at the front and looks at the next one).
+    #[inline(always)]
+    pub fn second(&self) -> Option<&T> {
+        let head = self.ring.head();
+        let tail = self.ring.tail();
+        let next = head.wrapping_add(1) & Ring::<T, N>::MASK;
+        if head == tail || next == tail {
+            return None;
+        }
+        // SAFETY: next lies in head..tail: published, and not reused before
+        // `head` moves past it.
+        Some(unsafe { (*self.ring.slot(next)).assume_init_ref() })
+    }
+
     /// Free the oldest item's slot (after [`Self::front`] returned it).
     #[inline(always)]
     pub fn release(&mut self) {

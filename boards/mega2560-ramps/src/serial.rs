@@ -105,28 +105,137 @@ pub fn init(dp: &Peripherals, producer: RxProducer<'static>) {
 /// handler's first, interrupts-off part fills it; the run of the handler
 /// that is draining it (`DRAINING`) empties it with interrupts on.
 const RAW_SLOTS: usize = 16;
-static mut RAW: [(u8, bool); RAW_SLOTS] = [(0, false); RAW_SLOTS];
+static mut RAW: [RawByte; RAW_SLOTS] = [RawByte { byte: 0, overrun: false }; RAW_SLOTS];
+
+/// One received byte and the UART's overrun flag for it (C layout: part 1
+/// writes it from assembly, the byte first).
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct RawByte {
+    byte: u8,
+    overrun: bool,
+}
 static mut RAW_HEAD: u8 = 0;
 static mut RAW_LEN: u8 = 0;
 static mut DRAINING: bool = false;
 
-/// USART0 receive complete, in two parts.
-///
-/// 1. Interrupts off, a few dozen cycles: every byte the UART holds goes
-///    into `RAW` with its overrun flag.
-/// 2. Unless an outer run of this handler is already at it, the bytes go
-///    through the ring and the emergency scanner (~250 cycles each) with
-///    interrupts on: a step is held up only by part 1.
-///
-/// The receive interrupt stays enabled, so a byte that arrives while part 2
-/// runs, or while another handler runs on top of it (the step interrupt's
-/// new block: up to ≈ 1 600 cycles), is taken at once by a nested part 1.
-/// At 250 000 baud a byte comes every 640 cycles and the UART holds two:
-/// when this handler switched its own source off for part 2, a step
-/// interrupt on top of it lost bytes. Only when `RAW` is full (a burst
-/// faster than the wire, as QEMU delivers them) does part 1 switch the
-/// source off and leave the bytes in the UART; part 2 switches it back on
-/// as soon as it has taken one.
+// USART0 receive complete, in two parts.
+//
+// 1. Interrupts off, ≈ 50 cycles from the vector to its end or to part
+//    2's `sei`: the byte goes into `RAW` with its overrun flag (a second
+//    byte waiting is left to a nested run, after a moment with interrupts
+//    on). Hand-written (`__vector_25` below): the compiler's
+//    handler saved 15 registers first and took ≈ 110–150 cycles to its
+//    `sei`, and that much was a step's lateness when a byte arrived just
+//    before a step (11 % of the interval at 13 000 steps/s: the even-step
+//    rate's limit once block changes became cheap).
+// 2. Unless an outer run of this handler is already at it, the bytes go
+//    through the ring and the emergency scanner (~250 cycles each) with
+//    interrupts on ([`drain`]): a step is held up only by part 1.
+//
+// The receive interrupt stays enabled, so a byte that arrives while part 2
+// runs, or while another handler runs on top of it, is taken at once by a
+// nested part 1. At 250 000 baud a byte comes every 640 cycles and the
+// UART holds two: when this handler switched its own source off for part
+// 2, a step interrupt on top of it lost bytes. Only when `RAW` is full (a
+// burst faster than the wire, as QEMU delivers them) does part 1 switch
+// the source off and leave the bytes in the UART; part 2 switches it back
+// on as soon as it has taken one.
+//
+// Registers: part 1 uses r24, r25, r30, r31 and SREG's T flag, saved
+// here. Part 2 is Rust: before calling it, r0 and r1 are saved and r1
+// cleared (the interrupted code may hold anything in them), and
+// `ferrostep_rx_drain` saves the other call-clobbered registers. UCSR0A
+// 0xC0 (RXC0 bit 7, DOR0 bit 3), UCSR0B 0xC1 (RXCIE0 bit 7), UDR0 0xC6.
+#[cfg(not(feature = "encoders"))]
+core::arch::global_asm!(
+    ".section .text.__vector_25,\"ax\",@progbits",
+    ".global __vector_25",
+    "__vector_25:",
+    "push r24",
+    "in r24, 0x3f",
+    "push r24",
+    "push r25",
+    "push r30",
+    "push r31",
+    // Part 1: one byte per turn while the UART holds any.
+    "1:",
+    "lds r24, {len}",
+    "cpi r24, {slots}",
+    "breq 3f",
+    "lds r25, {head}",
+    "add r25, r24",
+    "andi r25, {slots} - 1",
+    "lsl r25",
+    "ldi r30, lo8({raw})",
+    "ldi r31, hi8({raw})",
+    "add r30, r25",
+    "brcc 2f",
+    "inc r31",
+    "2:",
+    // The overrun flag belongs to the byte at the head: read it first.
+    "lds r25, 0xc0",
+    "bst r25, 3",
+    "lds r25, 0xc6",
+    "st Z+, r25",
+    "clr r25",
+    "bld r25, 0",
+    "st Z, r25",
+    "inc r24",
+    "sts {len}, r24",
+    // Another byte waiting (it came while interrupts were off): let the
+    // interrupts in for a moment instead of looping here, so a step due
+    // meanwhile goes first; a nested run of this handler takes the byte
+    // (and drains, if no run is at it yet). `sei` lets one instruction
+    // run before any interrupt: the `nop`.
+    "lds r25, 0xc0",
+    "sbrs r25, 7",
+    "rjmp 4f",
+    "sei",
+    "nop",
+    "cli",
+    // The UART's source was on all along, so the byte was taken unless
+    // RAW is full: then loop to switch the source off.
+    "lds r25, 0xc0",
+    "sbrc r25, 7",
+    "rjmp 1b",
+    "rjmp 4f",
+    // RAW is full: leave the bytes in the UART, the source off.
+    "3:",
+    "lds r25, 0xc1",
+    "andi r25, 0x7f",
+    "sts 0xc1, r25",
+    // Part 2 unless an outer run is at it.
+    "4:",
+    "lds r25, {draining}",
+    "tst r25",
+    "brne 5f",
+    "ldi r25, 1",
+    "sts {draining}, r25",
+    "push r0",
+    "push r1",
+    "clr r1",
+    "call ferrostep_rx_drain",
+    "pop r1",
+    "pop r0",
+    "5:",
+    "pop r31",
+    "pop r30",
+    "pop r25",
+    "pop r24",
+    "out 0x3f, r24",
+    "pop r24",
+    "reti",
+    len = sym RAW_LEN,
+    head = sym RAW_HEAD,
+    raw = sym RAW,
+    draining = sym DRAINING,
+    slots = const RAW_SLOTS,
+);
+
+/// The compiler's handler (encoder builds: part 2 must hold the encoder
+/// tick off before interrupts go on, see [`drain`]).
+#[cfg(feature = "encoders")]
 #[avr_device::interrupt(atmega2560)]
 fn USART0_RX() {
     // SAFETY: USART0's status and data registers are read only here; the
@@ -143,7 +252,7 @@ fn USART0_RX() {
             let overrun = usart.ucsr0a.read().dor0().bit_is_set();
             let byte = usart.udr0.read().bits();
             let slot = (RAW_HEAD as usize + RAW_LEN as usize) % RAW_SLOTS;
-            (*addr_of_mut!(RAW))[slot] = (byte, overrun);
+            (*addr_of_mut!(RAW))[slot] = RawByte { byte, overrun };
             RAW_LEN += 1;
             if usart.ucsr0a.read().rxc0().bit_is_clear() {
                 break;
@@ -154,18 +263,62 @@ fn USART0_RX() {
         }
         DRAINING = true;
     }
+    // SAFETY: the routine preserves every register (it saves the
+    // call-clobbered ones itself) and returns with interrupts off;
+    // DRAINING is set, so a nested run of this handler only does part 1.
+    unsafe { core::arch::asm!("call ferrostep_rx_drain") };
+}
+
+// Part 2's way in: the call-clobbered registers of avr-gcc's convention
+// (r18–r27, r30, r31) saved around an ordinary call to `drain`, which
+// returns with interrupts off. Without the encoder loops interrupts go on
+// first, so the saves do not delay a step.
+#[cfg(not(feature = "encoders"))]
+core::arch::global_asm!(
+    ".section .text.ferrostep_rx_drain,\"ax\",@progbits",
+    "ferrostep_rx_drain:",
+    "sei",
+    "push r18", "push r19", "push r20", "push r21", "push r22", "push r23",
+    "push r24", "push r25", "push r26", "push r27", "push r30", "push r31",
+    "call {f}",
+    "pop r31", "pop r30", "pop r27", "pop r26", "pop r25", "pop r24",
+    "pop r23", "pop r22", "pop r21", "pop r20", "pop r19", "pop r18",
+    "ret",
+    f = sym drain,
+);
+#[cfg(feature = "encoders")]
+core::arch::global_asm!(
+    ".section .text.ferrostep_rx_drain,\"ax\",@progbits",
+    "ferrostep_rx_drain:",
+    "push r18", "push r19", "push r20", "push r21", "push r22", "push r23",
+    "push r24", "push r25", "push r26", "push r27", "push r30", "push r31",
+    "call {f}",
+    "pop r31", "pop r30", "pop r27", "pop r26", "pop r25", "pop r24",
+    "pop r23", "pop r22", "pop r21", "pop r20", "pop r19", "pop r18",
+    "ret",
+    f = sym drain,
+);
+
+/// The receive handler's part 2: the bytes of `RAW` through [`receive`]
+/// with interrupts on; returns with interrupts off and `DRAINING` clear.
+extern "C" fn drain() {
     // With the encoder loops the tick runs ≈ 0.5 ms with interrupts on: it
     // must not sit on top of part 2 (found on simavr). Its mask is put
-    // back as it was (the main loop masks it too).
+    // back as it was (the main loop masks it too). (Interrupts are still
+    // off here in those builds.)
     #[cfg(feature = "encoders")]
     let tick = crate::clock::hold_tick();
+    avr_device::interrupt::disable();
+    // SAFETY: USART0's control register, as in the handler.
+    let usart = unsafe { &*USART0::ptr() };
     loop {
         // SAFETY: interrupts are off here (on entry, and after each byte).
         let next = unsafe {
             if RAW_LEN == 0 {
                 None
             } else {
-                let taken = (*addr_of_mut!(RAW))[RAW_HEAD as usize % RAW_SLOTS];
+                let RawByte { byte, overrun } = (*addr_of_mut!(RAW))[RAW_HEAD as usize % RAW_SLOTS];
+                let taken = (byte, overrun);
                 RAW_HEAD = ((RAW_HEAD as usize + 1) % RAW_SLOTS) as u8;
                 RAW_LEN -= 1;
                 // Room again: the source back on (part 1 may have switched

@@ -845,3 +845,261 @@ pub fn ok_latencies(board: &Board) -> Vec<u64> {
         })
         .collect()
 }
+
+/// Steps per mm of the even-step trials (issue 23's harness: 400).
+pub const EVEN_STEPS_PER_MM: f64 = 400.0;
+/// The even-step trials' path per axis, mm: one long move that the
+/// firmware cuts into pieces (≤ 16 384 steps each: 85 mm at 400 steps/mm
+/// is three), then 30 collinear 2 mm moves sent one per `ok`.
+pub const EVEN_LONG_MM: f64 = 85.0;
+pub const EVEN_SHORT_MM: f64 = 2.0;
+pub const EVEN_SHORT_MOVES: usize = 30;
+/// Each ramp takes this share of the path (acceleration chosen so).
+pub const EVEN_RAMP_SHARE: f64 = 0.10;
+/// The judged window: from this share of the steps to 1 − it (the ramps
+/// and a margin of 5 % left out).
+pub const EVEN_WINDOW_FROM: f64 = 0.15;
+/// An interval is even when within this share of the window's median.
+pub const EVEN_TOLERANCE: f64 = 0.10;
+
+/// One axis' intervals over the judged window of an even-step trial.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EvenVerdict {
+    pub failure: Option<String>,
+    pub steps: u64,
+    /// Median interval of the window, cycles.
+    pub median_cycles: f64,
+    /// Largest |interval − median| / median in the window.
+    pub worst_deviation: f64,
+    /// The worst interval, cycles, and the step it ends on (1-based).
+    pub worst_interval: (u64, u64),
+}
+
+/// Judge the rising edges of one axis: `expected` steps in all; every
+/// interval between consecutive steps from [`EVEN_WINDOW_FROM`] to
+/// 1 − [`EVEN_WINDOW_FROM`] of the steps within [`EVEN_TOLERANCE`] of
+/// their median, and the median within 1 % of `rate_hz`.
+pub fn judge_even(edges: &[crate::board::StepEdge], expected: u64, rate_hz: f64) -> EvenVerdict {
+    let rises: Vec<u64> = edges.iter().filter(|e| e.rising).map(|e| e.cycle).collect();
+    let steps = rises.len() as u64;
+    let mut verdict = EvenVerdict { failure: None, steps, median_cycles: 0.0, worst_deviation: 0.0, worst_interval: (0, 0) };
+    if steps != expected {
+        verdict.failure = Some(format!("{steps} steps instead of {expected}"));
+        return verdict;
+    }
+    let first = (expected as f64 * EVEN_WINDOW_FROM) as usize;
+    let last = (expected as f64 * (1.0 - EVEN_WINDOW_FROM)) as usize;
+    if last <= first + 2 {
+        verdict.failure = Some("too few steps to judge".into());
+        return verdict;
+    }
+    let intervals: Vec<u64> = rises[first..=last].windows(2).map(|w| w[1] - w[0]).collect();
+    let mut sorted: Vec<f64> = intervals.iter().map(|&i| i as f64).collect();
+    let median = median(&mut sorted);
+    verdict.median_cycles = median;
+    for (i, &interval) in intervals.iter().enumerate() {
+        let deviation = (interval as f64 - median).abs() / median;
+        if deviation > verdict.worst_deviation {
+            verdict.worst_deviation = deviation;
+            verdict.worst_interval = (interval, (first + i + 2) as u64);
+        }
+    }
+    let planned = f64::from(CPU_HZ) / rate_hz;
+    if ((median - planned) / planned).abs() > 0.01 {
+        verdict.failure = Some(format!("cruise at {:.0} steps/s instead of {rate_hz:.0}", f64::from(CPU_HZ) / median));
+    } else if verdict.worst_deviation > EVEN_TOLERANCE {
+        verdict.failure = Some(format!(
+            "uneven: the interval ending on step {} is {} cycles, {:.0} % off the median {median:.0}",
+            verdict.worst_interval.1,
+            verdict.worst_interval.0,
+            verdict.worst_deviation * 100.0
+        ));
+    }
+    verdict
+}
+
+/// The G-code of an even-step trial: set-up, then the moves.
+pub fn even_job(axes: usize, rate_hz: f64) -> (Vec<String>, Vec<String>, u64) {
+    let s = EVEN_STEPS_PER_MM;
+    let total_mm = EVEN_LONG_MM + EVEN_SHORT_MM * EVEN_SHORT_MOVES as f64;
+    let axis_v = rate_hz / s;
+    let axis_a = axis_v * axis_v / (2.0 * EVEN_RAMP_SHARE * total_mm);
+    let path_scale = (axes as f64).sqrt();
+    let (path_v, path_a) = (axis_v * path_scale, axis_a * path_scale);
+    let letters = &["X", "Y", "Z"][..axes];
+    let each = |value: f64| letters.iter().map(|l| format!("{l}{value:.3}")).collect::<Vec<_>>().join(" ");
+    let setup = vec![
+        format!("M92 {}", each(s)),
+        format!("M203 {}", each(axis_v * 1.5)),
+        format!("M201 {}", each(axis_a)),
+        format!("M204 P{path_a:.3} T{path_a:.3}"),
+        "M17".to_string(),
+        format!("G92 {}", each(0.0)),
+        "G90".to_string(),
+    ];
+    let mut moves = vec![format!("G1 {} F{:.1}", each(EVEN_LONG_MM), path_v * 60.0)];
+    for i in 1..=EVEN_SHORT_MOVES {
+        moves.push(format!("G1 {}", each(EVEN_LONG_MM + EVEN_SHORT_MM * i as f64)));
+    }
+    (setup, moves, (total_mm * s).round() as u64)
+}
+
+#[derive(Clone, Debug)]
+pub struct EvenTrial {
+    pub rate_hz: f64,
+    pub verdicts: Vec<EvenVerdict>,
+    /// Longest run of the step interrupt during the moves, entry to
+    /// `reti`, handlers nested in it included, cycles.
+    pub longest_step_isr: u64,
+}
+
+impl EvenTrial {
+    pub fn failure(&self) -> Option<String> {
+        self.verdicts.iter().zip(["X", "Y", "Z"]).find_map(|(v, a)| v.failure.as_ref().map(|f| format!("{a} {f}")))
+    }
+}
+
+/// The step interrupt's vector on the ATmega2560 (TIMER1_COMPA).
+pub const STEP_VECTOR: u32 = 17;
+
+/// Longest recorded run of the step interrupt (needs
+/// [`Board::record_isr_intervals`]).
+pub fn longest_step_isr(board: &Board) -> u64 {
+    board
+        .isr_intervals()
+        .iter()
+        .zip(board.isr_vector_numbers())
+        .filter(|(_, v)| *v == STEP_VECTOR)
+        .map(|(&(a, b), _)| b - a)
+        .max()
+        .unwrap_or(0)
+}
+
+/// One even-step trial on a booted board: the long move and the 30 short
+/// ones on `axes` axes at `rate_hz` steps/s each, judged by [`judge_even`].
+pub fn even_trial(board: &mut Board, axes: usize, rate_hz: f64) -> Result<EvenTrial, String> {
+    let (setup, moves, steps) = even_job(axes, rate_hz);
+    let setup_refs: Vec<&str> = setup.iter().map(String::as_str).collect();
+    let replies = exchange(board, &setup_refs, 5.0)?;
+    if let Some(error) = replies.iter().find(|r| r.starts_with("Error")) {
+        return Err(format!("the firmware refused the trial set-up: {error}"));
+    }
+    board.clear_step_edges();
+    board.record_isr_intervals(false);
+    board.record_isr_intervals(true);
+    let mut lines: Vec<&str> = moves.iter().map(String::as_str).collect();
+    lines.push("M400");
+    let timeout = steps as f64 / rate_hz * 3.0 + 2.0;
+    let replies = exchange(board, &lines, timeout)?;
+    if let Some(error) = replies.iter().find(|r| r.starts_with("Error")) {
+        return Err(format!("the firmware refused a trial move: {error}"));
+    }
+    let verdicts = [X, Y, Z][..axes].iter().map(|&a| judge_even(board.step_edges(a), steps, rate_hz)).collect();
+    let longest = longest_step_isr(board);
+    board.record_isr_intervals(false);
+    Ok(EvenTrial { rate_hz, verdicts, longest_step_isr: longest })
+}
+
+/// Rates the even-step search tries in order until one fails; then bisected.
+pub const EVEN_RATES_HZ: &[f64] = &[10_000.0, 15_000.0, 20_000.0, 25_000.0, 30_000.0, 33_000.0, 36_000.0, 40_000.0, 45_000.0, 50_000.0];
+
+#[derive(Clone, Debug)]
+pub struct EvenRateResult {
+    /// Highest rate per axis at which every interval was even.
+    pub per_axis_hz: f64,
+    pub axes: usize,
+    pub limit: Option<(f64, String)>,
+    pub trials: Vec<(f64, Option<String>, f64)>,
+    /// Longest step-interrupt run over every trial.
+    pub longest_step_isr: u64,
+    pub log: PhaseLog,
+}
+
+impl EvenRateResult {
+    pub fn total_hz(&self) -> f64 {
+        self.per_axis_hz * self.axes as f64
+    }
+}
+
+/// The highest per-axis rate whose cruise over block boundaries keeps
+/// every interval within ±10 % of the median (see [`even_trial`]).
+pub fn even_step_rate(elf: &Path, axes: usize) -> Result<EvenRateResult, String> {
+    let mut config = RampsConfig::stock(115_200);
+    config.endstops = far_endstops();
+    let mut board = boot(elf, config)?;
+    let (mut trials, mut best, mut limit, mut longest) = (Vec::new(), None, None, 0u64);
+    let mut run = |board: &mut Board, rate: f64, trials: &mut Vec<(f64, Option<String>, f64)>| -> Result<Option<String>, String> {
+        let trial = even_trial(board, axes, rate)?;
+        longest = longest.max(trial.longest_step_isr);
+        let worst = trial.verdicts.iter().map(|v| v.worst_deviation).fold(0.0, f64::max);
+        let failure = trial.failure();
+        trials.push((rate, failure.clone(), worst));
+        Ok(failure)
+    };
+    for &rate in EVEN_RATES_HZ {
+        match run(&mut board, rate, &mut trials)? {
+            None => best = Some(rate),
+            Some(why) => {
+                limit = Some((rate, why));
+                break;
+            }
+        }
+    }
+    let Some(mut low) = best else {
+        let (rate, why) = limit.unwrap_or_default();
+        return Err(format!("uneven already at {rate:.0} steps/s: {why}"));
+    };
+    if let Some((mut high, _)) = limit.clone() {
+        for _ in 0..3 {
+            let mid = ((low + high) / 2.0 / 250.0).round() * 250.0;
+            if mid <= low || mid >= high {
+                break;
+            }
+            match run(&mut board, mid, &mut trials)? {
+                None => low = mid,
+                Some(why) => {
+                    high = mid;
+                    limit = Some((mid, why));
+                }
+            }
+        }
+    }
+    Ok(EvenRateResult { per_axis_hz: low, axes, limit, trials, longest_step_isr: longest, log: PhaseLog::of(&format!("even steps, {axes} axes"), &board) })
+}
+
+/// Feed of [`lines_per_s`]' chords, mm/s: 0.5 mm chords at 250 mm/s are
+/// 500 a second of motion, more than the firmware takes.
+pub const LINES_FEED_MM_S: f64 = 250.0;
+
+/// Unnumbered `length_mm` chords of the bench spiral (see [`segments_of`])
+/// sent one per `ok` at `baud`: lines acknowledged per second, from the
+/// first chord's first byte to the last chord's `ok`; and the longest run
+/// of the step interrupt meanwhile.
+pub fn lines_per_s(elf: &Path, baud: u32, segments: usize, length_mm: f64) -> Result<(f64, u64, PhaseLog), String> {
+    let mut config = RampsConfig::stock(baud);
+    config.host = HostConfig::raw(baud);
+    let mut board = boot(elf, config)?;
+    board.record_isr_intervals(true);
+    let mut job = segments_of(segments, length_mm);
+    // The feed high enough that the motion never holds the host back
+    // (the planner would fill): the firmware's line rate is measured.
+    job[3] = format!("G1 F{:.0}", LINES_FEED_MM_S * 60.0);
+    job.insert(0, format!("M203 X{LINES_FEED_MM_S:.0} Y{LINES_FEED_MM_S:.0}"));
+    let header = 6;
+    board.send(job.iter());
+    let timeout = segments as f64 * 0.02 + 10.0;
+    if !board.run_until_host_done(timeout) {
+        return Err(format!("the stream did not finish within {timeout} s"));
+    }
+    let host = board.host();
+    if let Some(error) = host.replies.iter().find(|r| r.text.starts_with("Error")) {
+        return Err(format!("the firmware answered {:?}", error.text));
+    }
+    let chords: Vec<_> = host.sent.iter().filter(|s| s.job_index.is_some_and(|i| i >= header)).collect();
+    let (first, last) = (chords.first().ok_or("nothing sent")?, chords.last().ok_or("nothing sent")?);
+    let ok = &host.replies[last.ok_reply.ok_or("last chord without ok")?];
+    let seconds = (ok.arrived_cycle - first.start_cycle) as f64 / f64::from(CPU_HZ);
+    let rate = chords.len() as f64 / seconds;
+    let longest = longest_step_isr(&board);
+    Ok((rate, longest, PhaseLog::of(&format!("{length_mm} mm chords at {baud}"), &board)))
+}

@@ -107,6 +107,19 @@ fn main() {
         phases.push(log.clone());
     }
 
+    eprintln!("benchmark: even steps across block boundaries, 1 stepper …");
+    let even1 = bench::even_step_rate(&elf, 1);
+    eprintln!("benchmark: even steps across block boundaries, 3 steppers …");
+    let even3 = bench::even_step_rate(&elf, 3);
+    for r in [&even1, &even3].into_iter().flatten() {
+        phases.push(r.log.clone());
+    }
+    eprintln!("benchmark: unnumbered 0.5 mm chords at 115200 baud …");
+    let lines = bench::lines_per_s(&elf, 115_200, 400, 0.5);
+    if let Ok((_, _, log)) = &lines {
+        phases.push(log.clone());
+    }
+
     eprintln!("benchmark: G1 stream at 250000 baud …");
     let stream = elf_250k.clone().and_then(|e| bench::stream_rate(&e, 250_000, 400));
     if let Ok(s) = &stream {
@@ -118,6 +131,18 @@ fn main() {
         .into_iter()
         .map(|(key, length)| {
             let result = elf_250k.clone().and_then(|e| bench::segment_speed(&e, 250_000, (60.0 / length) as usize, length)).map(|(ratio, lines, log)| {
+                phases.push(log);
+                (ratio, lines)
+            });
+            (key, length, result)
+        })
+        .collect();
+
+    eprintln!("benchmark: short numbered segments at 100 mm/s, 115200 baud (0.5, 0.2 mm) …");
+    let segment_speeds_115k: Vec<(&str, f64, Result<(f64, f64), String>)> = [("segment_speed_ratio_0_5mm_115200", 0.5), ("segment_speed_ratio_0_2mm_115200", 0.2)]
+        .into_iter()
+        .map(|(key, length)| {
+            let result = bench::segment_speed(&elf, 115_200, (60.0 / length) as usize, length).map(|(ratio, lines, log)| {
                 phases.push(log);
                 (ratio, lines)
             });
@@ -211,6 +236,47 @@ fn main() {
         },
         Err(e) => missing("step_rate_3_steppers_total_hz", e, step_anchor_3.into()),
     });
+    let even_anchor_1 = "issue 23: ≥ 40 000 across block boundaries; Grbl 1.1 on the same harness 33 000";
+    rows.push(match &even1 {
+        Ok(r) => Row {
+            key: "step_rate_even_1_stepper_hz",
+            value: Ok(r.per_axis_hz),
+            shown: format!("{} steps/s, every interval within ±10 % of the median over block boundaries{}", group(r.per_axis_hz), limit_note(&r.limit)),
+            anchor: even_anchor_1.into(),
+        },
+        Err(e) => missing("step_rate_even_1_stepper_hz", e, even_anchor_1.into()),
+    });
+    let even_anchor_3 = "issue 23: ≥ 3 × 33 000 across block boundaries; Grbl 1.1 on the same harness 3 × 27 500";
+    rows.push(match &even3 {
+        Ok(r) => Row {
+            key: "step_rate_even_3_steppers_total_hz",
+            value: Ok(r.total_hz()),
+            shown: format!("{} steps/s ({} per axis){}", group(r.total_hz()), group(r.per_axis_hz), limit_note(&r.limit)),
+            anchor: even_anchor_3.into(),
+        },
+        Err(e) => missing("step_rate_even_3_steppers_total_hz", e, even_anchor_3.into()),
+    });
+    let longest_anchor = "no longer than the shortest interval it is specified for: 400 cycles at 40 000 steps/s";
+    let longest = [even1.as_ref().map(|r| r.longest_step_isr), even3.as_ref().map(|r| r.longest_step_isr), lines.as_ref().map(|l| l.1)];
+    rows.push(match longest.iter().flatten().max() {
+        Some(&cycles) => Row {
+            key: "step_isr_longest_path_cycles",
+            value: Ok(cycles as f64),
+            shown: format!("{} cycles (longest step-interrupt run, entry to reti, nested handlers included, over the even-step trials and the chord stream)", group(cycles as f64)),
+            anchor: longest_anchor.into(),
+        },
+        None => missing("step_isr_longest_path_cycles", "no even-step trial or chord stream ran", longest_anchor.into()),
+    });
+    let lines_anchor = "issue 23: ≥ 400; Grbl 1.1 on the same harness 220; the wire carries ≈ 512";
+    rows.push(match &lines {
+        Ok((rate, _, _)) => Row {
+            key: "lines_per_s_0_5mm_115200",
+            value: Ok(*rate),
+            shown: format!("{rate:.0} lines/s (unnumbered 0.5 mm chords at {:.0} mm/s, one line in flight)", bench::LINES_FEED_MM_S),
+            anchor: lines_anchor.into(),
+        },
+        Err(e) => missing("lines_per_s_0_5mm_115200", e, lines_anchor.into()),
+    });
     let isr_anchor = "Klipper ≈ 6 % (derived: 16 MHz / 157 k = 102 cycles a step); Marlin ≈ 70 % (derived: 10 k of its ≈ 14 k ceiling)";
     rows.push(match &isr {
         Ok((share, _)) => Row {
@@ -244,6 +310,19 @@ fn main() {
                 key: *key,
                 value: Ok(*ratio),
                 shown: format!("{:.2} of 100 mm/s ({lines:.0} lines/s acknowledged, 250000 baud, ok flow control)", ratio),
+                anchor,
+            },
+            Err(e) => missing(*key, e, anchor),
+        });
+    }
+
+    for (key, length, result) in &segment_speeds_115k {
+        let anchor = format!("issue 23: 0.5 mm ≥ 0.95 (full speed), 0.2 mm ≥ 0.8; {length} mm segments, printcore numbering, 115200 baud");
+        rows.push(match result {
+            Ok((ratio, lines)) => Row {
+                key: *key,
+                value: Ok(*ratio),
+                shown: format!("{:.2} of 100 mm/s ({lines:.0} lines/s acknowledged, 115200 baud, numbered, ok flow control)", ratio),
                 anchor,
             },
             Err(e) => missing(*key, e, anchor),
@@ -291,6 +370,12 @@ fn main() {
                 group(*rate),
                 failure.as_deref().unwrap_or("on time")
             );
+        }
+    }
+    for result in [&even1, &even3].into_iter().flatten() {
+        println!("even-step trials, {} axis(es) (steps/s per axis: worst interval off the median, verdict):", result.axes);
+        for (rate, failure, worst) in &result.trials {
+            println!("  {:>9}: {:5.1} %  {}", group(*rate), worst * 100.0, failure.as_deref().unwrap_or("even"));
         }
     }
     print_runner(&phases, started);
