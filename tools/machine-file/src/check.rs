@@ -383,6 +383,14 @@ fn required<T: Copy>(problems: &mut Problems, key: &str, value: Option<T>, why: 
     value
 }
 
+/// A required, positive geometry figure of `kinematics.<key>` (1 when
+/// missing: the problem is recorded, checking goes on).
+fn geometry(problems: &mut Problems, key: &str, value: Option<f64>, unit: &str, machine: &str) -> f64 {
+    let key = format!("kinematics.{key}");
+    let value = required(problems, &key, value, &format!("{machine} needs it")).unwrap_or(1.0);
+    positive(problems, &key, value, unit)
+}
+
 fn kinematics(k: &schema::KinematicsSection, problems: &mut Problems) -> Kinematics {
     let delta_keys = [k.rod_length, k.radius, k.nozzle_offset, k.homed_height, k.printable_radius];
     let arm_keys = [k.upper_arm, k.forearm, k.joint_gear_ratio, k.joint_pulses_per_rev];
@@ -399,10 +407,7 @@ fn kinematics(k: &schema::KinematicsSection, problems: &mut Problems) -> Kinemat
         }
         "delta" => {
             foreign(problems, &arm_keys, k.origin.is_some() || k.home_position.is_some(), "arm");
-            let need = |problems: &mut Problems, key: &str, v: Option<f64>, unit: &str| {
-                let v = required(problems, &format!("kinematics.{key}"), v, "a delta needs it").unwrap_or(1.0);
-                positive(problems, &format!("kinematics.{key}"), v, unit)
-            };
+            let need = |problems: &mut Problems, key: &str, v: Option<f64>, unit: &str| geometry(problems, key, v, unit, "a delta");
             let rod_length = need(problems, "rod_length", k.rod_length, "mm");
             let radius = need(problems, "radius", k.radius, "mm");
             let nozzle_offset = need(problems, "nozzle_offset", k.nozzle_offset, "mm");
@@ -422,10 +427,7 @@ fn kinematics(k: &schema::KinematicsSection, problems: &mut Problems) -> Kinemat
         }
         "arm" => {
             foreign(problems, &delta_keys, k.tower_angles.is_some(), "delta");
-            let need = |problems: &mut Problems, key: &str, v: Option<f64>, unit: &str| {
-                let v = required(problems, &format!("kinematics.{key}"), v, "an arm needs it").unwrap_or(1.0);
-                positive(problems, &format!("kinematics.{key}"), v, unit)
-            };
+            let need = |problems: &mut Problems, key: &str, v: Option<f64>, unit: &str| geometry(problems, key, v, unit, "an arm");
             let upper_arm = need(problems, "upper_arm", k.upper_arm, "mm");
             let forearm = need(problems, "forearm", k.forearm, "mm");
             let ratio = need(problems, "joint_gear_ratio", k.joint_gear_ratio, "");
