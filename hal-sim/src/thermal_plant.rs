@@ -56,6 +56,12 @@ impl PlantModel {
     pub const BARREL_STEP_FIT: PlantModel = PlantModel { gain_c_per_percent: 4.3, time_constant_s: 477.0, dead_time_s: 36.0, ambient_c: 24.0 };
     pub const HOTEND_40W: PlantModel = PlantModel { gain_c_per_percent: 4.0, time_constant_s: 120.0, dead_time_s: 3.0, ambient_c: 25.0 };
     pub const BED_SLOW: PlantModel = PlantModel { gain_c_per_percent: 1.5, time_constant_s: 2143.0, dead_time_s: 10.0, ambient_c: 25.0 };
+    /// Issue 22 finding 7's bed: 200 W, 0.55 °C/W to the air (full power
+    /// settles at 25 + 110 = 135 °C, so K = 1.1 °C per %), τ 600 s, 10 s
+    /// of dead time (the heat crossing the plate to the thermistor). At
+    /// full power 25 → 60 °C takes 10 + 600·ln(110/75) ≈ 240 s; holding
+    /// 60 °C takes 35/110 = 32 % (81 counts).
+    pub const BED_200W: PlantModel = PlantModel { gain_c_per_percent: 1.1, time_constant_s: 600.0, dead_time_s: 10.0, ambient_c: 25.0 };
 }
 
 /// A heater plant on virtual time.
@@ -620,8 +626,7 @@ mod tests {
     }
 
     /// The same bed on PID with gains from `M303` (Marlin's stock bed gains
-    /// stall it at ≈91 °C, P-only equilibrium, and the watch rightly
-    /// calls that a heating failure).
+    /// reach ≈91 °C, P-only equilibrium, then crawl on the integral).
     #[test]
     fn the_slow_bed_on_auto_tuned_pid_reaches_100_without_tripping() {
         let mut tuning = slow_bed_rig(firmware::thermal::Control::PID, Gains::MARLIN_BED);
@@ -631,12 +636,129 @@ mod tests {
         assert_slow_bed_holds_100(&mut rig);
     }
 
+    /// Marlin's stock bed gains on SPEC §2's slow bed: full power to 90 °C,
+    /// then P-only equilibrium near 91 °C and a slow climb on the tiny
+    /// integral. That is a slow controller, not a failed heater: the watch
+    /// judges only full-power periods (issue 22, finding 7; it used to
+    /// latch `HeatingFailed` here).
     #[test]
-    fn marlin_stock_bed_gains_stall_the_slow_bed_and_the_watch_says_so() {
+    fn marlin_stock_bed_gains_crawl_on_the_slow_bed_without_a_false_heating_failure() {
         let mut rig = slow_bed_rig(firmware::thermal::Control::PID, Gains::MARLIN_BED);
         rig.channel.set_target(Celsius(10_000)).unwrap();
-        rig.run(2400.0);
-        assert_eq!(rig.fault.map(|(_, fault)| fault), Some(ThermalFault::HeatingFailed));
+        rig.run(6000.0);
+        assert_eq!(rig.fault, None);
+        let reached = first_at(&rig, 99.0);
+        std::println!("slow bed, stock gains: 99 °C after {reached:?} s");
+        assert!(reached.is_some());
+    }
+
+    /// Issue 22 finding 7's bed with the RAMPS bed channel as it ships
+    /// (PID, Marlin's bed protections) and `gains`.
+    fn bed_200w_rig(gains: Gains) -> ThermalRig {
+        ThermalRig::new(
+            HeaterChannel::new(&BED, gains),
+            HeaterPlant::new(PlantModel::BED_200W),
+            SimulatedSensor::new(ThermistorCircuit::RAMPS, 0.5, 5),
+            16,
+        )
+    }
+
+    /// Seconds until the plant first reaches `celsius`.
+    fn first_at(rig: &ThermalRig, celsius: f64) -> Option<f64> {
+        rig.trace.iter().find(|r| r.plant_c >= celsius).map(|r| r.time_s)
+    }
+
+    /// The physical time: 25 → 60 °C at full power, ≈ 240 s.
+    fn bed_200w_full_power_time_to_60() -> f64 {
+        let mut plant = HeaterPlant::new(PlantModel::BED_200W);
+        let mut ms = 0u64;
+        while plant.temperature_c() < 60.0 {
+            plant.step(1.0);
+            ms += PLANT_STEP_MS;
+        }
+        ms as f64 / 1000.0
+    }
+
+    /// Issue 22 finding 7: `M304 P10 I0.023 D305.4` (the slicer's, Marlin's
+    /// stock bed gains) on the 200 W bed. Full power to 50 °C, then the
+    /// PID's duty falls to ≈ 0.38 and the rise to under 2 °C a minute:
+    /// the watch called that a failed heater at ≈ 51 °C. A working bed
+    /// under its own (slow) PID must get to the target.
+    #[test]
+    fn marlin_stock_bed_gains_bring_the_200w_bed_to_60_without_a_false_heating_failure() {
+        let mut rig = bed_200w_rig(Gains::MARLIN_BED);
+        rig.channel.set_target(Celsius(6_000)).unwrap();
+        rig.run(3600.0);
+        assert_eq!(rig.fault, None, "{:?}", rig.trace.last());
+        let reached = first_at(&rig, 59.5).expect("reaches 59.5 °C");
+        std::println!("stock gains: 59.5 °C after {reached:.0} s");
+        for r in rig.since(reached + 600.0) {
+            assert!((r.plant_c - 60.0).abs() <= 1.0, "{r:?}");
+        }
+    }
+
+    /// The watch still catches a bed heater that does not heat at full
+    /// power: 2 °C in 60 s (Marlin's `WATCH_BED_TEMP_*`).
+    #[test]
+    fn a_dead_bed_heater_at_full_power_is_still_a_heating_failure() {
+        let mut rig = bed_200w_rig(Gains::MARLIN_BED);
+        rig.plant.disconnect_heater();
+        rig.channel.set_target(Celsius(6_000)).unwrap();
+        rig.run(120.0);
+        assert_off_after(&mut rig, ThermalFault::HeatingFailed, 61.0, 0.0);
+    }
+
+    /// A bed heater that dies half way (a broken wire at 40 °C, the PID
+    /// still below its range and at full power) is caught too.
+    #[test]
+    fn a_bed_heater_lost_while_heating_is_a_heating_failure() {
+        let mut rig = bed_200w_rig(Gains::MARLIN_BED);
+        rig.channel.set_target(Celsius(6_000)).unwrap();
+        rig.run(120.0);
+        assert_eq!(rig.fault, None);
+        rig.plant.disconnect_heater();
+        rig.run(150.0);
+        assert_off_after(&mut rig, ThermalFault::HeatingFailed, 140.0, 120.0);
+    }
+
+    /// A bed heater that dies while the stock PID backs off near the
+    /// target (≈ 0.4 duty at 52 °C, where the watch no longer judges): the
+    /// bed cools, the PID goes back to full power below its 10 °C range,
+    /// and the next full 60 s period catches it.
+    #[test]
+    fn a_bed_heater_lost_while_the_pid_backs_off_is_still_caught() {
+        let mut rig = bed_200w_rig(Gains::MARLIN_BED);
+        rig.channel.set_target(Celsius(6_000)).unwrap();
+        rig.run(1.0);
+        while rig.plant.temperature_c() < 52.0 {
+            rig.run(1.0);
+        }
+        let lost = rig.time_s();
+        assert!(rig.trace.last().unwrap().duty < 150, "{:?}", rig.trace.last());
+        rig.plant.disconnect_heater();
+        rig.run(300.0);
+        std::println!("lost at {lost:.0} s, caught after {:?}", rig.fault.map(|(at, _)| at - lost));
+        assert_off_after(&mut rig, ThermalFault::HeatingFailed, 150.0, lost);
+    }
+
+    /// `M303 E-1 S60 C5` on the 200 W bed: gains that heat 25 → 60 °C in
+    /// close to the physical time (within 1.5× full power's).
+    #[test]
+    fn autotuned_gains_heat_the_200w_bed_in_close_to_its_physical_time() {
+        let mut tuning = bed_200w_rig(Gains::MARLIN_BED);
+        let result = tuning.tune(TuneConfig { cycles: 5, ..TuneConfig::new(Celsius(6_000), 100) }, 20_000.0).expect("the bed tunes");
+        let mut rig = bed_200w_rig(result.gains);
+        rig.channel.set_target(Celsius(6_000)).unwrap();
+        rig.run(1800.0);
+        assert_eq!(rig.fault, None);
+        let physical = bed_200w_full_power_time_to_60();
+        let reached = first_at(&rig, 59.5).expect("reaches 59.5 °C");
+        let peak = rig.trace.iter().map(|r| r.plant_c).fold(0.0, f64::max);
+        std::println!("tuned {:?}: 59.5 °C after {reached:.0} s (full power to 60: {physical:.0} s), peak {peak:.2}", result.gains);
+        assert!(reached <= 1.5 * physical, "{reached} s vs {physical} s");
+        for r in rig.since(reached + 300.0) {
+            assert!((r.plant_c - 60.0).abs() <= 1.0, "{r:?}");
+        }
     }
 
     /// Hold 210 °C with Marlin's gains, then break something.

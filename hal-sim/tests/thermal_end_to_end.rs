@@ -5,6 +5,7 @@
 //! line naming the fault, and the machine halted.
 
 use hal_sim::board::{SimBoard, Thermistor};
+use hal_sim::thermal_plant::{HeaterPlant, PlantModel};
 
 fn booted() -> SimBoard {
     SimBoard::booted()
@@ -159,4 +160,38 @@ fn m155_reports_every_n_seconds() {
     board.advance(4_100);
     let output = board.take_output();
     assert_eq!(output.matches(" T:").count(), 2, "{output}");
+}
+
+/// Issue 22, finding 7: a PrusaSlicer start sets Marlin's stock bed gains
+/// and waits for 60 °C on a 200 W bed with a 600 s time constant. The
+/// PID backs off to ≈ 0.38 duty from 50 °C and gains under 2 °C a minute;
+/// it used to be halted for `Heating failed … Heater_ID: bed` at ≈ 51 °C.
+/// Now `M190` waits for it (≈ 20 min: the stock gains' tiny Ki) and ends
+/// with `ok`.
+#[test]
+fn m190_with_the_slicers_bed_gains_reaches_60_on_a_slow_200w_bed() {
+    let mut board = booted();
+    board.bed_plant = HeaterPlant::new(PlantModel::BED_200W);
+    assert_eq!(board.run_gcode("M304 P10 I0.023 D305.4\n", 1_000), "ok\n");
+    let output = board.run_gcode("M190 S60\n", 1_800_000);
+    assert!(!output.contains("Error:"), "{output}");
+    assert!(output.ends_with("ok\n"), "{}", &output[output.len().saturating_sub(300)..]);
+    assert!(!board.link.machine.is_halted());
+    let t = board.bed_plant.temperature_c();
+    assert!((t - 60.0).abs() < 1.5, "{t}");
+    println!("M190 S60 with the stock bed gains: ok after {} s", board.now_ms() / 1000);
+}
+
+/// The same bed with its heater's wire cut: at full power it gains
+/// nothing, and the watch (2 °C in 60 s) still halts it.
+#[test]
+fn m190_on_a_dead_bed_heater_is_still_a_heating_failure() {
+    let mut board = booted();
+    board.bed_plant = HeaterPlant::new(PlantModel::BED_200W);
+    board.bed_plant.disconnect_heater();
+    board.receive(b"M190 S60\n");
+    let output = run_until_output(&mut board, "kill() called", 90_000);
+    assert!(output.contains("Error:Heating failed, system stopped! Heater_ID: bed\n"), "{output}");
+    assert!(board.now_ms() >= 60_000 && board.now_ms() <= 61_500, "{}", board.now_ms());
+    assert_halted_and_cold(&mut board);
 }

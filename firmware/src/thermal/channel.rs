@@ -340,6 +340,7 @@ impl HeaterChannel {
             }
             Control::BangBang { hysteresis_tenths } => bang_bang(hysteresis_tenths, c.max_power, self.target, measured, self.duty > 0),
         };
+        self.guard.on_output(&c.guard, c.sample_period_ms, self.target, measured, self.duty, c.max_power);
         None
     }
 

@@ -12,7 +12,7 @@
 //! | [`MinTemp`](ThermalFault::MinTemp) | `bad_readings` consecutive readings below `min_c` (5 °C) |
 //! | [`MaxTemp`](ThermalFault::MaxTemp) | one reading above `max_c` (275 °C hot end, 150 °C bed) |
 //! | [`ThermalRunaway`](ThermalFault::ThermalRunaway) | once the target was reached: below `target − runaway_hysteresis` for `runaway_period` (40 s / 4 °C hot end, 20 s / 2 °C bed) |
-//! | [`HeatingFailed`](ThermalFault::HeatingFailed) | heating toward a target: less than `watch_increase` gained in a `watch_period` (2 °C / 20 s hot end, 2 °C / 60 s bed) |
+//! | [`HeatingFailed`](ThermalFault::HeatingFailed) | heating toward a target at (near) full power: less than `watch_increase` gained in a `watch_period` (2 °C / 20 s hot end, 2 °C / 60 s bed) |
 //!
 //! A reading that is bad but not yet confirmed holds the heater off for
 //! that sample. Time is counted in samples (the guard runs at the heater's
@@ -22,7 +22,9 @@
 //! `watch_increase + 4 °C` above the measured temperature (Marlin's
 //! `TEMP_HYSTERESIS + 1`): the temperature must then rise by
 //! `watch_increase` within `watch_period`, again and again until it is
-//! within that margin. The runaway check (Marlin's
+//! within that margin. Only periods driven at (near) full power are judged
+//! ([`HeaterGuard::on_output`]): a controller that backs off is not a
+//! heater that fails. The runaway check (Marlin's
 //! `THERMAL_PROTECTION_*`) starts when the measured temperature first
 //! reaches the target and is reset whenever the target changes.
 
@@ -281,6 +283,20 @@ impl HeaterGuard {
             self.watch_goal = Celsius(measured.0.saturating_add(increase));
         } else {
             self.watch_samples = 0;
+        }
+    }
+
+    /// The controller's duty after this sample. The watch judges only
+    /// periods through which the heater was driven at (near) full power:
+    /// below 7/8 of `max_power` the period starts again from `measured`.
+    /// A PID that backs off near the target (Marlin's stock bed gains on
+    /// a slow bed drop to ≈ 0.38 duty 10 °C below it and gain under 2 °C a
+    /// minute) is not a heater that fails to heat (issue 22, finding 7);
+    /// a dead heater cools, its controller goes back to full power, and
+    /// the next full period catches it.
+    pub fn on_output(&mut self, config: &GuardConfig, period_ms: u16, target: Celsius, measured: Celsius, duty: u8, max_power: u8) {
+        if self.watch_samples > 0 && u16::from(duty) * 8 < u16::from(max_power) * 7 {
+            self.arm_watch(config, period_ms, target, measured);
         }
     }
 
@@ -582,6 +598,33 @@ mod tests {
         let mut guard = HeaterGuard::new();
         guard.on_target(&HOT, PERIOD, c(210), Some(c(205)));
         assert_eq!(run(&mut guard, &HOT, Ok(c(205)), c(210), 10_000), Verdict::Run(c(205)));
+    }
+
+    /// Issue 22, finding 7: a bed held at 51 °C by a PID asking for 0.38
+    /// duty is not judged; the same bed at full power is, after a whole
+    /// 60 s period at full power.
+    #[test]
+    fn the_watch_judges_only_periods_driven_at_near_full_power() {
+        let bed = GuardConfig::BED;
+        let mut guard = HeaterGuard::new();
+        guard.on_target(&bed, PERIOD, c(60), Some(c(51)));
+        // 10 minutes without a rise at 0.38 duty (97 counts): no fault.
+        for _ in 0..6_000 {
+            assert_eq!(guard.check(&bed, PERIOD, Ok(c(51)), c(60), false), Verdict::Run(c(51)));
+            guard.on_output(&bed, PERIOD, c(60), c(51), 97, 255);
+        }
+        // 7/8 of full power (224 counts) and more is judged: 60 s.
+        let mut samples = 0;
+        loop {
+            samples += 1;
+            if let Verdict::Latched(fault) = guard.check(&bed, PERIOD, Ok(c(51)), c(60), false) {
+                assert_eq!(fault, ThermalFault::HeatingFailed);
+                break;
+            }
+            guard.on_output(&bed, PERIOD, c(60), c(51), 224, 255);
+            assert!(samples < 1_000);
+        }
+        assert_eq!(samples, 600);
     }
 
     #[test]

@@ -45,6 +45,7 @@ fn main() {
         thermistor_intermittent(),
         thermal_fault("heater disconnected", "the hot end's heater wire cut at M104 S200", "Error:Heating failed", |b| b.hotend_plant.disconnect_heater(), 30_000),
         heater_dies_while_holding(),
+        slow_bed_heater_lost_under_pid(),
         thermal_fault("heater stuck on", "a shorted MOSFET: full power whatever the firmware drives", "Error:MAXTEMP triggered", |b| b.hotend_plant.stick_output(1.0), 400_000),
         encoder_disconnected(),
         watchdog_reset_mid_print(),
@@ -461,6 +462,39 @@ fn heater_dies_while_holding() -> Outcome {
         },
         safe_after_ms: safe,
         passed: !false_trip && named.is_some() && safe.is_some_and(|ms| ms <= 20_000),
+    }
+}
+
+/// Issue 22, finding 7: a 200 W bed with a 600 s time constant under the
+/// slicer's stock bed gains (`M304 P10 I0.023 D305.4`) heats for `M190
+/// S60`; from 50 °C the PID backs off (≈ 0.4 duty, under 2 °C a minute),
+/// which must not be called a failed heater. At 52 °C the heater's wire
+/// is cut: the bed cools, the PID goes back to full power and the watch
+/// (2 °C in 60 s at full power) catches it.
+fn slow_bed_heater_lost_under_pid() -> Outcome {
+    use hal_sim::thermal_plant::{HeaterPlant, PlantModel};
+    let mut board = booted();
+    board.bed_plant = HeaterPlant::new(PlantModel::BED_200W);
+    board.run_gcode("M304 P10 I0.023 D305.4\n", 1_000);
+    board.receive(b"M190 S60\n");
+    run_until(&mut board, 600_000, |b| b.bed_plant.temperature_c() >= 52.0 || b.link.machine.is_halted());
+    let false_trip = board.link.machine.is_halted();
+    board.take_output();
+    board.bed_plant.disconnect_heater();
+    let safe = run_until(&mut board, 300_000, |b| b.link.machine.is_halted() && b.link.machine.heater_duties() == (0, 0));
+    let output = board.take_output();
+    let named = output.lines().find(|l| l.starts_with("Error:Heating failed")).map(str::to_string);
+    Outcome {
+        fault: "slow bed heater lost under its PID",
+        injected: "M304 P10 I0.023 D305.4, M190 S60 on a 200 W τ 600 s bed; wire cut at 52 °C",
+        expected: "no trip while the PID backs off; Heating failed within 150 s of the cut",
+        observed: match (&named, false_trip) {
+            (_, true) => "halted before the cut (false heating failure)".to_string(),
+            (Some(line), _) => format!("{line}; heaters off, halted"),
+            (None, _) => "no Heating failed line".to_string(),
+        },
+        safe_after_ms: safe,
+        passed: !false_trip && named.is_some() && safe.is_some_and(|ms| ms <= 150_000),
     }
 }
 
