@@ -96,6 +96,10 @@ fn main() -> ! {
         // SPEC §3: a driver that lost sync stops the job.
         #[cfg(feature = "machine-arm")]
         let _ = link.machine.on_driver_alarms(pins::driver_alarms(&dp), &mut tx);
+        // SPEC §3: the light curtain's relay and the e-stop stop every
+        // motor; re-arm, then G28.
+        #[cfg(feature = "machine-arm")]
+        let _ = link.machine.on_safety_inputs(pins::safety_inputs(&dp), &mut tx);
         let _ = link.service(&mut rx, &mut eeprom, now, &mut tx);
         // SPEC §1: the encoder loops' settings, faults and reports, once a
         // millisecond: each look masks the 1 kHz tick that runs the loops,
@@ -175,8 +179,8 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
     link.machine.use_machine_file();
     pins::init_endstops(dp);
     #[cfg(feature = "machine-arm")]
-    for alarm in pins::DRIVER_ALARMS {
-        pins::make_input_pulled_up(dp, alarm);
+    for input in pins::DRIVER_ALARMS.into_iter().chain([pins::SAFETY_RELAY, pins::EMERGENCY_STOP, pins::REARM]) {
+        pins::make_input_pulled_up(dp, input);
     }
     let _ = link.machine.write_banner(tx);
     (link, serial::Rx { consumer })
