@@ -133,6 +133,10 @@ pub const EMERGENCY_STOP_PRESSED_HIGH: bool = true;
 #[cfg(feature = "machine-arm")]
 pub const REARM_PRESSED_HIGH: bool = false;
 
+/// The inputs that stop the machine (the core's bits).
+#[cfg(feature = "machine-arm")]
+pub const SAFETY_TRIPS: u8 = firmware::machine::safety::RELAY_TRIPPED | firmware::machine::safety::EMERGENCY_STOP;
+
 /// The safety inputs in the core's bits (`firmware::machine::safety`).
 #[cfg(feature = "machine-arm")]
 pub fn safety_inputs(dp: &Peripherals) -> u8 {
