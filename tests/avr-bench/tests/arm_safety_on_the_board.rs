@@ -74,11 +74,11 @@ fn a_relay_trip_mid_move_stops_every_step_and_needs_rearm_and_home() {
     let mut board = bench::boot(&elf(), config).expect("the arm boots");
     home(&mut board);
 
-    // A long move (≈ 127 mm at 10 mm/s); the relay trips 1.5 s into it,
+    // A long move (≈ 127 mm at up to 50 mm/s); the relay trips 1 s into it,
     // at speed.
     let start = [X, Y, Z].map(|a| board.position(a));
-    board.send(["G1 Y0 Z0 F600"]);
-    board.run_for_ms(1500.0);
+    board.send(["G1 Y0 Z0 F3000"]);
+    board.run_for_ms(1000.0);
     let moving = [X, Y, Z].map(|a| board.position(a));
     assert!(moving[1] != start[1] && moving[2] != start[2], "the joints are moving: {start:?} → {moving:?}");
     let before = board.host().replies.len();
