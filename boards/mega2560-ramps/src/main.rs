@@ -73,6 +73,9 @@ fn main() -> ! {
     #[cfg(feature = "display-hd44780")]
     let (mut lcd, mut next_screen_ms) = (display::init(), 0u32);
     let mut outputs = Outputs::default();
+    // The safety inputs at the last pass (the arm).
+    #[cfg(feature = "machine-arm")]
+    let mut safety_was = 0u8;
     #[cfg(feature = "machine-powder-bed")]
     let mut last_bed_ms = 0u32;
     #[cfg(feature = "encoders")]
@@ -96,6 +99,18 @@ fn main() -> ! {
         // SPEC §3: a driver that lost sync stops the job.
         #[cfg(feature = "machine-arm")]
         let _ = link.machine.on_driver_alarms(pins::driver_alarms(&dp), &mut tx);
+        // SPEC §3: the light curtain's relay and the e-stop stop every
+        // motor; re-arm, then G28. A new trip halts the step interrupt
+        // here, in this pass, not at the core's next motion poll.
+        #[cfg(feature = "machine-arm")]
+        {
+            let safety = pins::safety_inputs(&dp);
+            if safety & !safety_was & pins::SAFETY_TRIPS != 0 {
+                stepping::halt();
+            }
+            safety_was = safety;
+            let _ = link.machine.on_safety_inputs(safety, &mut tx);
+        }
         let _ = link.service(&mut rx, &mut eeprom, now, &mut tx);
         // SPEC §1: the encoder loops' settings, faults and reports, once a
         // millisecond: each look masks the 1 kHz tick that runs the loops,
@@ -175,8 +190,8 @@ fn boot(dp: &Peripherals, tx: &mut serial::Tx) -> (&'static mut HostLink<'static
     link.machine.use_machine_file();
     pins::init_endstops(dp);
     #[cfg(feature = "machine-arm")]
-    for alarm in pins::DRIVER_ALARMS {
-        pins::make_input_pulled_up(dp, alarm);
+    for input in pins::DRIVER_ALARMS.into_iter().chain([pins::SAFETY_RELAY, pins::EMERGENCY_STOP, pins::REARM]) {
+        pins::make_input_pulled_up(dp, input);
     }
     let _ = link.machine.write_banner(tx);
     (link, serial::Rx { consumer })

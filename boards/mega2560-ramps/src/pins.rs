@@ -111,6 +111,40 @@ pub fn driver_alarms(dp: &Peripherals) -> u8 {
         .fold(0, |alarms, (motor, &alarm)| if read(dp, alarm) == DRIVER_ALARM_ACTIVE_HIGH { alarms | 1 << motor } else { alarms })
 }
 
+/// SPEC §3's safety inputs (the arm build), on RAMPS AUX-2 beside the
+/// ALARMs, each pulled up: the safety relay of the light curtain on D40 =
+/// PG1, the emergency stop on D42 = PL7, the re-arm button on D44 = PL5.
+/// The trips are fail-safe: the relay's safety contact and the e-stop's
+/// NC contact hold their line low while all is well, so a trip, a pressed
+/// button or an open wire reads high. Re-arm is a normally-open button to
+/// ground (pressed = low). The machine file cannot use these pins
+/// (machine-file's check reserves them).
+#[cfg(feature = "machine-arm")]
+pub const SAFETY_RELAY: Pin = pin(Port::G, 1);
+#[cfg(feature = "machine-arm")]
+pub const EMERGENCY_STOP: Pin = pin(Port::L, 7);
+#[cfg(feature = "machine-arm")]
+pub const REARM: Pin = pin(Port::L, 5);
+/// The level of each input when active (tripped, pressed, pressed).
+#[cfg(feature = "machine-arm")]
+pub const SAFETY_RELAY_TRIPPED_HIGH: bool = true;
+#[cfg(feature = "machine-arm")]
+pub const EMERGENCY_STOP_PRESSED_HIGH: bool = true;
+#[cfg(feature = "machine-arm")]
+pub const REARM_PRESSED_HIGH: bool = false;
+
+/// The inputs that stop the machine (the core's bits).
+#[cfg(feature = "machine-arm")]
+pub const SAFETY_TRIPS: u8 = firmware::machine::safety::RELAY_TRIPPED | firmware::machine::safety::EMERGENCY_STOP;
+
+/// The safety inputs in the core's bits (`firmware::machine::safety`).
+#[cfg(feature = "machine-arm")]
+pub fn safety_inputs(dp: &Peripherals) -> u8 {
+    use firmware::machine::safety::{EMERGENCY_STOP as STOP, REARM as ARM, RELAY_TRIPPED};
+    [(SAFETY_RELAY, SAFETY_RELAY_TRIPPED_HIGH, RELAY_TRIPPED), (EMERGENCY_STOP, EMERGENCY_STOP_PRESSED_HIGH, STOP), (REARM, REARM_PRESSED_HIGH, ARM)]
+        .iter()
+        .fold(0, |inputs, &(input, active_high, bit)| if read(dp, input) == active_high { inputs | bit } else { inputs })
+}
 
 /// Drive `pin` as an output at `high`. The level is written before the
 /// direction so that the pin never glitches to the other level. Interrupts

@@ -35,6 +35,10 @@ pub enum CommandError {
     DiameterGainSign,
     /// `G28` while a driver's ALARM input is active.
     DriverAlarm,
+    /// A move or `G28` after a safety trip that was not re-armed: which
+    /// input ([`super::safety::RELAY_TRIPPED`] or
+    /// [`super::safety::EMERGENCY_STOP`]).
+    SafetyStop(u8),
 }
 
 impl From<ParseError> for CommandError {
@@ -67,6 +71,8 @@ impl CommandError {
             Self::MachineFrameArc => 7,
             Self::DiameterGainSign => 8,
             Self::DriverAlarm => 9,
+            Self::SafetyStop(super::safety::EMERGENCY_STOP) => SAFETY_MESSAGES + 1,
+            Self::SafetyStop(_) => SAFETY_MESSAGES,
         };
         (index, 0)
     }
@@ -104,6 +110,9 @@ fn parse_message(error: ParseError) -> (u8, u16) {
 /// Index of [`ParseError::BadNumber`]'s message; the other parse errors'
 /// follow in declaration order.
 const FIRST_PARSE_MESSAGE: u8 = 21;
+/// The safety trips' refusals follow the ten parse errors' messages:
+/// the relay's, then the emergency stop's.
+const SAFETY_MESSAGES: u8 = FIRST_PARSE_MESSAGE + 10;
 
 /// In a message: the argument as a letter.
 const LETTER: &str = "\x01";
@@ -147,6 +156,9 @@ const MESSAGE_PARTS: &[&str] = &[
     "Bad command number\0",
     "Empty command\0",
     "Too many codes on one line\0",
+    // 31: safety trips (SPEC §3), refused until re-armed.
+    "Safety relay tripped: clear the light curtain, press re-arm, then G28\0",
+    "Emergency stop pressed: release it, press re-arm, then G28\0",
 ];
 
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
@@ -231,6 +243,8 @@ mod tests {
             (E::MachineFrameArc, "G53 moves with G0 or G1 only"),
             (E::DiameterGainSign, "Diameter gains must be <= 0 (reverse acting)"),
             (E::DriverAlarm, "A driver ALARM is active: clear it before homing"),
+            (E::SafetyStop(crate::machine::safety::RELAY_TRIPPED), "Safety relay tripped: clear the light curtain, press re-arm, then G28"),
+            (E::SafetyStop(crate::machine::safety::EMERGENCY_STOP), "Emergency stop pressed: release it, press re-arm, then G28"),
         ];
         for (error, text) in cases {
             assert_eq!(line(error), std::format!("Error:{text}\n"), "{error:?}");

@@ -20,6 +20,7 @@
 pub mod error;
 pub mod modal;
 mod motion_commands;
+pub mod safety;
 mod thermal;
 #[cfg(feature = "extrusion-line")]
 pub mod line;
@@ -135,6 +136,11 @@ pub struct Machine<'q> {
     defaults: Settings,
     /// Driver ALARM inputs active at the last reading (bit i: motor i).
     driver_alarms: u8,
+    /// SPEC §3's safety inputs at the last reading ([`safety`]'s bits).
+    safety_levels: u8,
+    /// Safety trips not yet re-armed ([`safety::RELAY_TRIPPED`],
+    /// [`safety::EMERGENCY_STOP`]): moves and `G28` are refused.
+    safety_latched: u8,
     /// The extrusion line's state, when this machine is one
     /// ([`Machine::become_extrusion_line`]).
     #[cfg(feature = "extrusion-line")]
@@ -223,6 +229,8 @@ impl<'q> Machine<'q> {
             addr_of_mut!((*p).cold_extrusion).write(ColdExtrusionGuard::HOTEND);
             addr_of_mut!((*p).position_lost).write(false);
             addr_of_mut!((*p).driver_alarms).write(0);
+            addr_of_mut!((*p).safety_levels).write(0);
+            addr_of_mut!((*p).safety_latched).write(0);
             #[cfg(feature = "extrusion-line")]
             addr_of_mut!((*p).line).write(None);
             #[cfg(feature = "powder-bed")]
@@ -260,6 +268,8 @@ impl<'q> Machine<'q> {
             position_lost: _,
             defaults: _,
             driver_alarms: _,
+            safety_levels: _,
+            safety_latched: _,
             #[cfg(feature = "extrusion-line")]
             line: _,
             #[cfg(feature = "powder-bed")]
@@ -833,9 +843,12 @@ impl<'q> Machine<'q> {
     }
 
     #[cfg(feature = "printer")]
-    /// `G28`; refused while a driver alarms.
+    /// `G28`; refused while a driver alarms or a safety trip is not re-armed.
     #[inline(always)]
     fn home_command(&mut self, command: &Command) -> Outcome {
+        if let Err(refusal) = self.safety_check() {
+            return Outcome::Failed(refusal);
+        }
         if self.driver_alarms != 0 {
             return Outcome::Failed(CommandError::DriverAlarm);
         }

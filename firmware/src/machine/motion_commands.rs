@@ -264,6 +264,9 @@ impl<'q> Machine<'q> {
         target: &mut [i32; AXES],
         out: &mut W,
     ) -> Result<(), CommandError> {
+        // A safety trip not re-armed says so first: the operator has to
+        // act on the machine before G28 can help.
+        self.safety_check()?;
         if self.position_lost {
             return Err(CommandError::PositionLost);
         }

@@ -174,7 +174,21 @@ pub struct RampsConfig {
     /// Emulate the USART's 2-byte receive FIFO: a byte arriving while two
     /// are unread is lost and DOR0 is set (simavr buffers 64).
     pub hardware_rx_fifo: bool,
+    /// Other input pins driven from boot, at these levels (the arm's
+    /// safety inputs: [`ARM_SAFETY_CLEAR`]); any other input floats on
+    /// its pull-up. [`Board::drive_input`] changes them later.
+    pub inputs: Vec<(Pin, bool)>,
 }
+
+/// The arm's safety inputs (boards/mega2560-ramps/src/pins.rs): the safety
+/// relay on D40 = PG1 (high = tripped), the emergency stop on D42 = PL7
+/// (high = pressed), re-arm on D44 = PL5 (low = pressed).
+pub const SAFETY_RELAY_PIN: Pin = pin(b'G', 1);
+pub const EMERGENCY_STOP_PIN: Pin = pin(b'L', 7);
+pub const REARM_PIN: Pin = pin(b'L', 5);
+/// The arm's safety circuit closed: curtain clear, e-stop released,
+/// re-arm not pressed (the levels for [`RampsConfig::inputs`]).
+pub const ARM_SAFETY_CLEAR: [(Pin, bool); 3] = [(SAFETY_RELAY_PIN, false), (EMERGENCY_STOP_PIN, false), (REARM_PIN, true)];
 
 impl RampsConfig {
     pub fn stock(baud: u32) -> Self {
@@ -209,6 +223,7 @@ impl RampsConfig {
             sample_period_s: 0.1,
             correct_interrupt_entry: true,
             hardware_rx_fifo: true,
+            inputs: Vec::new(),
         }
     }
 }
@@ -321,6 +336,9 @@ struct Shared {
     endstops: [Option<Endstop>; 6],
     endstop_irqs: [*mut ffi::avr_irq_t; 6],
     endstop_levels: [bool; 6],
+    /// Input pins driven by [`Board::drive_input`] (`None`: released to
+    /// the pull-up), with their IRQs.
+    driven: Vec<(Pin, *mut ffi::avr_irq_t, Option<bool>)>,
     dir_high_is_positive: [bool; 5],
     meters: Vec<(Pin, *mut ffi::avr_irq_t, DutyMeter)>,
     /// Level changes of the bed pin (D8), when asked for.
@@ -547,6 +565,7 @@ impl Board {
                 endstops: config.endstops,
                 endstop_irqs: [std::ptr::null_mut(); 6],
                 endstop_levels: [true; 6],
+                driven: Vec::new(),
                 dir_high_is_positive: config.dir_high_is_positive,
                 meters: Vec::new(),
                 bed_edges: None,
@@ -654,6 +673,10 @@ impl Board {
             // Endstops.
             for (i, p) in ENDSTOP_PINS.iter().enumerate() {
                 shared.endstop_irqs[i] = port_irq(avr, *p);
+            }
+            for &(p, level) in &config.inputs {
+                shared.driven.push((p, port_irq(avr, p), Some(level)));
+                ffi::avr_raise_irq(port_irq(avr, p), u32::from(level));
             }
             shared.update_endstops(true);
             // The thermal plants run on a simavr cycle timer.
@@ -1019,6 +1042,21 @@ impl Board {
         self.shared.endstops[index] = endstop;
         // SAFETY: between instructions.
         unsafe { self.shared.update_endstops(false) };
+    }
+
+    /// Drive an input pin to `level` (`None`: let it float to its
+    /// pull-up), from now on; the firmware sees it at its next read.
+    pub fn drive_input(&mut self, p: Pin, level: Option<bool>) {
+        // SAFETY: between instructions; the IRQ is the instance's own.
+        unsafe {
+            let irq = port_irq(self.avr, p);
+            match self.shared.driven.iter_mut().find(|(q, _, _)| *q == p) {
+                Some(entry) => entry.2 = level,
+                None => self.shared.driven.push((p, irq, level)),
+            }
+            ffi::avr_raise_irq(irq, u32::from(level.unwrap_or(true)));
+            self.shared.update_endstops(false);
+        }
     }
 
     /// The level each endstop input is driven to.
@@ -1534,6 +1572,21 @@ impl Shared {
                     entry.2 |= u8::from(level) << p.bit;
                 }
                 None => per_port.push((p.port, 1 << p.bit, u8::from(level) << p.bit)),
+            }
+        }
+        // The other driven inputs share the ports' external state (a
+        // released one leaves its port's mask, back to its pull-up).
+        for &(p, _, level) in &self.driven {
+            let (mask, value) = match level {
+                Some(level) => (1 << p.bit, u8::from(level) << p.bit),
+                None => (0, 0),
+            };
+            match per_port.iter_mut().find(|(port, _, _)| *port == p.port) {
+                Some(entry) => {
+                    entry.1 |= mask;
+                    entry.2 |= value;
+                }
+                None => per_port.push((p.port, mask, value)),
             }
         }
         // Keep the levels when the firmware rewrites PORTx: simavr re-raises

@@ -332,6 +332,10 @@ pub fn check(path: &str, file: schema::File, all_options: bool) -> Result<Machin
         for (n, motor) in ["x", "y", "z", "e"].iter().enumerate() {
             use_pin(&mut problems, format!("the {motor} driver's ALARM input"), Pin::digital(63 + n as u8).unwrap());
         }
+        // The safety inputs (boards/mega2560-ramps/src/pins.rs).
+        for (what, pin) in [("the safety relay input", 40), ("the emergency stop input", 42), ("the re-arm input", 44)] {
+            use_pin(&mut problems, what.into(), Pin::digital(pin).unwrap());
+        }
     }
     if encoders && encoders_wanted {
         // I²C on D20/D21 and the Index inputs on A9/A10.

@@ -190,3 +190,17 @@ fn different_machines_have_different_fingerprints() {
     assert_ne!(generate::fingerprint(&prusa), generate::fingerprint(&renamed));
     assert_eq!(generate::fingerprint(&prusa), generate::fingerprint(&faster), "a tuned value is the same machine");
 }
+
+/// The arm's safety inputs (D40 relay, D42 e-stop, D44 re-arm) are the
+/// board's, like its ALARM inputs: a machine file cannot put anything
+/// else on them.
+#[test]
+fn the_arms_safety_inputs_are_reserved() {
+    let arm = shipped("arm.toml");
+    for (pin, what) in [(40, "the safety relay input"), (42, "the emergency stop input"), (44, "the re-arm input")] {
+        let from = "min_endstop_pin = 3            # switch at the min end";
+        assert_eq!(arm.matches(from).count(), 1);
+        let message = error_of(&arm.replacen(from, &format!("min_endstop_pin = {pin}"), 1));
+        assert!(message.contains(&format!("{what}: pin D{pin} ")) && message.contains("already used by axes.x.min_endstop_pin"), "{message}");
+    }
+}
