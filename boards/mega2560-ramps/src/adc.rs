@@ -78,13 +78,8 @@ fn select(dp: &Peripherals, channel: u8) {
     dp.ADC.admux.write(|w| unsafe { w.bits((1 << 6) | (channel & 0x07)) });
 }
 
-/// ADC conversion complete (vector 29), with `sei` as its first
-/// instruction (`avr-non-blocking-interrupt`, see the tick in clock.rs):
-/// the step interrupt is never held up by this handler. It cannot re-enter:
-/// the flag clears as the vector runs and the next conversion starts at
-/// the next tick, a millisecond away; nothing else writes `SAMPLING` while
-/// it runs (the main loop only with interrupts off, and the step
-/// interrupt never).
+/// ADC conversion complete, `sei` first (priority, nesting, sharing, cost:
+/// see `interrupts.rs`).
 #[no_mangle]
 pub unsafe extern "avr-non-blocking-interrupt" fn __vector_29() {
     // SAFETY: the ADC registers are only written here, in `init` (before

@@ -31,9 +31,8 @@ pub fn micros(cs: avr_device::interrupt::CriticalSection<'_>) -> u32 {
     MILLIS.borrow(cs).get().wrapping_mul(1000).wrapping_add(u32::from(ticks) * 4)
 }
 
-/// Hold the tick interrupt off (`true`) or let it in again: the encoder
-/// loops are shared with the tick this way, without holding the step
-/// interrupt off. A tick that falls due meanwhile runs when unmasked.
+/// Hold the tick interrupt off (`true`) or let it in again (who masks the
+/// tick, and why: see `interrupts.rs`).
 #[cfg(feature = "encoders")]
 pub fn mask_tick(dp: &Peripherals, masked: bool) {
     // SAFETY: OCIE3A is the only interrupt of Timer3 in use.
@@ -65,13 +64,10 @@ pub fn millis() -> u32 {
     avr_device::interrupt::free(|cs| MILLIS.borrow(cs).get())
 }
 
-/// TIMER3_COMPA (vector 32), with `sei` as its first instruction
-/// (`avr-non-blocking-interrupt`): the step interrupt may come in at once,
-/// before this handler has even saved its registers. With the blocking
-/// ABI its prologue and the ADC start held a step back by up to ~80 cycles,
-/// more than the bench's 10 % lateness allowance at 30 000 steps/s
-/// (53 cycles). It cannot re-enter itself: the next compare match is 1 ms
-/// away.
+/// TIMER3_COMPA, `sei` first (priority, nesting, cost: see `interrupts.rs`).
+/// With the blocking ABI its prologue and the ADC start held a step back
+/// by up to ~80 cycles, more than the bench's 10 % lateness allowance at
+/// 30 000 steps/s (53 cycles).
 #[no_mangle]
 pub unsafe extern "avr-non-blocking-interrupt" fn __vector_32() {
     // SAFETY: only the ADC's control register is written (see adc.rs).

@@ -13,9 +13,8 @@
 //! enabled; every [`LOOP_PERIOD_MS`]th millisecond it reads both chips
 //! (two 2-byte reads, ≈ 60 µs each; the step interrupt keeps running) and
 //! runs the loops, every millisecond it makes the correction steps the
-//! loops ask for. The main loop talks to the loops only with the tick's
-//! interrupt masked ([`with_loops`]), so the tick can work with interrupts
-//! on and still own them. While every loop is off (the default) the tick
+//! loops ask for. Who masks the tick around the loops: see
+//! `interrupts.rs` ([`with_loops`]). While every loop is off (the default) the tick
 //! does nothing here and the I²C bus stays idle.
 
 use avr_device::atmega2560::Peripherals;

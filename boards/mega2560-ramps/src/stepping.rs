@@ -58,9 +58,9 @@
 //! | Z | PL3 | PL1 |
 //! | E0 | PA4 | PA6 |
 //!
-//! The main loop shares PORTF (Y enable, PF2) and PORTA (E0 enable, PA2)
-//! with this handler; it writes those ports only with interrupts off (see
-//! [`crate::pins::make_output`]), so neither side loses the other's bits.
+//! What this handler shares with the main loop (PORTF's and PORTA's
+//! enable bits among them), what nests in it and its longest paths: see
+//! `interrupts.rs`.
 
 // Without the printers (`printer` feature off) the queues are still split
 // (the core's machine holds the feeder) but nothing steps: the interrupt
@@ -332,10 +332,8 @@ fn cold_call(what: u8) -> u16 {
 /// receive interrupt in: at 250 000 baud a byte arrives every 640 cycles
 /// and the UART holds two, so a step interrupt that long with interrupts
 /// off lost bytes (the bench's 250 000-baud stream, once its host sent at
-/// the real rate). Its own source is off meanwhile (it cannot re-enter),
-/// and so is the encoder loops' tick, which runs ≈ 0.5 ms with interrupts
-/// on; the ADC and millisecond handlers are short. Nothing they run
-/// touches the generator. The STEP pins are high and the next compare not
+/// the real rate). Which handlers may run in that window, and which are
+/// masked: see `interrupts.rs`. The STEP pins are high and the next compare not
 /// yet set: a byte makes the pulse a little longer, never a step late
 /// (the compare is set from the previous one).
 extern "C" fn cold_path(what: u8) -> u16 {
