@@ -13,11 +13,10 @@ static MILLIS: Mutex<Cell<u32>> = Mutex::new(Cell::new(0));
 pub fn init(dp: &Peripherals) {
     let timer = &dp.TC3;
     timer.ocr3a.write(|w| w.bits(249));
-    // SAFETY: WGM32 (CTC on OCR3A) and CS31|CS30 (prescaler 64).
-    timer.tccr3a.write(|w| unsafe { w.bits(0) });
-    timer.tccr3b.write(|w| unsafe { w.bits((1 << 3) | 0b011) });
-    // SAFETY: OCIE3A only.
-    timer.timsk3.write(|w| unsafe { w.bits(1 << 1) });
+    // Mode 4, CTC on OCR3A: WGM33:32 = 01 (in TCCR3B), WGM31:30 = 00.
+    timer.tccr3a.write(|w| w.wgm3().bits(0b00));
+    timer.tccr3b.write(|w| w.wgm3().bits(0b01).cs3().prescale_64());
+    timer.timsk3.write(|w| w.ocie3a().set_bit());
 }
 
 /// Microseconds since boot (wraps after 71 minutes), to 4 µs: the count
@@ -35,8 +34,8 @@ pub fn micros(cs: avr_device::interrupt::CriticalSection<'_>) -> u32 {
 /// tick, and why: see `interrupts.rs`).
 #[cfg(feature = "encoders")]
 pub fn mask_tick(dp: &Peripherals, masked: bool) {
-    // SAFETY: OCIE3A is the only interrupt of Timer3 in use.
-    dp.TC3.timsk3.write(|w| unsafe { w.bits(if masked { 0 } else { 1 << 1 }) });
+    // OCIE3A is the only interrupt of Timer3 in use.
+    dp.TC3.timsk3.write(|w| w.ocie3a().bit(!masked));
 }
 
 /// Mask the tick from an interrupt handler; returns the mask to put back

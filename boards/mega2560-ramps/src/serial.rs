@@ -93,11 +93,10 @@ pub fn init(dp: &Peripherals, producer: RxProducer<'static>) {
     unsafe { *addr_of_mut!(RX_PRODUCER) = Some(producer) };
     let usart = &dp.USART0;
     usart.ubrr0.write(|w| w.bits(UBRR));
-    // SAFETY: U2X0 (bit 1) only; the other bits are flags or zero.
-    usart.ucsr0a.write(|w| unsafe { w.bits(1 << 1) });
-    // 8 data bits, no parity, one stop bit: UCSZ01 | UCSZ00.
-    // SAFETY: a valid frame format.
-    usart.ucsr0c.write(|w| unsafe { w.bits(0b0000_0110) });
+    // Double speed; the other bits are flags or zero.
+    usart.ucsr0a.write(|w| w.u2x0().set_bit());
+    // 8N1, asynchronous.
+    usart.ucsr0c.write(|w| w.umsel0().usart_async().upm0().disabled().usbs0().stop1().ucsz0().chr8());
     usart.ucsr0b.write(|w| w.rxen0().set_bit().txen0().set_bit().rxcie0().set_bit());
 }
 

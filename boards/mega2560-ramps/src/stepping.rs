@@ -116,21 +116,21 @@ pub fn init(dp: &Peripherals, config: StepperConfig) -> StepFeeder<'static> {
         crate::pins::make_output(dp, pin, false);
     }
     let timer = &dp.TC1;
-    // SAFETY: normal mode (WGM = 0), clock / 8 (CS11), compare A interrupt.
-    timer.tccr1a.write(|w| unsafe { w.bits(0) });
-    timer.tccr1b.write(|w| unsafe { w.bits(1 << 1) });
+    // Normal mode (WGM13:10 = 0), clock / 8, compare A interrupt.
+    timer.tccr1a.write(|w| w.wgm1().bits(0b00));
+    timer.tccr1b.write(|w| w.wgm1().bits(0b00).cs1().prescale_8());
     timer.ocr1a.write(|w| w.bits(timer.tcnt1.read().bits().wrapping_add(1000)));
     // Without the printers nothing queues steps: no step interrupt.
     #[cfg(feature = "motion")]
-    timer.timsk1.write(|w| unsafe { w.bits(1 << 1) });
+    timer.timsk1.write(|w| w.ocie1a().set_bit());
     feeder
 }
 
 /// Stop the interrupt at once (kill, panic): no further STEP pulses.
 pub fn stop_timer(dp: &Peripherals) {
-    // SAFETY: clearing OCIE1A only; the flag is written with interrupts
-    // off (kill, panic) and read by the step interrupt's cold path.
-    dp.TC1.timsk1.write(|w| unsafe { w.bits(0) });
+    dp.TC1.timsk1.write(|w| w.ocie1a().clear_bit());
+    // SAFETY: the flag is written with interrupts off (kill, panic) and
+    // read by the step interrupt's cold path.
     unsafe { *addr_of_mut!(TIMER_STOPPED) = true };
 }
 
