@@ -44,7 +44,6 @@ const TWI_POLLS: u16 = 400;
 const TWINT: u8 = 1 << 7;
 const TWEA: u8 = 1 << 6;
 const TWSTA: u8 = 1 << 5;
-const TWSTO: u8 = 1 << 4;
 const TWEN: u8 = 1 << 2;
 
 /// The loops, valid once `READY` (set by [`init`]; `Option` would put
@@ -212,8 +211,8 @@ fn read(dp: &Peripherals, address: u8) -> Reading {
         frame[1] = twi.twdr.read().bits();
         Some(())
     })();
-    // SAFETY: STOP (also after a failure: releases the bus).
-    twi.twcr.write(|w| unsafe { w.bits(TWINT | TWEN | TWSTO) });
+    // STOP (also after a failure: releases the bus).
+    twi.twcr.write(|w| w.twint().set_bit().twen().set_bit().twsto().set_bit());
     match (ok, decode_frame(frame)) {
         (Some(()), Ok(raw)) => Reading::Raw(raw),
         _ => Reading::Failed,
