@@ -97,13 +97,13 @@
 //! | 25 receive | default | 643 | 1 627 | part 1 ≈ 50 to its `sei` (`docs/step-timing.md`) |
 //! | 25 receive | extrusion line, powder bed | 643 | 1 074 | as above |
 //! | 29 ADC | default / extrusion line / powder bed | 159 / 162 / 151 | 1 361 / 1 044 / 151 | none (`sei` first) |
-//! | 32 tick | default | 78 | 1 171 | a few tens |
+//! | 32 tick | default | 78 | 1 171 | part of the 78 (its critical section) |
 //! | 32 tick | extrusion line (SSR windows) | 360 | 1 277 | most of the 360 (`ssr::on_tick` in the critical section) |
 //! | 32 tick | powder bed | 1 247 | 1 381 | most of the 1 247 (`bed::on_tick`, the carriage's servo loop, in the critical section) |
 //! | 47 screw / 48 puller | extrusion line | 462 / 420 | 462 / 420 | all |
 //! | 17 step | encoder build | 2 320 | 2 320 | the general path (tick masked, window on) |
 //! | 25 receive | encoder build | 680 | 2 078 | the compiler's part 1, ≈ 110–150 to `sei` (`docs/step-timing.md`) |
-//! | 32 tick | encoder build, loops off / on (`M820 X1 Y1`) | 212 / 13 726 | 1 722 / 20 525 | a few tens; the loops run with interrupts on |
+//! | 32 tick | encoder build, loops off / on (`M820 X1 Y1`) | 212 / 13 726 | 1 722 / 20 525 | within 212 (loops off); the loops run with interrupts on |
 //! | 11 PCINT2 | encoder build (the bench's NSE-5310 pair) | 656 | 656 | all |
 //! | 1, 2, 5, 6 | powder bed | not measured: the bench does not drive the carriage's encoder pins | | all |
 //!
