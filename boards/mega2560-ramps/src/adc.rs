@@ -37,10 +37,6 @@ pub const MISSING_PERIODS_LIMIT: u8 = 3;
 /// The thermistors in conversion order: hot end, bed.
 const CHANNELS: [u8; 2] = [if pins::HOTEND.is_some() { pins::HOTEND_ADC } else { pins::BARREL_ADC }, pins::BED_ADC];
 
-/// ADCSRA: ADEN, ADSC, ADIE and prescaler 128 (16 MHz / 128 = 125 kHz).
-/// ADIF (bit 4) is written 0, which leaves a pending completion alone.
-const START_CONVERSION: u8 = 0b1100_1111;
-
 /// What the interrupt fills and the main loop empties.
 struct Sampling {
     averagers: [SampleAverager; 2],
@@ -59,32 +55,28 @@ static mut SAMPLING: Sampling = Sampling {
 
 pub fn init(dp: &Peripherals) {
     select(dp, CHANNELS[0]);
-    // SAFETY: ADEN | ADIE, prescaler 128; no conversion started yet.
-    dp.ADC.adcsra.write(|w| unsafe { w.bits(0b1000_1111) });
+    // No conversion started yet.
+    dp.ADC.adcsra.write(|w| w.aden().set_bit().adie().set_bit().adps().prescaler_128());
 }
 
 /// Start a conversion (from the 1 kHz tick, interrupts off).
 #[inline(always)]
 pub fn start_conversion(dp: &Peripherals) {
-    // SAFETY: a valid ADCSRA value (see `START_CONVERSION`); writing ADSC
-    // while a conversion runs has no effect.
-    dp.ADC.adcsra.write(|w| unsafe { w.bits(START_CONVERSION) });
+    // Prescaler 128: 16 MHz / 128 = 125 kHz. ADIF is written 0, which
+    // leaves a pending completion alone; writing ADSC while a conversion
+    // runs has no effect.
+    dp.ADC.adcsra.write(|w| w.aden().set_bit().adsc().set_bit().adie().set_bit().adps().prescaler_128());
 }
 
 /// Point the multiplexer at `channel` (0–15), AVcc reference.
 fn select(dp: &Peripherals, channel: u8) {
-    // SAFETY: MUX5 in ADCSRB for channels 8–15; REFS0 (AVcc) and MUX2..0.
-    dp.ADC.adcsrb.write(|w| unsafe { w.bits(if channel >= 8 { 1 << 3 } else { 0 }) });
-    dp.ADC.admux.write(|w| unsafe { w.bits((1 << 6) | (channel & 0x07)) });
+    // MUX5 in ADCSRB for channels 8–15, MUX2..0 in ADMUX.
+    dp.ADC.adcsrb.write(|w| w.mux5().bit(channel >= 8));
+    dp.ADC.admux.write(|w| w.refs().avcc().mux().bits(channel & 0x07));
 }
 
-/// ADC conversion complete (vector 29), with `sei` as its first
-/// instruction (`avr-non-blocking-interrupt`, see the tick in clock.rs):
-/// the step interrupt is never held up by this handler. It cannot re-enter:
-/// the flag clears as the vector runs and the next conversion starts at
-/// the next tick, a millisecond away; nothing else writes `SAMPLING` while
-/// it runs (the main loop only with interrupts off, and the step
-/// interrupt never).
+/// ADC conversion complete, `sei` first (priority, nesting, sharing, cost:
+/// see `interrupts.rs`).
 #[no_mangle]
 pub unsafe extern "avr-non-blocking-interrupt" fn __vector_29() {
     // SAFETY: the ADC registers are only written here, in `init` (before

@@ -91,9 +91,9 @@ pub fn init(dp: &Peripherals) {
     }
     stop(dp);
     // Timer5: WGM52|WGM50 fast PWM 8-bit, CS51 clk/8 (7.8 kHz).
-    // SAFETY (all `bits`): documented mode and prescaler values.
-    dp.TC5.tccr5a.write(|w| unsafe { w.bits(0b0000_0001) });
-    dp.TC5.tccr5b.write(|w| unsafe { w.bits(0b0000_1010) });
+    // Mode 5: WGM53:52 = 01 (TCCR5B), WGM51:50 = 01 (TCCR5A).
+    dp.TC5.tccr5a.write(|w| w.wgm5().bits(0b01));
+    dp.TC5.tccr5b.write(|w| w.wgm5().bits(0b01).cs5().prescale_8());
     let (a, b) = (pins::read(dp, ENCODER_A), pins::read(dp, ENCODER_B));
     let (ya, yb) = (pins::read(dp, ENCODER_Y_A), pins::read(dp, ENCODER_Y_B));
     avr_device::interrupt::free(|cs| {
@@ -102,12 +102,10 @@ pub fn init(dp: &Peripherals) {
     });
     // INT4, INT5 (X) and INT0, INT1 (Y) on any logical change (ISCn1:0 =
     // 01), then enabled.
-    // SAFETY: documented sense-control bits.
-    dp.EXINT.eicrb.modify(|r, w| unsafe { w.bits((r.bits() & !0b0000_1111) | 0b0000_0101) });
-    // SAFETY: as above.
-    dp.EXINT.eicra.modify(|r, w| unsafe { w.bits((r.bits() & !0b0000_1111) | 0b0000_0101) });
-    dp.EXINT.eifr.write(|w| w.bits(0b0011_0011));
-    dp.EXINT.eimsk.modify(|r, w| w.bits(r.bits() | 0b0011_0011));
+    dp.EXINT.eicrb.modify(|_, w| w.isc4().val_0x01().isc5().val_0x01());
+    dp.EXINT.eicra.modify(|_, w| w.isc0().val_0x01().isc1().val_0x01());
+    dp.EXINT.eifr.write(|w| w.intf().bits(0b0011_0011));
+    dp.EXINT.eimsk.modify(|r, w| w.int().bits(r.int().bits() | 0b0011_0011));
 }
 
 /// Carriage braked, roller and suction off, platform drivers disabled:

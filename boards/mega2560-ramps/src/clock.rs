@@ -13,11 +13,10 @@ static MILLIS: Mutex<Cell<u32>> = Mutex::new(Cell::new(0));
 pub fn init(dp: &Peripherals) {
     let timer = &dp.TC3;
     timer.ocr3a.write(|w| w.bits(249));
-    // SAFETY: WGM32 (CTC on OCR3A) and CS31|CS30 (prescaler 64).
-    timer.tccr3a.write(|w| unsafe { w.bits(0) });
-    timer.tccr3b.write(|w| unsafe { w.bits((1 << 3) | 0b011) });
-    // SAFETY: OCIE3A only.
-    timer.timsk3.write(|w| unsafe { w.bits(1 << 1) });
+    // Mode 4, CTC on OCR3A: WGM33:32 = 01 (in TCCR3B), WGM31:30 = 00.
+    timer.tccr3a.write(|w| w.wgm3().bits(0b00));
+    timer.tccr3b.write(|w| w.wgm3().bits(0b01).cs3().prescale_64());
+    timer.timsk3.write(|w| w.ocie3a().set_bit());
 }
 
 /// Microseconds since boot (wraps after 71 minutes), to 4 µs: the count
@@ -31,13 +30,12 @@ pub fn micros(cs: avr_device::interrupt::CriticalSection<'_>) -> u32 {
     MILLIS.borrow(cs).get().wrapping_mul(1000).wrapping_add(u32::from(ticks) * 4)
 }
 
-/// Hold the tick interrupt off (`true`) or let it in again: the encoder
-/// loops are shared with the tick this way, without holding the step
-/// interrupt off. A tick that falls due meanwhile runs when unmasked.
+/// Hold the tick interrupt off (`true`) or let it in again (who masks the
+/// tick, and why: see `interrupts.rs`).
 #[cfg(feature = "encoders")]
 pub fn mask_tick(dp: &Peripherals, masked: bool) {
-    // SAFETY: OCIE3A is the only interrupt of Timer3 in use.
-    dp.TC3.timsk3.write(|w| unsafe { w.bits(if masked { 0 } else { 1 << 1 }) });
+    // OCIE3A is the only interrupt of Timer3 in use.
+    dp.TC3.timsk3.write(|w| w.ocie3a().bit(!masked));
 }
 
 /// Mask the tick from an interrupt handler; returns the mask to put back
@@ -65,13 +63,10 @@ pub fn millis() -> u32 {
     avr_device::interrupt::free(|cs| MILLIS.borrow(cs).get())
 }
 
-/// TIMER3_COMPA (vector 32), with `sei` as its first instruction
-/// (`avr-non-blocking-interrupt`): the step interrupt may come in at once,
-/// before this handler has even saved its registers. With the blocking
-/// ABI its prologue and the ADC start held a step back by up to ~80 cycles,
-/// more than the bench's 10 % lateness allowance at 30 000 steps/s
-/// (53 cycles). It cannot re-enter itself: the next compare match is 1 ms
-/// away.
+/// TIMER3_COMPA, `sei` first (priority, nesting, cost: see `interrupts.rs`).
+/// With the blocking ABI its prologue and the ADC start held a step back
+/// by up to ~80 cycles, more than the bench's 10 % lateness allowance at
+/// 30 000 steps/s (53 cycles).
 #[no_mangle]
 pub unsafe extern "avr-non-blocking-interrupt" fn __vector_32() {
     // SAFETY: only the ADC's control register is written (see adc.rs).

@@ -13,9 +13,8 @@
 //! enabled; every [`LOOP_PERIOD_MS`]th millisecond it reads both chips
 //! (two 2-byte reads, ≈ 60 µs each; the step interrupt keeps running) and
 //! runs the loops, every millisecond it makes the correction steps the
-//! loops ask for. The main loop talks to the loops only with the tick's
-//! interrupt masked ([`with_loops`]), so the tick can work with interrupts
-//! on and still own them. While every loop is off (the default) the tick
+//! loops ask for. Who masks the tick around the loops: see
+//! `interrupts.rs` ([`with_loops`]). While every loop is off (the default) the tick
 //! does nothing here and the I²C bus stays idle.
 
 use avr_device::atmega2560::Peripherals;
@@ -45,7 +44,6 @@ const TWI_POLLS: u16 = 400;
 const TWINT: u8 = 1 << 7;
 const TWEA: u8 = 1 << 6;
 const TWSTA: u8 = 1 << 5;
-const TWSTO: u8 = 1 << 4;
 const TWEN: u8 = 1 << 2;
 
 /// The loops, valid once `READY` (set by [`init`]; `Option` would put
@@ -69,21 +67,20 @@ static mut SCALE_MILLI: [i32; AXES] = [0; AXES];
 /// fastest speed (from the settings; `service` follows later `M92`s).
 pub fn init(dp: &Peripherals, steps_per_mm: [f32; AXES], max_speed_mm_s: [u16; AXES]) {
     dp.TWI.twbr.write(|w| w.bits(TWBR_400KHZ));
-    // SAFETY: prescaler bits 0 (×1); the status bits are read-only.
-    dp.TWI.twsr.write(|w| unsafe { w.bits(0) });
-    // SAFETY: TWEN only.
-    dp.TWI.twcr.write(|w| unsafe { w.bits(TWEN) });
+    // The status bits are read-only.
+    dp.TWI.twsr.write(|w| w.twps().prescaler_1());
+    dp.TWI.twcr.write(|w| w.twen().set_bit());
     for bit in INDEX_BITS {
         dp.PORTK.ddrk.modify(|r, w| unsafe { w.bits(r.bits() & !bit) });
         dp.PORTK.portk.modify(|r, w| unsafe { w.bits(r.bits() | bit) });
     }
     // PCINT17/18 in PCMSK2 and PCIE2 in PCICR (safe writes: every value is valid).
-    dp.EXINT.pcmsk2.modify(|r, w| w.bits(r.bits() | INDEX_BITS[0] | INDEX_BITS[1]));
+    dp.EXINT.pcmsk2.modify(|r, w| w.pcint().bits(r.pcint().bits() | INDEX_BITS[0] | INDEX_BITS[1]));
     // The levels now (pulled up) are the reference for the first change:
     // no edge counted at start.
     // SAFETY: before the pin-change interrupt is enabled.
     unsafe { *addr_of_mut!(LAST_PINK) = dp.PORTK.pink.read().bits() };
-    dp.EXINT.pcicr.modify(|r, w| unsafe { w.bits(r.bits() | 1 << 2) });
+    dp.EXINT.pcicr.modify(|r, w| w.pcie().bits(r.pcie().bits() | 1 << 2));
     // SAFETY: main loop only.
     unsafe { *addr_of_mut!(SCALE_MILLI) = steps_per_mm.map(|spm| (spm * 1000.0) as i32) };
     if let Some(loops) = EncoderLoops::new(steps_per_mm, max_speed_mm_s) {
@@ -214,8 +211,8 @@ fn read(dp: &Peripherals, address: u8) -> Reading {
         frame[1] = twi.twdr.read().bits();
         Some(())
     })();
-    // SAFETY: STOP (also after a failure: releases the bus).
-    twi.twcr.write(|w| unsafe { w.bits(TWINT | TWEN | TWSTO) });
+    // STOP (also after a failure: releases the bus).
+    twi.twcr.write(|w| w.twint().set_bit().twen().set_bit().twsto().set_bit());
     match (ok, decode_frame(frame)) {
         (Some(()), Ok(raw)) => Reading::Raw(raw),
         _ => Reading::Failed,

@@ -43,10 +43,10 @@ static STEPPERS: Mutex<RefCell<[VelocityStepper; 2]>> = Mutex::new(RefCell::new(
 
 /// Timer5 free-running at 2 MHz, both channels off; drivers disabled.
 pub fn init(dp: &Peripherals) {
-    // SAFETY (all `bits`): normal mode, CS51 = clk/8, no interrupt yet.
-    dp.TC5.tccr5a.write(|w| unsafe { w.bits(0) });
-    dp.TC5.tccr5b.write(|w| unsafe { w.bits(0b010) });
-    dp.TC5.timsk5.write(|w| unsafe { w.bits(0) });
+    // Normal mode (WGM53:50 = 0), clk/8, no interrupt yet.
+    dp.TC5.tccr5a.write(|w| w.wgm5().bits(0b00));
+    dp.TC5.tccr5b.write(|w| w.wgm5().bits(0b00).cs5().prescale_8());
+    dp.TC5.timsk5.write(|w| w.ocie5a().clear_bit().ocie5b().clear_bit());
     for motor in [&SCREW, &PULLER] {
         pins::make_output(dp, motor.step, false);
         pins::make_output(dp, motor.enable, true);
@@ -55,8 +55,7 @@ pub fn init(dp: &Peripherals) {
 
 /// Both channels off at once (halt, kill, panic): from any context.
 pub fn stop(dp: &Peripherals) {
-    // SAFETY: clearing the two compare interrupt enables.
-    dp.TC5.timsk5.write(|w| unsafe { w.bits(0) });
+    dp.TC5.timsk5.write(|w| w.ocie5a().clear_bit().ocie5b().clear_bit());
 }
 
 /// After `Machine::poll_line`: the copies follow the models; a start arms

@@ -19,6 +19,8 @@ mod clock;
 #[cfg(feature = "display-hd44780")]
 mod display;
 mod eeprom;
+// Documentation only: every handler's priority, nesting and longest path.
+mod interrupts;
 #[cfg(feature = "encoders")]
 mod encoders;
 #[cfg(feature = "machine-extrusion-line")]

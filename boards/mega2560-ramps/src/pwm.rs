@@ -56,14 +56,13 @@ impl Channel {
 
 /// Start both timers with every output disconnected (low).
 pub fn init(dp: &Peripherals) {
-    // Timer2: WGM21|WGM20 = fast PWM 0xFF; CS22 = clk/64.
-    // SAFETY: valid mode and prescaler bits; compare outputs off.
-    dp.TC2.tccr2a.write(|w| unsafe { w.bits(0b0000_0011) });
-    dp.TC2.tccr2b.write(|w| unsafe { w.bits(0b0000_0100) });
-    // Timer4: WGM42|WGM40 = fast PWM 8-bit; CS41 = clk/8.
-    // SAFETY: valid mode and prescaler bits; compare outputs off.
-    dp.TC4.tccr4a.write(|w| unsafe { w.bits(0b0000_0001) });
-    dp.TC4.tccr4b.write(|w| unsafe { w.bits(0b0000_1010) });
+    // Timer2: fast PWM, TOP 0xFF (WGM22 = 0); clk/64; compare outputs off.
+    dp.TC2.tccr2a.write(|w| w.wgm2().pwm_fast());
+    dp.TC2.tccr2b.write(|w| w.cs2().prescale_64());
+    // Timer4: mode 5, fast PWM 8-bit (WGM43:42 = 01, WGM41:40 = 01);
+    // clk/8; compare outputs off.
+    dp.TC4.tccr4a.write(|w| w.wgm4().bits(0b01));
+    dp.TC4.tccr4b.write(|w| w.wgm4().bits(0b01).cs4().prescale_8());
 }
 
 /// Set one output's duty, 0 (off) to 255 (fully on); nothing if the
@@ -104,7 +103,7 @@ fn set_channel(dp: &Peripherals, channel: Channel, duty: u8) {
 /// Disconnect every PWM output from its timer (then the pins follow their
 /// PORT bits, which the caller drives low).
 pub fn disconnect_all(dp: &Peripherals) {
-    // SAFETY: clearing COM bits only; waveform mode bits are kept.
-    dp.TC2.tccr2a.modify(|r, w| unsafe { w.bits(r.bits() & 0b0000_1111) });
-    dp.TC4.tccr4a.modify(|r, w| unsafe { w.bits(r.bits() & 0b0000_0011) });
+    // The COM fields only; waveform mode bits are kept.
+    dp.TC2.tccr2a.modify(|_, w| w.com2a().disconnected().com2b().disconnected());
+    dp.TC4.tccr4a.modify(|_, w| w.com4a().disconnected().com4b().disconnected().com4c().disconnected());
 }

@@ -93,11 +93,10 @@ pub fn init(dp: &Peripherals, producer: RxProducer<'static>) {
     unsafe { *addr_of_mut!(RX_PRODUCER) = Some(producer) };
     let usart = &dp.USART0;
     usart.ubrr0.write(|w| w.bits(UBRR));
-    // SAFETY: U2X0 (bit 1) only; the other bits are flags or zero.
-    usart.ucsr0a.write(|w| unsafe { w.bits(1 << 1) });
-    // 8 data bits, no parity, one stop bit: UCSZ01 | UCSZ00.
-    // SAFETY: a valid frame format.
-    usart.ucsr0c.write(|w| unsafe { w.bits(0b0000_0110) });
+    // Double speed; the other bits are flags or zero.
+    usart.ucsr0a.write(|w| w.u2x0().set_bit());
+    // 8N1, asynchronous.
+    usart.ucsr0c.write(|w| w.umsel0().usart_async().upm0().disabled().usbs0().stop1().ucsz0().chr8());
     usart.ucsr0b.write(|w| w.rxen0().set_bit().txen0().set_bit().rxcie0().set_bit());
 }
 
@@ -133,9 +132,9 @@ static mut DRAINING: bool = false;
 //    through the ring and the emergency scanner (~250 cycles each) with
 //    interrupts on ([`drain`]): a step is held up only by part 1.
 //
-// The receive interrupt stays enabled, so a byte that arrives while part 2
-// runs, or while another handler runs on top of it, is taken at once by a
-// nested part 1. At 250 000 baud a byte comes every 640 cycles and the
+// Nesting and masking with the other handlers: see `interrupts.rs`. The
+// receive interrupt stays enabled (a nested part 1 takes each byte at
+// once) because at 250 000 baud a byte comes every 640 cycles and the
 // UART holds two: when this handler switched its own source off for part
 // 2, a step interrupt on top of it lost bytes. Only when `RAW` is full (a
 // burst faster than the wire, as QEMU delivers them) does part 1 switch
@@ -302,10 +301,9 @@ core::arch::global_asm!(
 /// The receive handler's part 2: the bytes of `RAW` through [`receive`]
 /// with interrupts on; returns with interrupts off and `DRAINING` clear.
 extern "C" fn drain() {
-    // With the encoder loops the tick runs ≈ 0.5 ms with interrupts on: it
-    // must not sit on top of part 2 (found on simavr). Its mask is put
-    // back as it was (the main loop masks it too). (Interrupts are still
-    // off here in those builds.)
+    // Encoder builds: the tick is masked for part 2 (see `interrupts.rs`;
+    // its long run on top of part 2 was found on simavr). Interrupts are
+    // still off here in those builds.
     #[cfg(feature = "encoders")]
     let tick = crate::clock::hold_tick();
     avr_device::interrupt::disable();

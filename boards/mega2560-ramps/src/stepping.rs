@@ -58,9 +58,9 @@
 //! | Z | PL3 | PL1 |
 //! | E0 | PA4 | PA6 |
 //!
-//! The main loop shares PORTF (Y enable, PF2) and PORTA (E0 enable, PA2)
-//! with this handler; it writes those ports only with interrupts off (see
-//! [`crate::pins::make_output`]), so neither side loses the other's bits.
+//! What this handler shares with the main loop (PORTF's and PORTA's
+//! enable bits among them), what nests in it and its longest paths: see
+//! `interrupts.rs`.
 
 // Without the printers (`printer` feature off) the queues are still split
 // (the core's machine holds the feeder) but nothing steps: the interrupt
@@ -116,21 +116,21 @@ pub fn init(dp: &Peripherals, config: StepperConfig) -> StepFeeder<'static> {
         crate::pins::make_output(dp, pin, false);
     }
     let timer = &dp.TC1;
-    // SAFETY: normal mode (WGM = 0), clock / 8 (CS11), compare A interrupt.
-    timer.tccr1a.write(|w| unsafe { w.bits(0) });
-    timer.tccr1b.write(|w| unsafe { w.bits(1 << 1) });
+    // Normal mode (WGM13:10 = 0), clock / 8, compare A interrupt.
+    timer.tccr1a.write(|w| w.wgm1().bits(0b00));
+    timer.tccr1b.write(|w| w.wgm1().bits(0b00).cs1().prescale_8());
     timer.ocr1a.write(|w| w.bits(timer.tcnt1.read().bits().wrapping_add(1000)));
     // Without the printers nothing queues steps: no step interrupt.
     #[cfg(feature = "motion")]
-    timer.timsk1.write(|w| unsafe { w.bits(1 << 1) });
+    timer.timsk1.write(|w| w.ocie1a().set_bit());
     feeder
 }
 
 /// Stop the interrupt at once (kill, panic): no further STEP pulses.
 pub fn stop_timer(dp: &Peripherals) {
-    // SAFETY: clearing OCIE1A only; the flag is written with interrupts
-    // off (kill, panic) and read by the step interrupt's cold path.
-    dp.TC1.timsk1.write(|w| unsafe { w.bits(0) });
+    dp.TC1.timsk1.write(|w| w.ocie1a().clear_bit());
+    // SAFETY: the flag is written with interrupts off (kill, panic) and
+    // read by the step interrupt's cold path.
     unsafe { *addr_of_mut!(TIMER_STOPPED) = true };
 }
 
@@ -332,10 +332,8 @@ fn cold_call(what: u8) -> u16 {
 /// receive interrupt in: at 250 000 baud a byte arrives every 640 cycles
 /// and the UART holds two, so a step interrupt that long with interrupts
 /// off lost bytes (the bench's 250 000-baud stream, once its host sent at
-/// the real rate). Its own source is off meanwhile (it cannot re-enter),
-/// and so is the encoder loops' tick, which runs ≈ 0.5 ms with interrupts
-/// on; the ADC and millisecond handlers are short. Nothing they run
-/// touches the generator. The STEP pins are high and the next compare not
+/// the real rate). Which handlers may run in that window, and which are
+/// masked: see `interrupts.rs`. The STEP pins are high and the next compare not
 /// yet set: a byte makes the pulse a little longer, never a step late
 /// (the compare is set from the previous one).
 extern "C" fn cold_path(what: u8) -> u16 {

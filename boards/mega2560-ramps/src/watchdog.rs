@@ -32,8 +32,8 @@ fn timed_write(value: u8) {
 
 pub fn start(dp: &Peripherals) {
     avr_device::interrupt::free(|_| {
-        // SAFETY: clearing WDRF (bit 3) is required before WDE can be changed.
-        dp.CPU.mcusr.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 3)) });
+        // Clearing WDRF is required before WDE can be changed.
+        dp.CPU.mcusr.modify(|_, w| w.wdrf().clear_bit());
         avr_device::asm::wdr();
         // WDE (bit 3) with the 2 s prescaler.
         timed_write((1 << 3) | TIMEOUT_BITS);
@@ -48,8 +48,8 @@ pub fn start(dp: &Peripherals) {
 
 pub fn stop(dp: &Peripherals) {
     avr_device::asm::wdr();
-    // SAFETY: clearing WDRF, as in `start`.
-    dp.CPU.mcusr.modify(|r, w| unsafe { w.bits(r.bits() & !(1 << 3)) });
+    // Clearing WDRF, as in `start`.
+    dp.CPU.mcusr.modify(|_, w| w.wdrf().clear_bit());
     timed_write(0);
 }
 

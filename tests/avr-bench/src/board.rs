@@ -386,6 +386,12 @@ struct Shared {
     /// longest first, while recording ISR intervals.
     main_cli: Vec<(u32, u64)>,
     main_cli_open: Option<(u32, u64)>,
+    /// Handler runs open at each nesting level, while recording ISR
+    /// intervals: (vector pc, entered, cycles of the runs nested in it).
+    isr_open: Vec<(u32, u64, u64)>,
+    /// Per vector (flash byte address): the longest run without the
+    /// handlers nested in it, and the number of runs.
+    isr_own_longest: std::collections::BTreeMap<u32, (u64, usize)>,
     /// Cycles per flash word address, when profiling.
     profile: Option<Vec<u64>>,
     /// Inclusive profile: cycles per function entry (word address) with
@@ -602,6 +608,8 @@ impl Board {
                 isr_entered_vector: 0,
                 main_cli: Vec::new(),
                 main_cli_open: None,
+                isr_open: Vec::new(),
+                isr_own_longest: Default::default(),
                 profile: None,
                 inclusive: None,
                 inclusive_main_only: false,
@@ -916,6 +924,29 @@ impl Board {
                     stats.isr_cycles += spent;
                 }
                 let nesting_after = (*avr).interrupts.running_ptr;
+                if (*shared).record_isr_intervals {
+                    // By instruction, not by the nesting count: a `reti`
+                    // followed at once by the next pending vector leaves
+                    // the count as it was. `reti` is 0x9518; an interrupt
+                    // lands in the vector table (57 slots of 4 bytes).
+                    let was_reti = *(*avr).flash.add(pc_before as usize) == 0x18
+                        && *(*avr).flash.add(pc_before as usize + 1) == 0x95;
+                    let entered = (*avr).pc < 57 * 4 && (*avr).pc != 0 && (was_reti || pc_before >= 57 * 4);
+                    if was_reti {
+                        if let Some((vector, at, nested)) = (*shared).isr_open.pop() {
+                            let total = after - at;
+                            if let Some(outer) = (*shared).isr_open.last_mut() {
+                                outer.2 += total;
+                            }
+                            let own = (*shared).isr_own_longest.entry(vector).or_default();
+                            own.0 = own.0.max(total - nested);
+                            own.1 += 1;
+                        }
+                    }
+                    if entered {
+                        (*shared).isr_open.push(((*avr).pc, after, 0));
+                    }
+                }
                 if nesting_after > nesting {
                     stats.interrupt_entries += 1;
                     if nesting == 0 {
@@ -1239,7 +1270,16 @@ impl Board {
             self.shared.isr_vectors.clear();
             self.shared.main_cli.clear();
             self.shared.main_cli_open = None;
+            self.shared.isr_open.clear();
+            self.shared.isr_own_longest.clear();
         }
+    }
+
+    /// Per interrupt vector number, while ISR intervals were recorded: the
+    /// longest run of its handler without the handlers nested in it
+    /// (entry's 5 cycles to `reti`), and how many runs there were.
+    pub fn isr_own_longest(&self) -> Vec<(u32, u64, usize)> {
+        self.shared.isr_own_longest.iter().map(|(&pc, &(cycles, runs))| (pc / 4, cycles, runs)).collect()
     }
 
     /// Every top-level handler run recorded since
