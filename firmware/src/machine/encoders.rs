@@ -23,6 +23,7 @@
 //! nothing. Not saved by `M500` (ours: a loop switched on by a stored
 //! setting on a board whose encoder is unplugged would stop every job).
 
+use super::commands::{Listing, Machines};
 use super::{CommandError, Machine};
 use crate::closed_loop::control::{FollowingErrorLimit, LoopGains};
 use crate::closed_loop::printer::{AxisReport, LoopSettings, AXES, AXIS_LETTERS, LOOP_HZ};
@@ -76,6 +77,15 @@ impl Default for EncoderState {
         Self::new()
     }
 }
+
+/// The codes of the printer's encoder loops (dispatched by
+/// `Machine::encoder_command`; see [`super::commands`]). Their `M114`
+/// addition is the core's `M114`.
+pub const COMMANDS: &[Listing] = &[
+    Listing::m(820).on(Machines::PRINTER).capability("CLOSED_LOOP"),
+    Listing::m(821).to(824).on(Machines::PRINTER),
+    Listing::m(828).on(Machines::PRINTER), // trace
+];
 
 impl Machine<'_> {
     /// The next axis whose loop settings changed, with its gains (the board

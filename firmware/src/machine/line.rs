@@ -29,6 +29,7 @@
 //! the minimum stops the screw with an `Error:` line).
 
 use super::error::CommandError;
+use super::commands::{Listing, Machines};
 use super::Machine;
 use crate::gcode::{Code, Command, Decimal};
 use crate::machines::diameter::{write_milli, ClosedLoopPi, DiameterError, THESIS_KI, THESIS_KP};
@@ -89,6 +90,17 @@ fn diameter_error(error: DiameterError, letter: u8) -> CommandError {
         DiameterError::GainSign => CommandError::DiameterGainSign,
     }
 }
+
+/// The line's own codes (dispatched by `Machine::line_command`; see
+/// [`super::commands`]). The printers' codes it refuses (`G0`–`G3`, `G28`,
+/// `G92`, `M4`, `M17`/`M18`/`M84`) and those it handles as the screw
+/// (`M3`, `M5`) are the core's rows.
+pub const COMMANDS: &[Listing] = &[
+    Listing::m(404).to(406).on(Machines::LINE), // diameter set point, automatic on / off
+    Listing::m(407).on(Machines::LINE).runs_halted(), // report
+    Listing::m(860).on(Machines::LINE).capability("EXTRUSION_LINE"), // puller
+    Listing::m(861).to(863).on(Machines::LINE), // measurement, PI gains, watchdog
+];
 
 impl Machine<'_> {
     /// Make this machine the extrusion line: the barrel on heater 0 (SPEC
@@ -210,11 +222,6 @@ impl Machine<'_> {
                     _ => Err(CommandError::OutOfRange(b'S')),
                 },
             },
-            Code::M(115) => {
-                super::write_capabilities(out)?;
-                crate::flash_str!("Cap:EXTRUSION_LINE:1\n").write_to(out)?;
-                Ok(())
-            }
             _ => return Ok(None),
         };
         Ok(Some(result))

@@ -17,6 +17,7 @@
 //! still act from the receive interrupt (see [`crate::emergency`]).
 
 
+pub mod commands;
 pub mod error;
 pub mod modal;
 mod motion_commands;
@@ -46,6 +47,7 @@ use crate::thermal::{AutoReport, Autotune, ColdExtrusionGuard, Gains, HeaterChan
 #[cfg(feature = "heaters")]
 use crate::thermal::WaitConfig;
 use thermal::HeaterSlot;
+use commands::{Halted, Kind};
 use error::CommandError;
 use modal::{Distance, ModalState, MotionMode, Plane, Units, AXIS_LETTERS};
 use ufmt::uWrite;
@@ -604,10 +606,10 @@ impl<'q> Machine<'q> {
             // their arguments, and hosts treat an `Error:` line as fatal.
             Err(error) => match gcode::code_of(text) {
                 Some(Code::M(115)) => {
-                    write_capabilities(out)?;
+                    self.write_capabilities(out)?;
                     return Ok(Outcome::Done);
                 }
-                Some(code) if !is_known(code) => {
+                Some(code) if commands::listing(code, self.kind()).is_none() => {
                     self.unknown_command(text, out)?;
                     return Ok(Outcome::Done);
                 }
@@ -689,11 +691,18 @@ impl<'q> Machine<'q> {
         storage: &mut dyn NonVolatile,
         out: &mut W,
     ) -> Result<Outcome, W::Error> {
-        // Halted, the machine still answers what only reports or waits
-        // (hosts keep polling M105) and echoes unknown codes as unknown;
-        // it refuses everything that would act.
-        if self.halted && refused_while_halted(command.code) {
-            return Ok(Outcome::Failed(CommandError::Halted));
+        // The command table decides: a code this machine does not list is
+        // unknown; halted, the machine still answers what only reports or
+        // waits (hosts keep polling M105) and refuses what would act.
+        let listing = commands::listing(command.code, self.kind());
+        // The table test's second half: with the gate open, a code no row
+        // lists must still reach the `match`'s "unknown" arm.
+        #[cfg(test)]
+        let listing = listing.or(tests::GATE_OPEN.get().then_some(Halted::Runs));
+        match listing {
+            None => return self.unknown_command(text, out).map(|()| Outcome::Done),
+            Some(Halted::Refused) if self.halted => return Ok(Outcome::Failed(CommandError::Halted)),
+            Some(_) => {}
         }
         #[cfg(feature = "powder-bed")]
         if let Some(result) = self.bed_command(command, out)? {
@@ -703,12 +712,16 @@ impl<'q> Machine<'q> {
                 Err(error) => Outcome::Failed(error),
             });
         }
+        // The encoder loops are a printer's (host builds keep every
+        // machine: not the line's or the bed's, which has its own M821–M823).
         #[cfg(feature = "encoders")]
-        if let Some(result) = self.encoder_command(command, out)? {
-            return Ok(match result {
-                Ok(()) => Outcome::Done,
-                Err(error) => Outcome::Failed(error),
-            });
+        if self.kind() == Kind::Printer {
+            if let Some(result) = self.encoder_command(command, out)? {
+                return Ok(match result {
+                    Ok(()) => Outcome::Done,
+                    Err(error) => Outcome::Failed(error),
+                });
+            }
         }
         #[cfg(feature = "extrusion-line")]
         if let Some(result) = self.line_command(command, out)? {
@@ -774,7 +787,7 @@ impl<'q> Machine<'q> {
             }
             #[cfg(feature = "printer")]
             Code::M(114) => self.report_position(out).map(Ok)?,
-            Code::M(115) => write_capabilities(out).map(Ok)?,
+            Code::M(115) => self.write_capabilities(out).map(Ok)?,
             // M73 (PrusaSlicer's progress): no display here, accepted
             // silently as Marlin without one; M117 likewise.
             Code::M(73 | 117) => Ok(()),
@@ -902,6 +915,25 @@ impl<'q> Machine<'q> {
         }
     }
 
+    /// The kind of machine this is ([`commands::Kind`]): the `become_…`
+    /// the board called, a printer otherwise.
+    pub fn kind(&self) -> Kind {
+        #[cfg(feature = "extrusion-line")]
+        if self.line.is_some() {
+            return Kind::Line;
+        }
+        #[cfg(feature = "powder-bed")]
+        if self.powder.is_some() {
+            return Kind::Bed;
+        }
+        Kind::Printer
+    }
+
+    /// `M115`, as the command table has it for this machine.
+    fn write_capabilities<W: uWrite + ?Sized>(&self, out: &mut W) -> Result<(), W::Error> {
+        commands::capabilities(self.kind()).write_to(out)
+    }
+
     /// A code the executor does not run: echoed, as Marlin does.
     #[inline(always)]
     fn unknown_command<W: uWrite + ?Sized>(&self, text: &[u8], out: &mut W) -> Result<(), W::Error> {
@@ -1024,81 +1056,6 @@ impl<'q> Machine<'q> {
         Ok(())
     }
 }
-
-/// Whether the executor runs `code` (the dispatch in `execute`); the rest
-/// are echoed as unknown. A bitmap in flash (96 bytes) rather than a match
-/// over the ranges, which came to 344 bytes of compares and branches.
-#[inline(never)]
-fn is_known(code: Code) -> bool {
-    let bit = match code {
-        Code::G(n) if n < KNOWN_M_BASE => n,
-        Code::M(n) if n < KNOWN_BITS - KNOWN_M_BASE => KNOWN_M_BASE + n,
-        Code::T(_) | Code::Modal => return true,
-        _ => return false,
-    };
-    KNOWN_MAP.get(usize::from(bit >> 3)).is_some_and(|byte| byte >> (bit & 7) & 1 != 0)
-}
-
-/// The G codes the executor runs, as ranges (first, last).
-const KNOWN_G: [(u16, u16); 11] =
-    [(0, 4), (10, 11), (17, 21), (28, 28), (40, 40), (49, 49), (53, 59), (61, 61), (64, 64), (80, 80), (90, 94)];
-/// The M codes the executor runs, as ranges (first, last).
-const KNOWN_M: [(u16, u16); 21] = [
-    (2, 5), (7, 9), (17, 18), (30, 30), (73, 73), (82, 84), (92, 92), (104, 110), (112, 121), (140, 140), (155, 155),
-    (190, 190), (201, 201), (203, 205), (220, 221), (301, 304), (400, 400), (410, 410), (500, 503), (665, 666),
-    (820, 824),
-];
-/// Bit of `G0` in [`KNOWN_MAP`] is 0, of `M0` this (past the last G code).
-const KNOWN_M_BASE: u16 = 96;
-/// Bits in [`KNOWN_MAP`]: up to the last M code.
-const KNOWN_BITS: u16 = KNOWN_M_BASE + 825;
-
-/// One bit per code: G codes from bit 0, M codes from [`KNOWN_M_BASE`].
-#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static KNOWN_MAP: crate::progmem::Flash<[u8; KNOWN_BITS.div_ceil(8) as usize]> = crate::progmem::Flash::new(known_map());
-
-const fn known_map() -> [u8; KNOWN_BITS.div_ceil(8) as usize] {
-    let mut map = [0u8; KNOWN_BITS.div_ceil(8) as usize];
-    let mut i = 0;
-    while i < KNOWN_G.len() + KNOWN_M.len() {
-        let ((first, last), base) =
-            if i < KNOWN_G.len() { (KNOWN_G[i], 0) } else { (KNOWN_M[i - KNOWN_G.len()], KNOWN_M_BASE) };
-        // Every range ends below its part's limit (checked at compile time).
-        assert!(last < if base == 0 { KNOWN_M_BASE } else { KNOWN_BITS - KNOWN_M_BASE });
-        let mut n = base + first;
-        while n <= base + last {
-            map[(n >> 3) as usize] |= 1 << (n & 7);
-            n += 1;
-        }
-        i += 1;
-    }
-    map
-}
-
-/// Whether a halted machine refuses `code`: every known code but those
-/// that only report or wait (unknown ones are echoed as unknown).
-fn refused_while_halted(code: Code) -> bool {
-    let answered = match code {
-        Code::G(4) | Code::M(410 | 503) => true,
-        // M105, M108, M110, M112, M114, M115, M117, M118, M119 as bits of
-        // one mask: the compares one by one cost 100 bytes.
-        Code::M(n @ 105..=119) => HALTED_M105_TO_M119 >> (n - 105) & 1 != 0,
-        _ => false,
-    };
-    is_known(code) && !answered
-}
-
-/// Bit `n - 105`: `Mn` (105 ≤ n ≤ 119) still runs on a halted machine.
-const HALTED_M105_TO_M119: u16 = {
-    let mut mask = 0u16;
-    let codes = [105, 108, 110, 112, 113, 114, 115, 117, 118, 119];
-    let mut i = 0;
-    while i < codes.len() {
-        mask |= 1 << (codes[i] - 105);
-        i += 1;
-    }
-    mask
-};
 
 /// `<bytes> bytes; crc <crc>)`, the end of `M500`'s and `M501`'s report:
 /// one copy of the code for both.
@@ -1236,30 +1193,6 @@ static SETTING_WORDS: crate::progmem::Flash<[SettingWord; 22]> = {
     ])
 };
 
-/// `M115`: the firmware line and the `Cap:` lines hosts read to decide what
-/// to send (OctoPrint enables auto-reporting and the emergency parser from
-/// these).
-pub fn write_capabilities<W: uWrite + ?Sized>(out: &mut W) -> Result<(), W::Error> {
-    // One string in flash, the firmware line included.
-    crate::flash_concat!(
-        "FIRMWARE_NAME:",
-        crate::FIRMWARE_NAME,
-        " ",
-        crate::FIRMWARE_VERSION,
-        " (Rust) SOURCE_CODE_URL:local PROTOCOL_VERSION:1.0 MACHINE_TYPE:",
-        crate::machine_file::NAME,
-        " EXTRUDER_COUNT:",
-        EXTRUDERS_TEXT,
-        "\n",
-        CAPABILITIES
-    )
-    .write_to(out)?;
-    // M820-M824 (machine/encoders.rs).
-    #[cfg(feature = "encoders")]
-    crate::flash_str!("Cap:CLOSED_LOOP:1\n").write_to(out)?;
-    Ok(())
-}
-
 /// Gains as the settings keep them (Marlin's units × 10⁴ in `i32`s).
 fn gains_setting(gains: Gains) -> [i32; 3] {
     [gains.kp, gains.ki, gains.kd].map(|g| g.min(i32::MAX as u32) as i32)
@@ -1271,34 +1204,6 @@ const LAYOUT_VERSION_TEXT: &str = ["0", "1", "2", "3", "4", "5", "6", "7", "8", 
 
 /// [`EXTRUDERS`] as text, for the constant `M115` reply.
 const EXTRUDERS_TEXT: &str = ["0", "1", "2", "3", "4", "5", "6", "7", "8", "9"][EXTRUDERS as usize];
-
-/// The capabilities reported by `M115`, honestly: 1 only when implemented.
-/// One string in flash: on the AVR every `&str` would cost SRAM.
-const CAPABILITIES: &str = "Cap:SERIAL_XON_XOFF:0
-Cap:BINARY_FILE_TRANSFER:0
-Cap:EEPROM:1
-Cap:VOLUMETRIC:0
-Cap:AUTOREPORT_TEMP:1
-Cap:AUTOREPORT_POS:0
-Cap:PROGRESS:0
-Cap:PRINT_JOB:0
-Cap:AUTOLEVEL:0
-Cap:Z_PROBE:0
-Cap:LEVELING_DATA:0
-Cap:SOFTWARE_POWER:0
-Cap:TOGGLE_LIGHTS:0
-Cap:EMERGENCY_PARSER:1
-Cap:HOST_ACTION_COMMANDS:0
-Cap:PROMPT_SUPPORT:0
-Cap:SDCARD:0
-Cap:AUTOREPORT_SD_STATUS:0
-Cap:THERMAL_PROTECTION:1
-Cap:MOTION_MODES:0
-Cap:ARCS:1
-Cap:BABYSTEPPING:0
-Cap:CHAMBER_TEMPERATURE:0
-Cap:PAREN_COMMENTS:1
-";
 
 #[cfg(test)]
 mod tests;

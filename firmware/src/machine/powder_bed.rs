@@ -40,6 +40,7 @@
 //! sensor's zone and the axis settles there.
 
 use super::error::CommandError;
+use super::commands::{Listing, Machines};
 use super::{Machine, Running};
 use crate::closed_loop::control::{AxisController, DriverStatus, FollowingErrorLimit, LoopGains, Reference};
 use crate::closed_loop::relay::{RelayAutotune, RelayStep};
@@ -276,6 +277,18 @@ fn switches(inputs: &BedInputs, platform: Platform) -> PlatformSwitches {
     };
     PlatformSwitches::from_levels(lower, upper, SWITCH_ACTIVE)
 }
+
+/// The powder bed's own codes (dispatched by `Machine::bed_command`; see
+/// [`super::commands`]). The printers' codes it runs its own way (`G0`/`G1`,
+/// `M3`/`M5`, `M104`…) or refuses (`G2`/`G3`, `G28`, `G92`, `M17`…) are
+/// the core's rows. `POWDER_BED` first: `M115` names them in row order.
+pub const COMMANDS: &[Listing] = &[
+    Listing::m(880).to(882).on(Machines::BED).capability("POWDER_BED"), // jobs
+    Listing::m(10).to(11).on(Machines::BED), // suction on / off
+    Listing::m(821).on(Machines::BED).capability("CLOSED_LOOP"), // carriage PID
+    Listing::m(822).to(823).on(Machines::BED), // carriage report, following error
+    Listing::m(825).on(Machines::BED), // relay auto-tune
+];
 
 impl Machine<'_> {
     /// Make this machine the powder bed (the board calls it once at boot).
@@ -581,14 +594,6 @@ impl Machine<'_> {
                 bed.job = Job::RelayTune { tune, relay_amplitude, apply, ticks_left: RELAY_TIMEOUT_TICKS };
                 Ok(Some(Running::BedJob))
             })(),
-            Code::M(115) => {
-                super::write_capabilities(out)?;
-                crate::flash_str!("Cap:POWDER_BED:1\n").write_to(out)?;
-                // With the printer's encoder loops built in, M115 already says so.
-                #[cfg(not(feature = "encoders"))]
-                crate::flash_str!("Cap:CLOSED_LOOP:1\n").write_to(out)?;
-                Ok(None)
-            }
             _ => return Ok(None),
         };
         Ok(Some(result))

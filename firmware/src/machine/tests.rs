@@ -1,6 +1,7 @@
 //! The executor, specified by conversations: lines in, exact replies out.
 
 use super::*;
+use super::commands::{self, Halted, Kind};
 use super::modal::AXES;
 use crate::line::LineAssembler;
 use crate::reply::test_support::Text;
@@ -636,30 +637,6 @@ fn g53_moves_in_machine_coordinates_for_its_own_line() {
 }
 
 #[test]
-fn the_known_codes_bitmap_holds_exactly_the_codes_the_executor_runs() {
-    // The list as a match (what the bitmap replaced on the AVR).
-    fn reference(code: Code) -> bool {
-        match code {
-            Code::G(n) => matches!(n, 0..=4 | 10 | 11 | 17..=21 | 28 | 40 | 49 | 53..=59 | 61 | 64 | 80 | 90..=94),
-            Code::M(n) => matches!(
-                n,
-                2..=5 | 7..=9 | 30 | 17 | 18 | 73 | 82..=84 | 92 | 104..=110 | 112..=121 | 140 | 155 | 190 | 201 | 203..=205 | 220 | 221
-                    | 301..=304 | 400 | 410 | 500..=503 | 665 | 666 | 820..=824
-            ),
-            Code::T(_) | Code::Modal => true,
-            Code::Other => false,
-        }
-    }
-    for n in (0..=2_000).chain([u16::MAX - 1, u16::MAX]) {
-        for code in [Code::G(n), Code::M(n), Code::T(n)] {
-            assert_eq!(is_known(code), reference(code), "{code:?}");
-        }
-    }
-    assert!(is_known(Code::Modal));
-    assert!(!is_known(Code::Other));
-}
-
-#[test]
 fn m503_reports_every_setting_in_marlins_layout() {
     let mut machine = new_machine();
     converse(&mut machine, 0, "M92 X80.125 E415.5\nM205 B1234 J0.007 S0.005 T0.004\nM221 S99\nM204 R1234.5678\n");
@@ -711,7 +688,7 @@ fn the_default_machine_file_is_the_prusa_i3_the_simulator_runs() {
 #[test]
 fn m115_names_the_machine_files_machine() {
     let mut out = Text(String::new());
-    super::write_capabilities(&mut out).unwrap();
+    new_machine().write_capabilities(&mut out).unwrap();
     assert!(out.0.contains(" MACHINE_TYPE:Prusa i3 EXTRUDER_COUNT:1\n"), "{}", out.0);
 }
 
@@ -755,4 +732,166 @@ fn a_deltas_m665_and_m666_are_saved_loaded_and_reported() {
     let crate::motion::kinematics::MachineKinematics::Delta(restored) = rebooted.motion.config.kinematics else { panic!("a delta") };
     assert_eq!((restored.rod_length(), restored.radius(), restored.homed_height), (361.0, 227.0, 300.0));
     assert_eq!(restored.endstop_trim, [0.0; 3]);
+}
+
+// --- the command table (issue 24) ------------------------------------------
+
+fn powder_bed() -> Machine<'static> {
+    let mut machine = new_machine();
+    machine.become_powder_bed();
+    machine
+}
+
+fn extrusion_line() -> Machine<'static> {
+    let mut machine = new_machine();
+    machine.become_extrusion_line();
+    machine
+}
+
+#[test]
+fn a_malformed_m880_on_the_powder_bed_is_refused_not_echoed_as_unknown() {
+    assert_eq!(converse(&mut powder_bed(), 0, "M880 F1.2.3\n"), "Error:Bad number after F\nok\n");
+    assert_eq!(converse(&mut powder_bed(), 0, "M10 S1.2.3\n"), "Error:Bad number after S\nok\n");
+}
+
+#[test]
+fn a_malformed_line_command_is_refused_not_echoed_as_unknown() {
+    assert_eq!(converse(&mut extrusion_line(), 0, "M860 S1.2.3\n"), "Error:Bad number after S\nok\n");
+    assert_eq!(converse(&mut extrusion_line(), 0, "M404 W1.2.3\n"), "Error:Bad number after W\nok\n");
+}
+
+#[test]
+fn a_halted_powder_bed_refuses_its_jobs_and_its_suction() {
+    let mut bed = powder_bed();
+    converse(&mut bed, 0, "M112\n");
+    let halted = "Error:Printer halted. kill() called!\nok\n";
+    for line in ["M880\n", "M881\n", "M882 S1\n", "M10\n", "M825\n"] {
+        assert_eq!(converse(&mut bed, 0, line), halted, "for {line:?}");
+    }
+    assert!(!bed.powder_bed().unwrap().is_busy());
+}
+
+#[test]
+fn a_halted_extrusion_line_refuses_its_commands_and_still_reports() {
+    let mut line = extrusion_line();
+    converse(&mut line, 0, "M112\n");
+    let halted = "Error:Printer halted. kill() called!\nok\n";
+    for command in ["M405\n", "M406\n", "M860 S1\n", "M863 S5\n"] {
+        assert_eq!(converse(&mut line, 0, command), halted, "for {command:?}");
+    }
+    assert!(converse(&mut line, 0, "M407\n").starts_with("echo:"));
+}
+
+#[test]
+fn codes_of_another_machine_are_unknown_on_a_printer() {
+    for code in ["M10", "M404", "M407", "M860", "M880", "M116"] {
+        assert_eq!(reply(&format!("{code}\n")), format!("echo:Unknown command: \"{code}\"\nok\n"));
+    }
+}
+
+/// A fresh machine of each kind, as the boards make them.
+fn machine_of(kind: Kind) -> Machine<'static> {
+    match kind {
+        Kind::Printer => new_machine(),
+        Kind::Line => extrusion_line(),
+        Kind::Bed => powder_bed(),
+    }
+}
+
+std::thread_local! {
+    /// Set: the dispatch runs codes no row lists (see `Machine::dispatch`).
+    pub(super) static GATE_OPEN: core::cell::Cell<bool> = const { core::cell::Cell::new(false) };
+}
+
+/// Every code a table could list (and a few past the bitmap), as sent.
+fn every_code() -> impl Iterator<Item = (Code, String)> {
+    let numbers = || (0..=1_000).chain([2_000, u16::MAX]);
+    numbers()
+        .map(|n| (Code::G(n), format!("G{n}")))
+        .chain(numbers().map(|n| (Code::M(n), format!("M{n}"))))
+        .chain([(Code::T(0), "T0".into()), (Code::T(7), "T7".into()), (Code::Modal, "X1".into()), (Code::Other, "M862.3".into())])
+}
+
+fn unknown(text: &str) -> String {
+    format!("echo:Unknown command: \"{text}\"\nok\n")
+}
+
+#[test]
+fn every_listed_code_is_dispatched_and_every_other_is_unknown() {
+    for kind in commands::KINDS {
+        assert_eq!(machine_of(kind).kind(), kind);
+        let mut listed = 0;
+        for (code, text) in every_code() {
+            // Bare, and with an argument that does not parse: a listed
+            // code refuses it, an unlisted one is echoed whatever follows.
+            let bare = converse(&mut machine_of(kind), 0, &format!("{text}\n"));
+            let malformed_text = format!("{text} Q1.2.3");
+            let malformed = converse(&mut machine_of(kind), 0, &format!("{malformed_text}\n"));
+            if commands::listing(code, kind).is_some() {
+                listed += 1;
+                assert!(!bare.contains("Unknown command"), "{kind:?} lists {text} but does not run it: {bare:?}");
+                if code != Code::M(115) && !matches!(code, Code::M(117 | 118)) {
+                    assert_eq!(malformed, "Error:Bad number after Q\nok\n", "{kind:?} {malformed_text}");
+                }
+            } else {
+                assert_eq!(bare, unknown(&text), "{kind:?}");
+                assert_eq!(malformed, unknown(&malformed_text), "{kind:?}");
+                // The table is not only a gate: without it, the code
+                // still reaches no handler.
+                GATE_OPEN.set(true);
+                let ungated = converse(&mut machine_of(kind), 0, &format!("{text}\n"));
+                GATE_OPEN.set(false);
+                assert_eq!(ungated, unknown(&text), "{kind:?} runs {text} but does not list it");
+            }
+        }
+        // Not a vacuous walk: the core alone lists about ninety codes.
+        assert!(listed > 80, "{kind:?}: {listed} codes");
+    }
+}
+
+#[test]
+fn the_halted_policy_comes_from_the_table() {
+    let halted = "Error:Printer halted. kill() called!\nok\n";
+    for kind in commands::KINDS {
+        for (code, text) in every_code() {
+            let Some(policy) = commands::listing(code, kind) else { continue };
+            let mut machine = machine_of(kind);
+            converse(&mut machine, 0, "M112\n");
+            let reply = converse(&mut machine, 0, &format!("{text}\n"));
+            match policy {
+                Halted::Refused => assert_eq!(reply, halted, "{kind:?} {text}"),
+                Halted::Runs => assert_ne!(reply, halted, "{kind:?} {text}"),
+            }
+        }
+    }
+    // The answers hosts rely on while halted, spelled out.
+    for code in ["G4", "M105", "M108", "M110", "M112", "M113", "M114", "M115", "M117", "M118", "M119", "M410", "M503"] {
+        let text = code.strip_prefix(['G', 'M']).unwrap().parse().unwrap();
+        let code = if code.starts_with('G') { Code::G(text) } else { Code::M(text) };
+        assert_eq!(commands::listing(code, Kind::Printer), Some(Halted::Runs), "{code:?}");
+    }
+    assert_eq!(commands::listing(Code::M(407), Kind::Line), Some(Halted::Runs));
+}
+
+/// `M115` on the Prusa i3 (the host build's printer), exactly: the table
+/// names Marlin's capabilities in Marlin's order.
+const M115_PRINTER: &str = concat!(
+    "Cap:SERIAL_XON_XOFF:0\nCap:BINARY_FILE_TRANSFER:0\nCap:EEPROM:1\nCap:VOLUMETRIC:0\nCap:AUTOREPORT_TEMP:1\n",
+    "Cap:AUTOREPORT_POS:0\nCap:PROGRESS:0\nCap:PRINT_JOB:0\nCap:AUTOLEVEL:0\nCap:Z_PROBE:0\nCap:LEVELING_DATA:0\n",
+    "Cap:SOFTWARE_POWER:0\nCap:TOGGLE_LIGHTS:0\nCap:EMERGENCY_PARSER:1\nCap:HOST_ACTION_COMMANDS:0\nCap:PROMPT_SUPPORT:0\n",
+    "Cap:SDCARD:0\nCap:AUTOREPORT_SD_STATUS:0\nCap:THERMAL_PROTECTION:1\nCap:MOTION_MODES:0\nCap:ARCS:1\n",
+    "Cap:BABYSTEPPING:0\nCap:CHAMBER_TEMPERATURE:0\nCap:PAREN_COMMENTS:1\n",
+);
+
+#[test]
+fn m115_names_what_the_tables_list_for_each_machine() {
+    let firmware = format!(
+        "FIRMWARE_NAME:Ferrostep {} (Rust) SOURCE_CODE_URL:local PROTOCOL_VERSION:1.0 MACHINE_TYPE:Prusa i3 EXTRUDER_COUNT:1\n",
+        crate::FIRMWARE_VERSION
+    );
+    assert_eq!(reply("M115\n"), format!("{firmware}{M115_PRINTER}Cap:CLOSED_LOOP:1\nok\n"));
+    assert_eq!(converse(&mut extrusion_line(), 0, "M115\n"), format!("{firmware}{M115_PRINTER}Cap:EXTRUSION_LINE:1\nok\n"));
+    assert_eq!(converse(&mut powder_bed(), 0, "M115\n"), format!("{firmware}{M115_PRINTER}Cap:POWDER_BED:1\nCap:CLOSED_LOOP:1\nok\n"));
+    // PrusaSlicer's version check: the same reply, whatever the arguments.
+    assert_eq!(converse(&mut powder_bed(), 0, "M115 U3.13.0\n"), converse(&mut powder_bed(), 0, "M115\n"));
 }
