@@ -1,70 +1,143 @@
 //! The machine's tunable settings: what `M92`, `M201`, `M203`, `M204`,
-//! `M205`, `M220` and `M221` change and `M503` prints (and, once storage
-//! lands, what `M500`/`M501` save and load).
+//! `M205`, `M220`, `M221`, `M301`/`M304` and `M665`/`M666` change, `M503`
+//! prints and `M500`/`M501` save and load (`storage`).
 //!
 //! Values are fixed point with three decimals ("milli" units) so that they
 //! print back exactly as typed and need no float: steps/mm × 1000, mm/s ×
 //! 1000 (= µm/s), mm/s² × 1000 (= µm/s²). Units are Marlin's.
 
-use crate::machine::modal::AXES;
 use crate::reply::Fixed;
 use ufmt::uWrite;
 
-/// Every tunable value. `repr(C)` and only 32-bit integer fields: the
-/// storage image is this struct's bytes (see `storage`).
-#[derive(Clone, Debug, PartialEq, Eq)]
-#[repr(C)]
-pub struct Settings {
-    /// `M92`: steps per mm × 1000, per axis X Y Z E.
-    pub steps_per_mm_milli: [i32; AXES],
-    /// `M203`: maximum feed rate per axis, µm/s.
-    pub max_feed_um_per_s: [i32; AXES],
-    /// `M201`: maximum acceleration per axis, µm/s².
-    pub max_accel_um_per_s2: [i32; AXES],
-    /// `M204 P`: acceleration of printing moves, µm/s².
-    pub print_accel_um_per_s2: i32,
-    /// `M204 R`: acceleration of retracts (E-only moves), µm/s².
-    pub retract_accel_um_per_s2: i32,
-    /// `M204 T`: acceleration of travel (non-extruding) moves, µm/s².
-    pub travel_accel_um_per_s2: i32,
-    /// `M205 J`: junction deviation, µm (Marlin's default 0.013 mm).
-    pub junction_deviation_um: i32,
-    /// `M205 S`: minimum feed rate of printing moves, µm/s.
-    pub min_feed_um_per_s: i32,
-    /// `M205 T`: minimum feed rate of travel moves, µm/s.
-    pub min_travel_feed_um_per_s: i32,
-    /// `M205 B`: minimum segment time, µs.
-    pub min_segment_time_us: i32,
-    /// `M220 S`: feed-rate override, percent.
-    pub feed_percent: i32,
-    /// `M221 S`: flow (extrusion) override, percent.
-    pub flow_percent: i32,
-    /// `M301 P I D` (hot end) and the bed's gains, Marlin's units × 10⁴
-    /// (see `thermal::Gains`); `M303 U1` sets them too.
-    pub hotend_pid: [i32; 3],
-    pub bed_pid: [i32; 3],
-    /// `M665 L R H` (a delta): rod length, radius and homed height, µm
-    /// (zeros on other machines).
-    pub delta_geometry_um: [i32; 3],
-    /// `M666 X Y Z` (a delta): each tower's endstop trim, µm.
-    pub delta_trim_um: [i32; 3],
+/// The axes with per-axis settings, X Y Z E (the executor's axes,
+/// `machine::modal::AXIS_LETTERS`, are these). Declared here, the lowest
+/// of the modules that use it: settings sit below the motion core and the
+/// executor, and import neither.
+pub const AXES: usize = 4;
+
+/// What one row of the settings declaration holds: one `i32` (a slot of
+/// the saved image) or an array of them, one slot each.
+pub trait Slots {
+    /// Slots this field takes in the saved image.
+    const LEN: usize;
+    fn slot(&self, index: usize) -> i32;
+    fn set_slot(&mut self, index: usize, value: i32);
 }
 
-/// Numbers of the fields [`Settings::field_mut`] reaches (the per-axis
-/// arrays take four each, X Y Z E).
-pub mod field {
-    pub const STEPS_PER_MM: usize = 0;
-    pub const MAX_FEED: usize = 4;
-    pub const MAX_ACCEL: usize = 8;
-    pub const PRINT_ACCEL: usize = 12;
-    pub const RETRACT_ACCEL: usize = 13;
-    pub const TRAVEL_ACCEL: usize = 14;
-    pub const JUNCTION_DEVIATION: usize = 15;
-    pub const MIN_FEED: usize = 16;
-    pub const MIN_TRAVEL_FEED: usize = 17;
-    pub const MIN_SEGMENT_TIME: usize = 18;
-    pub const FEED_PERCENT: usize = 19;
-    pub const FLOW_PERCENT: usize = 20;
+impl Slots for i32 {
+    const LEN: usize = 1;
+    fn slot(&self, _: usize) -> i32 {
+        *self
+    }
+    fn set_slot(&mut self, _: usize, value: i32) {
+        *self = value;
+    }
+}
+
+impl<const N: usize> Slots for [i32; N] {
+    const LEN: usize = N;
+    fn slot(&self, index: usize) -> i32 {
+        self.get(index).copied().unwrap_or(0)
+    }
+    fn set_slot(&mut self, index: usize, value: i32) {
+        if let Some(slot) = self.get_mut(index) {
+            *slot = value;
+        }
+    }
+}
+
+/// The settings, declared once: each row is a field of [`Settings`] (its
+/// reader is the field itself) and its place in the saved image (rows in
+/// order, slots in order: [`field`] numbers the first slot of each, which
+/// the setting commands' words, `M503` and the storage use). A new setting
+/// is a new row here (last, so stored images keep their layout; bump
+/// `storage::LAYOUT_VERSION`), its default in [`Settings::prusa_i3`] (or
+/// from the machine file, `Machine::init_other_fields`), its words in
+/// `machine::SETTING_WORDS` and its line in [`M503_TEXT`].
+macro_rules! declare_settings {
+    ($($(#[$doc:meta])* $name:ident / $number:ident: $ty:ty,)*) => {
+        /// Every tunable value, as the setting commands change them and
+        /// the storage keeps them (see [`declare_settings`]).
+        #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+        pub struct Settings {
+            $($(#[$doc])* pub $name: $ty,)*
+        }
+
+        /// The first slot of each field in the saved image (the per-axis
+        /// arrays take four each, X Y Z E).
+        pub mod field {
+            #![allow(unused)]
+            use super::{Slots, AXES};
+            declare_settings!(@numbers 0; $($number: $ty,)*);
+        }
+
+        /// Slots in the saved image.
+        pub const SLOTS: usize = 0 $(+ <$ty as Slots>::LEN)*;
+
+        impl Settings {
+            /// Slot `index` of the saved image (0 past the last).
+            pub fn slot(&self, index: usize) -> i32 {
+                $(
+                    if let Some(i) = index.checked_sub(field::$number).filter(|i| *i < <$ty as Slots>::LEN) {
+                        return self.$name.slot(i);
+                    }
+                )*
+                0
+            }
+
+            /// Set slot `index` (nothing past the last).
+            pub fn set_slot(&mut self, index: usize, value: i32) {
+                $(
+                    if let Some(i) = index.checked_sub(field::$number).filter(|i| *i < <$ty as Slots>::LEN) {
+                        return self.$name.set_slot(i, value);
+                    }
+                )*
+            }
+        }
+    };
+    (@numbers $at:expr; $number:ident: $ty:ty, $($rest:tt)*) => {
+        pub const $number: usize = $at;
+        declare_settings!(@numbers $number + <$ty as Slots>::LEN; $($rest)*);
+    };
+    (@numbers $at:expr;) => {};
+}
+
+declare_settings! {
+    /// `M92`: steps per mm × 1000, per axis X Y Z E.
+    steps_per_mm_milli / STEPS_PER_MM: [i32; AXES],
+    /// `M203`: maximum feed rate per axis, µm/s.
+    max_feed_um_per_s / MAX_FEED: [i32; AXES],
+    /// `M201`: maximum acceleration per axis, µm/s².
+    max_accel_um_per_s2 / MAX_ACCEL: [i32; AXES],
+    /// `M204 P`: acceleration of printing moves, µm/s².
+    print_accel_um_per_s2 / PRINT_ACCEL: i32,
+    /// `M204 R`: acceleration of retracts (E-only moves), µm/s².
+    retract_accel_um_per_s2 / RETRACT_ACCEL: i32,
+    /// `M204 T`: acceleration of travel (non-extruding) moves, µm/s².
+    travel_accel_um_per_s2 / TRAVEL_ACCEL: i32,
+    /// `M205 J`: junction deviation, µm (Marlin's default 0.013 mm).
+    junction_deviation_um / JUNCTION_DEVIATION: i32,
+    /// `M205 S`: minimum feed rate of printing moves, µm/s.
+    min_feed_um_per_s / MIN_FEED: i32,
+    /// `M205 T`: minimum feed rate of travel moves, µm/s.
+    min_travel_feed_um_per_s / MIN_TRAVEL_FEED: i32,
+    /// `M205 B`: minimum segment time, µs.
+    min_segment_time_us / MIN_SEGMENT_TIME: i32,
+    /// `M220 S`: feed-rate override, percent.
+    feed_percent / FEED_PERCENT: i32,
+    /// `M221 S`: flow (extrusion) override, percent.
+    flow_percent / FLOW_PERCENT: i32,
+    /// `M301 P I D` (hot end), Marlin's units × 10⁴ (see
+    /// `thermal::Gains`); `M303 U1` sets them too. Default: the machine
+    /// file's.
+    hotend_pid / HOTEND_PID: [i32; 3],
+    /// `M304 P I D`: the bed's gains, the same way.
+    bed_pid / BED_PID: [i32; 3],
+    /// `M665 L R H` (a delta): rod length, radius and homed height, µm
+    /// (zeros on other machines). Default: the machine file's.
+    delta_geometry_um / DELTA_GEOMETRY: [i32; 3],
+    /// `M666 X Y Z` (a delta): each tower's endstop trim, µm.
+    delta_trim_um / DELTA_TRIM: [i32; 3],
 }
 
 impl Default for Settings {
@@ -73,98 +146,13 @@ impl Default for Settings {
     }
 }
 
-/// Number of `i32` fields of [`Settings`] (its only fields).
-const FIELDS: usize = 33;
-const _: () = assert!(core::mem::size_of::<Settings>() == FIELDS * 4);
-
-/// Fields of [`Settings`] taken from the motion configuration (the
-/// first ones: steps/mm, feeds, accelerations, junction deviation).
-const CONFIGURED: usize = field::JUNCTION_DEVIATION + 1;
-
-/// Where each configured field's figure lies in `MotionConfig`, in bytes.
+/// [`Settings::prusa_i3`] in flash: the defaults of everything the
+/// machine file does not set (on the AVR a `const` this size would be
+/// copied from RAM).
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static CONFIG_OFFSETS: crate::progmem::Flash<[u16; CONFIGURED]> = crate::progmem::Flash::new({
-    use crate::motion::MotionConfig;
-    use core::mem::offset_of;
-    let mut offsets = [0u16; CONFIGURED];
-    let mut axis = 0;
-    while axis < AXES {
-        offsets[field::STEPS_PER_MM + axis] =
-            (offset_of!(MotionConfig, steps_per_mm) + 4 * axis) as u16;
-        offsets[field::MAX_FEED + axis] = (offset_of!(MotionConfig, max_feed) + 4 * axis) as u16;
-        offsets[field::MAX_ACCEL + axis] = (offset_of!(MotionConfig, max_accel) + 4 * axis) as u16;
-        axis += 1;
-    }
-    offsets[field::PRINT_ACCEL] = offset_of!(MotionConfig, print_accel) as u16;
-    offsets[field::RETRACT_ACCEL] = offset_of!(MotionConfig, retract_accel) as u16;
-    offsets[field::TRAVEL_ACCEL] = offset_of!(MotionConfig, travel_accel) as u16;
-    offsets[field::JUNCTION_DEVIATION] = offset_of!(MotionConfig, junction_deviation) as u16;
-    offsets
-});
-
-/// The other fields of [`Settings::prusa_i3`], in flash, for
-/// [`Settings::init_for_machine`].
-#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static PRUSA_I3_REST: crate::progmem::Flash<[i32; FIELDS - CONFIGURED]> =
-    crate::progmem::Flash::new({
-        // SAFETY: `Settings` is `repr(C)` with exactly `FIELDS` `i32`s.
-        let all = unsafe { core::mem::transmute::<Settings, [i32; FIELDS]>(Settings::prusa_i3()) };
-        let mut rest = [0; FIELDS - CONFIGURED];
-        let mut i = 0;
-        while i < rest.len() {
-            rest[i] = all[CONFIGURED + i];
-            i += 1;
-        }
-        rest
-    });
+pub static PRUSA_I3: crate::progmem::Flash<Settings> = crate::progmem::Flash::new(Settings::prusa_i3());
 
 impl Settings {
-    /// The defaults of a machine: its motion configuration's figures in
-    /// milli-units, the rest as on the Prusa i3.
-    pub fn for_machine(config: &crate::motion::MotionConfig) -> Self {
-        let mut settings = core::mem::MaybeUninit::uninit();
-        Self::init_for_machine(&mut settings, config);
-        // SAFETY: `init_for_machine` wrote every field.
-        unsafe { settings.assume_init() }
-    }
-
-    /// [`Settings::for_machine`] written in place (the machine builds its
-    /// defaults in their field), in one loop: each configured figure read
-    /// at its offset in the configuration and rounded to milli-units, the
-    /// rest copied out of flash. Field by field, the constants cost four
-    /// bytes of code per byte, and each conversion its own call.
-    pub fn init_for_machine(
-        slot: &mut core::mem::MaybeUninit<Self>,
-        config: &crate::motion::MotionConfig,
-    ) {
-        let values = slot.as_mut_ptr().cast::<i32>();
-        let base = (config as *const crate::motion::MotionConfig).cast::<u8>();
-        for index in 0..FIELDS {
-            let value = match CONFIG_OFFSETS.get(index) {
-                // SAFETY: the offset is that of an `f32` field of
-                // `MotionConfig` (`offset_of!` above), so it lies inside
-                // `*config` and is aligned.
-                Some(offset) => {
-                    let figure = unsafe { base.add(usize::from(offset)).cast::<f32>().read() };
-                    crate::motion::math::round_to_i32(figure * 1000.0)
-                }
-                None => PRUSA_I3_REST.get(index - CONFIGURED).unwrap_or(0),
-            };
-            // SAFETY: `Settings` is `repr(C)` and holds `FIELDS` `i32`s
-            // and nothing else (asserted above), so `index` is in it.
-            unsafe { values.add(index).write(value) };
-        }
-        // A delta's geometry and trims (M665, M666), saved with the rest.
-        #[cfg(feature = "delta")]
-        if let crate::motion::kinematics::MachineKinematics::Delta(delta) = &config.kinematics {
-            let um = |mm: f32| crate::motion::math::round_to_i32(mm * 1000.0);
-            // SAFETY: every field was written by the loop above.
-            let settings = unsafe { slot.assume_init_mut() };
-            settings.delta_geometry_um = [um(delta.rod_length()), um(delta.radius()), um(delta.homed_height)];
-            settings.delta_trim_um = delta.endstop_trim.map(um);
-        }
-    }
-
     /// SPEC §1: the Cartesian Prusa i3 on RAMPS (A4988 at 1/16, GT2 16-tooth
     /// pulleys: 100 steps/mm on X and Y; M8 Z rods: 400 steps/mm; E 93).
     pub const fn prusa_i3() -> Self {
@@ -187,20 +175,6 @@ impl Settings {
             delta_geometry_um: [0; 3],
             delta_trim_um: [0; 3],
         }
-    }
-
-    /// The `i32` field numbered `index` ([`field`] names them), for the
-    /// table-driven setting commands (`M92`, `M201`, ...); `None` past the
-    /// last.
-    pub fn field_mut(&mut self, index: u8) -> Option<&mut i32> {
-        let index = usize::from(index);
-        if index > field::FLOW_PERCENT {
-            return None;
-        }
-        // SAFETY: `Settings` is `repr(C)` and holds `FIELDS` `i32`s and
-        // nothing else, in the order [`field`] numbers them; `index` is
-        // below `FIELDS`.
-        Some(unsafe { &mut *(self as *mut Self).cast::<i32>().add(index) })
     }
 
     /// `M503`: the settings as the commands that would set them, in
@@ -232,16 +206,6 @@ impl Settings {
         Ok(())
     }
 
-    /// The `i32` field numbered `index` (0 past the last).
-    fn value(&self, index: usize) -> i32 {
-        if index >= FIELDS {
-            return 0;
-        }
-        // SAFETY: `Settings` is `repr(C)` and holds `FIELDS` `i32`s and
-        // nothing else, so field `index` lies inside it.
-        unsafe { *(self as *const Self).cast::<i32>().add(index) }
-    }
-
     /// [`M503_SCRIPT`] from byte `at` to the next NUL, with every field
     /// marker replaced by its value; returns where the next part starts.
     #[inline(never)]
@@ -261,7 +225,7 @@ impl Settings {
                 }
                 1..=0x7F => out.write_char(char::from(byte))?,
                 _ => {
-                    let value = self.value(usize::from(byte & FIELD_MASK));
+                    let value = self.slot(usize::from(byte & FIELD_MASK));
                     let (mantissa, digits) = match byte & !FIELD_MASK {
                         // Marlin prints two decimals, rounded.
                         MILLI => (
@@ -290,9 +254,6 @@ const FIELD_MASK: u8 = 0x1F;
 const MILLI: u8 = 0x80;
 /// A whole number.
 const WHOLE: u8 = 0xA0;
-/// First field of the hot end's and of the bed's gains (P, I, D).
-const HOTEND_PID: usize = 21;
-const BED_PID: usize = 24;
 
 /// `M503`'s text with markers for the values (see [`FIELD_MASK`]), in two
 /// parts ended by NUL: up to the hot end's gains, up to the bed's. Every
@@ -358,7 +319,7 @@ const _: () = {
             && JUNCTION_DEVIATION == 15
     );
     assert!(MIN_FEED == 16 && MIN_SEGMENT_TIME == 18 && FEED_PERCENT == 19 && FLOW_PERCENT == 20);
-    assert!(HOTEND_PID == FLOW_PERCENT + 1 && BED_PID == HOTEND_PID + 3 && BED_PID + 3 + 6 == FIELDS);
+    assert!(HOTEND_PID == FLOW_PERCENT + 1 && BED_PID == HOTEND_PID + 3 && BED_PID + 3 + 6 == SLOTS);
 };
 
 #[cfg(test)]
@@ -366,12 +327,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn field_numbers_reach_their_fields() {
+    fn slot_numbers_reach_their_fields_in_declaration_order() {
         let mut settings = Settings::prusa_i3();
-        for index in 0..=field::FLOW_PERCENT as u8 {
-            *settings.field_mut(index).unwrap() = -1 - i32::from(index);
+        for index in 0..SLOTS {
+            settings.set_slot(index, -1 - index as i32);
         }
-        assert_eq!(settings.field_mut(field::FLOW_PERCENT as u8 + 1), None);
+        settings.set_slot(SLOTS, 99);
         assert_eq!(settings.steps_per_mm_milli, [-1, -2, -3, -4]);
         assert_eq!(settings.max_feed_um_per_s, [-5, -6, -7, -8]);
         assert_eq!(settings.max_accel_um_per_s2, [-9, -10, -11, -12]);
@@ -384,41 +345,23 @@ mod tests {
         assert_eq!(settings.min_segment_time_us, -19);
         assert_eq!(settings.feed_percent, -20);
         assert_eq!(settings.flow_percent, -21);
-        assert_eq!(settings.hotend_pid, Settings::prusa_i3().hotend_pid);
-        assert_eq!(settings.value(HOTEND_PID), 222_000);
-        assert_eq!(settings.value(BED_PID + 2), 3_054_000);
-        assert_eq!(settings.value(FIELDS), 0);
+        assert_eq!(settings.hotend_pid, [-22, -23, -24]);
+        assert_eq!(settings.bed_pid, [-25, -26, -27]);
+        assert_eq!(settings.delta_geometry_um, [-28, -29, -30]);
+        assert_eq!(settings.delta_trim_um, [-31, -32, -33]);
+        assert_eq!((0..SLOTS).map(|i| settings.slot(i)).collect::<std::vec::Vec<_>>(), (1..=33).map(|i| -i).collect::<std::vec::Vec<_>>());
+        assert_eq!(settings.slot(SLOTS), 0);
     }
 
     #[test]
-    fn every_configured_figure_lands_in_its_field() {
-        let mut config = crate::motion::MotionConfig::prusa_i3();
-        config.steps_per_mm = [1.0, 2.0, 3.0, 4.0];
-        config.max_feed = [5.0, 6.0, 7.0, 8.0];
-        config.max_accel = [9.0, 10.0, 11.0, 12.0];
-        config.print_accel = 13.0;
-        config.retract_accel = 14.0;
-        config.travel_accel = 15.0;
-        config.junction_deviation = 0.0165;
-        let settings = Settings::for_machine(&config);
-        assert_eq!(settings.steps_per_mm_milli, [1000, 2000, 3000, 4000]);
-        assert_eq!(settings.max_feed_um_per_s, [5000, 6000, 7000, 8000]);
-        assert_eq!(settings.max_accel_um_per_s2, [9000, 10000, 11000, 12000]);
-        assert_eq!(settings.print_accel_um_per_s2, 13000);
-        assert_eq!(settings.retract_accel_um_per_s2, 14000);
-        assert_eq!(settings.travel_accel_um_per_s2, 15000);
-        assert_eq!(settings.junction_deviation_um, 17);
-        let prusa = Settings::prusa_i3();
-        assert_eq!(settings.min_segment_time_us, prusa.min_segment_time_us);
-        assert_eq!(
-            (settings.hotend_pid, settings.bed_pid),
-            (prusa.hotend_pid, prusa.bed_pid)
-        );
+    fn the_saved_image_holds_thirty_three_slots() {
+        // storage::LAYOUT_VERSION 3: a change here is a new layout.
+        assert_eq!(SLOTS, 33);
+        assert_eq!((field::HOTEND_PID, field::BED_PID, field::DELTA_GEOMETRY, field::DELTA_TRIM), (21, 24, 27, 30));
     }
 
     #[test]
-    fn the_flash_image_is_the_prusa_i3() {
-        let config = crate::motion::MotionConfig::prusa_i3();
-        assert_eq!(Settings::for_machine(&config), Settings::prusa_i3());
+    fn the_flash_copy_is_the_prusa_i3() {
+        assert_eq!(PRUSA_I3.load(), Settings::prusa_i3());
     }
 }

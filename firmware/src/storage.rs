@@ -17,7 +17,7 @@
 //! | 5 | 2 | payload length |
 //! | 7 | 2 | CRC-16/CCITT of bytes 0–6, 9–12 and the payload |
 //! | 9 | 4 | the machine file's fingerprint ([`crate::machine_file::FINGERPRINT`]) |
-//! | 13 | n | payload ([`Settings`] fields in declaration order, `i32` each) |
+//! | 13 | n | payload ([`Settings`]' slots in declaration order, `i32` each) |
 //!
 //! An image with another magic, version or length, or a wrong CRC, is
 //! refused whole and reported; the defaults stay in force. So is an image
@@ -33,8 +33,8 @@ use crate::settings::Settings;
 pub const LAYOUT_VERSION: u8 = 3;
 const MAGIC: u16 = 0xF5E7;
 const HEADER_LEN: usize = 13;
-/// Payload: the 33 `i32` fields of [`Settings`].
-pub const PAYLOAD_LEN: usize = 33 * 4;
+/// Payload: the `i32` slots of [`Settings`] (33 in layout 3).
+pub const PAYLOAD_LEN: usize = crate::settings::SLOTS * 4;
 /// Bytes one slot occupies.
 pub const SLOT_LEN: usize = HEADER_LEN + PAYLOAD_LEN;
 /// Storage the two slots need.
@@ -136,11 +136,10 @@ pub fn load_into(storage: &mut (impl NonVolatile + ?Sized), settings: &mut Setti
     }
     let (slot, _) = newest(storage)?;
     let base = slot * SLOT_LEN;
-    // SAFETY: as in `encode`: `Settings` is `repr(C)` with only `i32`
-    // fields (no padding, asserted size), so any bytes are a valid value.
-    let payload = unsafe { core::slice::from_raw_parts_mut((settings as *mut Settings).cast::<u8>(), PAYLOAD_LEN) };
-    for (index, byte) in payload.iter_mut().enumerate() {
-        *byte = storage.read(base + HEADER_LEN + index);
+    for slot in 0..crate::settings::SLOTS {
+        let at = base + HEADER_LEN + 4 * slot;
+        let bytes = [storage.read(at), storage.read(at + 1), storage.read(at + 2), storage.read(at + 3)];
+        settings.set_slot(slot, i32::from_le_bytes(bytes));
     }
     Ok(Stored { bytes: SLOT_LEN, crc: u16::from_le_bytes([storage.read(base + 7), storage.read(base + 8)]) })
 }
@@ -227,13 +226,6 @@ fn crc16(mut crc: u16, bytes: &[u8]) -> u16 {
     crc
 }
 
-// The payload is the `Settings` struct's own bytes: `#[repr(C)]`, only
-// 32-bit integer fields, so no padding and every bit pattern is a valid
-// value; both targets are little endian, so this is the documented layout
-// (each field's `to_le_bytes`, in declaration order). Field-by-field code
-// cost 2.5 KB of flash on the AVR.
-const _: () = assert!(core::mem::size_of::<Settings>() == PAYLOAD_LEN);
-const _: () = assert!(cfg!(target_endian = "little"));
 
 fn encode(settings: &Settings, sequence: u16, image: &mut [u8; SLOT_LEN]) {
     image[0..2].copy_from_slice(&MAGIC.to_le_bytes());
@@ -241,10 +233,9 @@ fn encode(settings: &Settings, sequence: u16, image: &mut [u8; SLOT_LEN]) {
     image[3..5].copy_from_slice(&sequence.to_le_bytes());
     image[5..7].copy_from_slice(&(PAYLOAD_LEN as u16).to_le_bytes());
     image[9..13].copy_from_slice(&crate::machine_file::FINGERPRINT.to_le_bytes());
-    // SAFETY: `Settings` is `repr(C)` with only `i32` fields (no padding,
-    // asserted size), so all its PAYLOAD_LEN bytes are initialised.
-    let bytes = unsafe { core::slice::from_raw_parts((settings as *const Settings).cast::<u8>(), PAYLOAD_LEN) };
-    image[HEADER_LEN..].copy_from_slice(bytes);
+    for (slot, bytes) in image[HEADER_LEN..].chunks_exact_mut(4).enumerate() {
+        bytes.copy_from_slice(&settings.slot(slot).to_le_bytes());
+    }
     let crc = image_crc(image);
     image[7..9].copy_from_slice(&crc.to_le_bytes());
 }
@@ -302,6 +293,34 @@ mod tests {
         settings.steps_per_mm_milli[3] = 415_500;
         settings.junction_deviation_um = 20;
         settings
+    }
+
+    /// Layout 3, byte by byte as an earlier firmware wrote it (the
+    /// header, then each slot's `i32` little endian): EEPROMs in the
+    /// field keep loading.
+    #[test]
+    fn a_layout_3_image_written_byte_by_byte_loads() {
+        let mut slots: std::vec::Vec<i32> = (1..=33).collect();
+        slots[0] = 80_125; // M92 X80.125
+        let mut image = std::vec![0xE7, 0xF5, 3, 7, 0, 132, 0, 0, 0];
+        image.extend_from_slice(&crate::machine_file::FINGERPRINT.to_le_bytes());
+        for value in &slots {
+            image.extend_from_slice(&value.to_le_bytes());
+        }
+        let crc = crc16(crc16(0xFFFF, &image[..7]), &image[9..]);
+        image[7..9].copy_from_slice(&crc.to_le_bytes());
+        let mut eeprom = MemoryStorage::<512>::new();
+        eeprom.bytes[..image.len()].copy_from_slice(&image);
+        let (settings, stored) = load(&mut eeprom).unwrap();
+        assert_eq!(stored.bytes, 145);
+        assert_eq!(settings.steps_per_mm_milli, [80_125, 2, 3, 4]);
+        assert_eq!(settings.flow_percent, 21);
+        assert_eq!(settings.delta_trim_um, [31, 32, 33]);
+        // And saved back, the same bytes (sequence 8 in the other slot).
+        save(&mut eeprom, &settings).unwrap();
+        let mut again = read_slot(&mut eeprom, 1);
+        again[3] = 7;
+        assert_eq!(&again[13..], &image[13..]);
     }
 
     #[test]

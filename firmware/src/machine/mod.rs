@@ -198,7 +198,7 @@ impl<'q> Machine<'q> {
         // SAFETY: `motion` is initialised (caller), so reading it is sound;
         // the defaults are built in their field (no copy through the stack).
         unsafe {
-            Settings::init_for_machine(&mut *addr_of_mut!((*p).defaults).cast(), &(*p).motion.config);
+            init_defaults(&mut *addr_of_mut!((*p).defaults).cast(), &(*p).motion.config);
         }
         // SAFETY: `defaults` is initialised now; `apply_settings` touches
         // `motion` only.
@@ -992,8 +992,8 @@ impl<'q> Machine<'q> {
             if word.field == BOTH_ACCELERATIONS {
                 self.settings.print_accel_um_per_s2 = value;
                 self.settings.travel_accel_um_per_s2 = value;
-            } else if let Some(slot) = self.settings.field_mut(word.field) {
-                *slot = value;
+            } else {
+                self.settings.set_slot(usize::from(word.field), value);
             }
         }
         self.apply_motion_settings();
@@ -1123,7 +1123,7 @@ fn set_scaled(command: &Command, letter: u8, digits: u8, min: i32, max: i32, slo
     Ok(())
 }
 
-/// One word of a settings command: `M<code> <letter><value>` sets field
+/// One word of a settings command: `M<code> <letter><value>` sets slot
 /// `field` of [`Settings`] (see [`settings::field`]) to the value in units
 /// of 10^-`digits`, which must lie in `WORD_RANGES[range]`.
 #[derive(Clone, Copy)]
@@ -1192,6 +1192,29 @@ static SETTING_WORDS: crate::progmem::Flash<[SettingWord; 22]> = {
         word(221, b'S', 0, 4, FLOW_PERCENT),
     ])
 };
+
+/// The machine's default settings, in place: what its machine file's
+/// motion configuration says (steps/mm, feeds, accelerations, junction
+/// deviation, a delta's geometry) in milli-units, the rest as on the Prusa
+/// i3 ([`settings::PRUSA_I3`]); the heaters' gains follow in
+/// [`Machine::use_machine_file`]. Here, above both the settings and the
+/// motion core, so that neither imports the other's.
+fn init_defaults(slot: &mut MaybeUninit<Settings>, config: &MotionConfig) {
+    let milli = |figure: f32| crate::motion::math::round_to_i32(figure * 1000.0);
+    let defaults = slot.write(settings::PRUSA_I3.load());
+    defaults.steps_per_mm_milli = config.steps_per_mm.map(milli);
+    defaults.max_feed_um_per_s = config.max_feed.map(milli);
+    defaults.max_accel_um_per_s2 = config.max_accel.map(milli);
+    defaults.print_accel_um_per_s2 = milli(config.print_accel);
+    defaults.retract_accel_um_per_s2 = milli(config.retract_accel);
+    defaults.travel_accel_um_per_s2 = milli(config.travel_accel);
+    defaults.junction_deviation_um = milli(config.junction_deviation);
+    #[cfg(feature = "delta")]
+    if let crate::motion::kinematics::MachineKinematics::Delta(delta) = &config.kinematics {
+        defaults.delta_geometry_um = [milli(delta.rod_length()), milli(delta.radius()), milli(delta.homed_height)];
+        defaults.delta_trim_um = delta.endstop_trim.map(milli);
+    }
+}
 
 /// Gains as the settings keep them (Marlin's units × 10⁴ in `i32`s).
 fn gains_setting(gains: Gains) -> [i32; 3] {

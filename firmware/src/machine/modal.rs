@@ -21,6 +21,8 @@ use crate::gcode::{Command, Decimal, Code};
 pub const AXIS_LETTERS: [u8; 4] = [b'X', b'Y', b'Z', b'E'];
 /// Number of axes the executor tracks.
 pub const AXES: usize = AXIS_LETTERS.len();
+// The per-axis settings are these axes.
+const _: () = assert!(AXES == crate::settings::AXES);
 
 /// Largest coordinate accepted, in µm (±2000 m leaves headroom in `i32`).
 pub const MAX_COORDINATE_UM: i32 = 2_000_000_000;

@@ -895,3 +895,34 @@ fn m115_names_what_the_tables_list_for_each_machine() {
     // PrusaSlicer's version check: the same reply, whatever the arguments.
     assert_eq!(converse(&mut powder_bed(), 0, "M115 U3.13.0\n"), converse(&mut powder_bed(), 0, "M115\n"));
 }
+
+// --- the settings declaration (issue 24) --------------------------------------
+
+#[test]
+fn every_configured_figure_lands_in_its_default_setting() {
+    let mut config = MotionConfig::prusa_i3();
+    config.steps_per_mm = [1.0, 2.0, 3.0, 4.0];
+    config.max_feed = [5.0, 6.0, 7.0, 8.0];
+    config.max_accel = [9.0, 10.0, 11.0, 12.0];
+    config.print_accel = 13.0;
+    config.retract_accel = 14.0;
+    config.travel_accel = 15.0;
+    config.junction_deviation = 0.0165;
+    let mut slot = MaybeUninit::uninit();
+    init_defaults(&mut slot, &config);
+    // SAFETY: `init_defaults` writes the whole value.
+    let settings = unsafe { slot.assume_init() };
+    assert_eq!(settings.steps_per_mm_milli, [1000, 2000, 3000, 4000]);
+    assert_eq!(settings.max_feed_um_per_s, [5000, 6000, 7000, 8000]);
+    assert_eq!(settings.max_accel_um_per_s2, [9000, 10000, 11000, 12000]);
+    assert_eq!((settings.print_accel_um_per_s2, settings.retract_accel_um_per_s2, settings.travel_accel_um_per_s2), (13000, 14000, 15000));
+    assert_eq!(settings.junction_deviation_um, 17);
+    let prusa = Settings::prusa_i3();
+    assert_eq!(settings.min_segment_time_us, prusa.min_segment_time_us);
+    assert_eq!((settings.hotend_pid, settings.bed_pid), (prusa.hotend_pid, prusa.bed_pid));
+}
+
+#[test]
+fn the_prusa_i3s_machine_file_gives_the_prusa_i3s_defaults() {
+    assert_eq!(new_machine().settings(), &Settings::prusa_i3());
+}
