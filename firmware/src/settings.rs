@@ -237,6 +237,7 @@ impl Settings {
                             2,
                         ),
                         WHOLE => (value, 0),
+                        // THOUSANDTHS
                         _ => (value, 3),
                     };
                     ufmt::uwrite!(out, "{}", Fixed { mantissa, digits })?;
@@ -254,9 +255,11 @@ const FIELD_MASK: u8 = 0x1F;
 const MILLI: u8 = 0x80;
 /// A whole number.
 const WHOLE: u8 = 0xA0;
+/// Thousandths, with three decimals.
+const THOUSANDTHS: u8 = 0xC0;
 
-/// `M503`'s text with markers for the values (see [`FIELD_MASK`]), in two
-/// parts ended by NUL: up to the hot end's gains, up to the bed's. Every
+/// `M503`'s text ([`M503_PARTS`]) with markers for the values (see
+/// [`FIELD_MASK`]), in two parts ended by NUL: up to the hot end's gains, up to the bed's. Every
 /// line after the first starts with `echo:`: stored without it, and
 /// [`Settings::write_script`] writes it after each newline.
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
@@ -298,29 +301,121 @@ const fn script_bytes() -> [u8; SCRIPT_LEN] {
     bytes
 }
 
-const M503_TEXT: &[u8] = b"echo:; Steps per unit:\necho:  M92 X\x80 Y\x81 Z\x82 E\x83\n\
-echo:; Max feedrates (units/s):\necho:  M203 X\x84 Y\x85 Z\x86 E\x87\n\
-echo:; Max Acceleration (units/s2):\necho:  M201 X\x88 Y\x89 Z\x8a E\x8b\n\
-echo:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\necho:  M204 P\x8c R\x8d T\x8e\n\
-echo:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\n\
-echo:  M205 B\xb2 S\x90 T\x91 J\xcf\n\
-echo:; Feedrate and flow:\necho:  M220 S\xb3\necho:  M221 S\xb4\n\
-echo:; Hotend PID:\necho:  \0\
-\necho:; Bed PID:\necho:  \0";
+/// `M503`'s text, a piece at a time: text, or a slot's value and how
+/// it prints.
+#[derive(Clone, Copy)]
+enum Part {
+    Text(&'static str),
+    /// A milli-unit value, with two decimals (Marlin's, rounded).
+    Milli(usize),
+    /// A whole number.
+    Whole(usize),
+    /// A value in thousandths, with three decimals.
+    Thousandths(usize),
+    /// The end of a part of the script (a heater's gains follow).
+    End,
+}
 
-const _: () = {
-    // The markers above name these fields.
+const M503_PARTS: &[Part] = {
     use field::*;
-    assert!(
-        STEPS_PER_MM == 0
-            && MAX_FEED == 4
-            && MAX_ACCEL == 8
-            && PRINT_ACCEL == 12
-            && JUNCTION_DEVIATION == 15
-    );
-    assert!(MIN_FEED == 16 && MIN_SEGMENT_TIME == 18 && FEED_PERCENT == 19 && FLOW_PERCENT == 20);
-    assert!(HOTEND_PID == FLOW_PERCENT + 1 && BED_PID == HOTEND_PID + 3 && BED_PID + 3 + 6 == SLOTS);
+    use Part::{End, Milli, Text, Thousandths, Whole};
+    &[
+        Text("echo:; Steps per unit:\necho:  M92 X"),
+        Milli(STEPS_PER_MM),
+        Text(" Y"),
+        Milli(STEPS_PER_MM + 1),
+        Text(" Z"),
+        Milli(STEPS_PER_MM + 2),
+        Text(" E"),
+        Milli(STEPS_PER_MM + 3),
+        Text("\necho:; Max feedrates (units/s):\necho:  M203 X"),
+        Milli(MAX_FEED),
+        Text(" Y"),
+        Milli(MAX_FEED + 1),
+        Text(" Z"),
+        Milli(MAX_FEED + 2),
+        Text(" E"),
+        Milli(MAX_FEED + 3),
+        Text("\necho:; Max Acceleration (units/s2):\necho:  M201 X"),
+        Milli(MAX_ACCEL),
+        Text(" Y"),
+        Milli(MAX_ACCEL + 1),
+        Text(" Z"),
+        Milli(MAX_ACCEL + 2),
+        Text(" E"),
+        Milli(MAX_ACCEL + 3),
+        Text("\necho:; Acceleration (units/s2) (P<print-accel> R<retract-accel> T<travel-accel>):\necho:  M204 P"),
+        Milli(PRINT_ACCEL),
+        Text(" R"),
+        Milli(RETRACT_ACCEL),
+        Text(" T"),
+        Milli(TRAVEL_ACCEL),
+        Text("\necho:; Advanced (B<min_segment_time_us> S<min_feedrate> T<min_travel_feedrate> J<junc_dev>):\necho:  M205 B"),
+        Whole(MIN_SEGMENT_TIME),
+        Text(" S"),
+        Milli(MIN_FEED),
+        Text(" T"),
+        Milli(MIN_TRAVEL_FEED),
+        Text(" J"),
+        Thousandths(JUNCTION_DEVIATION),
+        Text("\necho:; Feedrate and flow:\necho:  M220 S"),
+        Whole(FEED_PERCENT),
+        Text("\necho:  M221 S"),
+        Whole(FLOW_PERCENT),
+        Text("\necho:; Hotend PID:\necho:  "),
+        End,
+        Text("\necho:; Bed PID:\necho:  "),
+        End,
+    ]
 };
+
+/// [`M503_PARTS`] as bytes (`bytes` long enough, or empty to measure);
+/// the length.
+const fn m503_bytes(bytes: &mut [u8]) -> usize {
+    let mut at = 0;
+    let mut i = 0;
+    while i < M503_PARTS.len() {
+        let marker = match M503_PARTS[i] {
+            Part::Text(text) => {
+                let text = text.as_bytes();
+                let mut k = 0;
+                while k < text.len() {
+                    assert!(text[k] > 0 && text[k] < 0x80);
+                    if at + k < bytes.len() {
+                        bytes[at + k] = text[k];
+                    }
+                    k += 1;
+                }
+                at += text.len();
+                i += 1;
+                continue;
+            }
+            Part::Milli(slot) => MILLI | marker_slot(slot),
+            Part::Whole(slot) => WHOLE | marker_slot(slot),
+            Part::Thousandths(slot) => THOUSANDTHS | marker_slot(slot),
+            Part::End => 0,
+        };
+        if at < bytes.len() {
+            bytes[at] = marker;
+        }
+        at += 1;
+        i += 1;
+    }
+    at
+}
+
+const fn marker_slot(slot: usize) -> u8 {
+    assert!(slot <= FIELD_MASK as usize, "a slot past the M503 script's markers");
+    slot as u8
+}
+
+const M503_LEN: usize = m503_bytes(&mut []);
+const M503_BYTES: [u8; M503_LEN] = {
+    let mut bytes = [0; M503_LEN];
+    m503_bytes(&mut bytes);
+    bytes
+};
+const M503_TEXT: &[u8] = &M503_BYTES;
 
 #[cfg(test)]
 mod tests {
