@@ -47,15 +47,16 @@ impl<const N: usize> Slots for [i32; N] {
 }
 
 /// The settings, declared once: each row is a field of [`Settings`] (its
-/// reader is the field itself) and its place in the saved image (rows in
+/// reader is the field itself), its place in the saved image (rows in
 /// order, slots in order: [`field`] numbers the first slot of each, which
-/// the setting commands' words, `M503` and the storage use). A new setting
-/// is a new row here (last, so stored images keep their layout; bump
-/// `storage::LAYOUT_VERSION`), its default in [`Settings::prusa_i3`] (or
-/// from the machine file, `Machine::init_other_fields`), its words in
-/// `machine::SETTING_WORDS` and its line in [`M503_TEXT`].
+/// `M503` and the storage use) and, for the generic setting commands, the
+/// command, letters, decimals and range that set it ([`words`]). A new
+/// setting is a new row here (last, so stored images keep their layout;
+/// bump `storage::LAYOUT_VERSION`), its default in [`Settings::prusa_i3`]
+/// (or from the machine file, `machine::init_defaults`) and its line in
+/// [`M503_PARTS`].
 macro_rules! declare_settings {
-    ($($(#[$doc:meta])* $name:ident / $number:ident: $ty:ty,)*) => {
+    ($($(#[$doc:meta])* $name:ident / $number:ident: $ty:ty $(=> $code:literal $letters:literal $digits:literal $range:ident)?,)*) => {
         /// Every tunable value, as the setting commands change them and
         /// the storage keeps them (see [`declare_settings`]).
         #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -73,6 +74,11 @@ macro_rules! declare_settings {
 
         /// Slots in the saved image.
         pub const SLOTS: usize = 0 $(+ <$ty as Slots>::LEN)*;
+
+        /// The rows set by the generic setting commands: code, letters
+        /// (one per slot), decimals, range, first slot.
+        const WORD_ROWS: &[(u16, &[u8], u8, (i32, i32), usize)] =
+            &[$($(($code, $letters, $digits, range::$range, field::$number),)?)*];
 
         impl Settings {
             /// Slot `index` of the saved image (0 past the last).
@@ -102,31 +108,38 @@ macro_rules! declare_settings {
     (@numbers $at:expr;) => {};
 }
 
+// A row: `name / SLOT_NUMBER: type`, and for a setting the generic
+// setting commands change, `=> code letters decimals range`: `M<code>`
+// with one letter per slot sets it, the value in units of 10^-decimals,
+// which must lie in the [`range`] named (values in milli-units, decimals
+// 3, unless counted in whole units). Within a command, the words are read
+// in row order (the first refused one is the error reported).
 declare_settings! {
     /// `M92`: steps per mm × 1000, per axis X Y Z E.
-    steps_per_mm_milli / STEPS_PER_MM: [i32; AXES],
+    steps_per_mm_milli / STEPS_PER_MM: [i32; AXES] => 92 b"XYZE" 3 POSITIVE,
     /// `M203`: maximum feed rate per axis, µm/s.
-    max_feed_um_per_s / MAX_FEED: [i32; AXES],
+    max_feed_um_per_s / MAX_FEED: [i32; AXES] => 203 b"XYZE" 3 POSITIVE,
     /// `M201`: maximum acceleration per axis, µm/s².
-    max_accel_um_per_s2 / MAX_ACCEL: [i32; AXES],
-    /// `M204 P`: acceleration of printing moves, µm/s².
-    print_accel_um_per_s2 / PRINT_ACCEL: i32,
+    max_accel_um_per_s2 / MAX_ACCEL: [i32; AXES] => 201 b"XYZE" 3 POSITIVE,
+    /// `M204 P`: acceleration of printing moves, µm/s² (`M204 S` sets it
+    /// and the travel acceleration: `machine::SETTING_WORDS`).
+    print_accel_um_per_s2 / PRINT_ACCEL: i32 => 204 b"P" 3 POSITIVE,
     /// `M204 R`: acceleration of retracts (E-only moves), µm/s².
-    retract_accel_um_per_s2 / RETRACT_ACCEL: i32,
+    retract_accel_um_per_s2 / RETRACT_ACCEL: i32 => 204 b"R" 3 POSITIVE,
     /// `M204 T`: acceleration of travel (non-extruding) moves, µm/s².
-    travel_accel_um_per_s2 / TRAVEL_ACCEL: i32,
+    travel_accel_um_per_s2 / TRAVEL_ACCEL: i32 => 204 b"T" 3 POSITIVE,
     /// `M205 J`: junction deviation, µm (Marlin's default 0.013 mm).
-    junction_deviation_um / JUNCTION_DEVIATION: i32,
+    junction_deviation_um / JUNCTION_DEVIATION: i32 => 205 b"J" 3 JUNCTION_DEVIATION,
     /// `M205 S`: minimum feed rate of printing moves, µm/s.
-    min_feed_um_per_s / MIN_FEED: i32,
+    min_feed_um_per_s / MIN_FEED: i32 => 205 b"S" 3 NOT_NEGATIVE,
     /// `M205 T`: minimum feed rate of travel moves, µm/s.
-    min_travel_feed_um_per_s / MIN_TRAVEL_FEED: i32,
+    min_travel_feed_um_per_s / MIN_TRAVEL_FEED: i32 => 205 b"T" 3 NOT_NEGATIVE,
     /// `M205 B`: minimum segment time, µs.
-    min_segment_time_us / MIN_SEGMENT_TIME: i32,
+    min_segment_time_us / MIN_SEGMENT_TIME: i32 => 205 b"B" 0 SEGMENT_TIME,
     /// `M220 S`: feed-rate override, percent.
-    feed_percent / FEED_PERCENT: i32,
+    feed_percent / FEED_PERCENT: i32 => 220 b"S" 0 PERCENT,
     /// `M221 S`: flow (extrusion) override, percent.
-    flow_percent / FLOW_PERCENT: i32,
+    flow_percent / FLOW_PERCENT: i32 => 221 b"S" 0 PERCENT,
     /// `M301 P I D` (hot end), Marlin's units × 10⁴ (see
     /// `thermal::Gains`); `M303 U1` sets them too. Default: the machine
     /// file's.
@@ -138,6 +151,62 @@ declare_settings! {
     delta_geometry_um / DELTA_GEOMETRY: [i32; 3],
     /// `M666 X Y Z` (a delta): each tower's endstop trim, µm.
     delta_trim_um / DELTA_TRIM: [i32; 3],
+}
+
+/// The value ranges of the setting words.
+pub mod range {
+    /// Strictly positive (steps/mm, feed rates, accelerations).
+    pub const POSITIVE: (i32, i32) = (1, i32::MAX);
+    /// Not negative (minimum feed rates).
+    pub const NOT_NEGATIVE: (i32, i32) = (0, i32::MAX);
+    /// Junction deviation, µm: 0.001–0.3 mm.
+    pub const JUNCTION_DEVIATION: (i32, i32) = (1, 300);
+    /// Minimum segment time, µs: up to 1 s.
+    pub const SEGMENT_TIME: (i32, i32) = (0, 1_000_000);
+    /// Feed and flow percent, 10–999 as Marlin clamps.
+    pub const PERCENT: (i32, i32) = (10, 999);
+}
+
+/// One word of a setting command: `M<code> <letter><value>` sets slot
+/// `slot` to the value in units of 10^-`digits`, which must lie in
+/// `min..=max`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Word {
+    pub code: u16,
+    pub letter: u8,
+    pub digits: u8,
+    pub min: i32,
+    pub max: i32,
+    pub slot: u8,
+}
+
+/// Number of [`words`].
+pub const WORDS: usize = {
+    let mut n = 0;
+    let mut r = 0;
+    while r < WORD_ROWS.len() {
+        n += WORD_ROWS[r].1.len();
+        r += 1;
+    }
+    n
+};
+
+/// Every word of the setting commands, in row order, from the declaration.
+pub const fn words() -> [Word; WORDS] {
+    let mut words = [Word { code: 0, letter: 0, digits: 0, min: 0, max: 0, slot: 0 }; WORDS];
+    let (mut at, mut r) = (0, 0);
+    while r < WORD_ROWS.len() {
+        let (code, letters, digits, (min, max), first) = WORD_ROWS[r];
+        let mut k = 0;
+        while k < letters.len() {
+            assert!(first + k < u8::MAX as usize);
+            words[at] = Word { code, letter: letters[k], digits, min, max, slot: (first + k) as u8 };
+            at += 1;
+            k += 1;
+        }
+        r += 1;
+    }
+    words
 }
 
 impl Default for Settings {

@@ -977,8 +977,7 @@ impl<'q> Machine<'q> {
         for index in 0..SETTING_WORDS.len() {
             let Some(word) = SETTING_WORDS.get(index).filter(|word| word.code == number) else { continue };
             let Some(value) = given.next() else { break };
-            let Some((min, max)) = WORD_RANGES.get(usize::from(word.range)) else { continue };
-            set_scaled(command, word.letter, word.digits, min, max, value)?;
+            set_scaled(command, word.letter, word.digits, word.min, word.max, value)?;
         }
         let mut given = values.iter();
         for index in 0..SETTING_WORDS.len() {
@@ -989,11 +988,11 @@ impl<'q> Machine<'q> {
             }
             // `M204 S` sets print and travel together (older hosts send
             // it); its row comes first, so `P` and `T` on the same line win.
-            if word.field == BOTH_ACCELERATIONS {
+            if word.slot == BOTH_ACCELERATIONS {
                 self.settings.print_accel_um_per_s2 = value;
                 self.settings.travel_accel_um_per_s2 = value;
             } else {
-                self.settings.set_slot(usize::from(word.field), value);
+                self.settings.set_slot(usize::from(word.slot), value);
             }
         }
         self.apply_motion_settings();
@@ -1123,75 +1122,28 @@ fn set_scaled(command: &Command, letter: u8, digits: u8, min: i32, max: i32, slo
     Ok(())
 }
 
-/// One word of a settings command: `M<code> <letter><value>` sets slot
-/// `field` of [`Settings`] (see [`settings::field`]) to the value in units
-/// of 10^-`digits`, which must lie in `WORD_RANGES[range]`.
-#[derive(Clone, Copy)]
-struct SettingWord {
-    code: u16,
-    letter: u8,
-    digits: u8,
-    range: u8,
-    field: u8,
-}
-
 /// Most words one settings command takes (`M92 X Y Z E`).
 const MAX_SETTING_WORDS: usize = 4;
 
-/// `SettingWord::field` of `M204 S`: print and travel acceleration both.
+/// `Word::slot` of `M204 S`: print and travel acceleration both.
 const BOTH_ACCELERATIONS: u8 = u8::MAX;
 
-/// The value ranges of [`SETTING_WORDS`], by `range`.
+/// Every word the settings commands take, in the order they are read (the
+/// first refused one is the error reported): the settings declaration's
+/// (`settings::words`), after `M204 S`, which sets two of them.
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static WORD_RANGES: crate::progmem::Flash<[(i32, i32); 5]> = crate::progmem::Flash::new([
-    // Strictly positive (steps/mm, feed rates, accelerations).
-    (1, i32::MAX),
-    // Not negative (minimum feed rates).
-    (0, i32::MAX),
-    // Junction deviation, µm: 0.001–0.3 mm.
-    (1, 300),
-    // Minimum segment time, µs: up to 1 s.
-    (0, 1_000_000),
-    // Feed and flow percent, 10–999 as Marlin clamps.
-    (10, 999),
-]);
-
-const fn word(code: u16, letter: u8, digits: u8, range: u8, field: usize) -> SettingWord {
-    assert!(field < BOTH_ACCELERATIONS as usize);
-    SettingWord { code, letter, digits, range, field: field as u8 }
-}
-
-/// Every word the settings commands take, in the order they are read
-/// (the first refused one is the error reported). Values in milli-units
-/// (`digits` 3) unless counted in whole units.
-#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-static SETTING_WORDS: crate::progmem::Flash<[SettingWord; 22]> = {
-    use settings::field::*;
-    crate::progmem::Flash::new([
-        word(92, b'X', 3, 0, STEPS_PER_MM),
-        word(92, b'Y', 3, 0, STEPS_PER_MM + 1),
-        word(92, b'Z', 3, 0, STEPS_PER_MM + 2),
-        word(92, b'E', 3, 0, STEPS_PER_MM + 3),
-        word(201, b'X', 3, 0, MAX_ACCEL),
-        word(201, b'Y', 3, 0, MAX_ACCEL + 1),
-        word(201, b'Z', 3, 0, MAX_ACCEL + 2),
-        word(201, b'E', 3, 0, MAX_ACCEL + 3),
-        word(203, b'X', 3, 0, MAX_FEED),
-        word(203, b'Y', 3, 0, MAX_FEED + 1),
-        word(203, b'Z', 3, 0, MAX_FEED + 2),
-        word(203, b'E', 3, 0, MAX_FEED + 3),
-        SettingWord { code: 204, letter: b'S', digits: 3, range: 0, field: BOTH_ACCELERATIONS },
-        word(204, b'P', 3, 0, PRINT_ACCEL),
-        word(204, b'R', 3, 0, RETRACT_ACCEL),
-        word(204, b'T', 3, 0, TRAVEL_ACCEL),
-        word(205, b'J', 3, 2, JUNCTION_DEVIATION),
-        word(205, b'S', 3, 1, MIN_FEED),
-        word(205, b'T', 3, 1, MIN_TRAVEL_FEED),
-        word(205, b'B', 0, 3, MIN_SEGMENT_TIME),
-        word(220, b'S', 0, 4, FEED_PERCENT),
-        word(221, b'S', 0, 4, FLOW_PERCENT),
-    ])
-};
+static SETTING_WORDS: crate::progmem::Flash<[settings::Word; settings::WORDS + 1]> = crate::progmem::Flash::new({
+    let declared = settings::words();
+    let (min, max) = settings::range::POSITIVE;
+    let mut words = [settings::Word { code: 204, letter: b'S', digits: 3, min, max, slot: BOTH_ACCELERATIONS }; settings::WORDS + 1];
+    let mut i = 0;
+    while i < declared.len() {
+        assert!(declared[i].slot != BOTH_ACCELERATIONS);
+        words[i + 1] = declared[i];
+        i += 1;
+    }
+    words
+});
 
 /// The machine's default settings, in place: what its machine file's
 /// motion configuration says (steps/mm, feeds, accelerations, junction
