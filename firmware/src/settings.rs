@@ -77,7 +77,7 @@ macro_rules! declare_settings {
 
         /// The rows set by the generic setting commands: code, letters
         /// (one per slot), decimals, range, first slot.
-        const WORD_ROWS: &[(u16, &[u8], u8, (i32, i32), usize)] =
+        const WORD_ROWS: &[(u16, &[u8], u8, u8, usize)] =
             &[$($(($code, $letters, $digits, range::$range, field::$number),)?)*];
 
         impl Settings {
@@ -153,30 +153,36 @@ declare_settings! {
     delta_trim_um / DELTA_TRIM: [i32; 3],
 }
 
-/// The value ranges of the setting words.
+/// The value ranges of the setting words, by number in [`RANGES`].
 pub mod range {
     /// Strictly positive (steps/mm, feed rates, accelerations).
-    pub const POSITIVE: (i32, i32) = (1, i32::MAX);
+    pub const POSITIVE: u8 = 0;
     /// Not negative (minimum feed rates).
-    pub const NOT_NEGATIVE: (i32, i32) = (0, i32::MAX);
+    pub const NOT_NEGATIVE: u8 = 1;
     /// Junction deviation, µm: 0.001–0.3 mm.
-    pub const JUNCTION_DEVIATION: (i32, i32) = (1, 300);
+    pub const JUNCTION_DEVIATION: u8 = 2;
     /// Minimum segment time, µs: up to 1 s.
-    pub const SEGMENT_TIME: (i32, i32) = (0, 1_000_000);
+    pub const SEGMENT_TIME: u8 = 3;
     /// Feed and flow percent, 10–999 as Marlin clamps.
-    pub const PERCENT: (i32, i32) = (10, 999);
+    pub const PERCENT: u8 = 4;
 }
+
+/// The ranges [`range`] numbers, (min, max). By number rather than in
+/// each [`Word`]: a word is copied into the executor's frame, which must
+/// not grow (the Prusa i3's stack margin).
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+pub static RANGES: crate::progmem::Flash<[(i32, i32); 5]> =
+    crate::progmem::Flash::new([(1, i32::MAX), (0, i32::MAX), (1, 300), (0, 1_000_000), (10, 999)]);
 
 /// One word of a setting command: `M<code> <letter><value>` sets slot
 /// `slot` to the value in units of 10^-`digits`, which must lie in
-/// `min..=max`.
+/// [`RANGES`]`[range]`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Word {
     pub code: u16,
     pub letter: u8,
     pub digits: u8,
-    pub min: i32,
-    pub max: i32,
+    pub range: u8,
     pub slot: u8,
 }
 
@@ -193,14 +199,14 @@ pub const WORDS: usize = {
 
 /// Every word of the setting commands, in row order, from the declaration.
 pub const fn words() -> [Word; WORDS] {
-    let mut words = [Word { code: 0, letter: 0, digits: 0, min: 0, max: 0, slot: 0 }; WORDS];
+    let mut words = [Word { code: 0, letter: 0, digits: 0, range: 0, slot: 0 }; WORDS];
     let (mut at, mut r) = (0, 0);
     while r < WORD_ROWS.len() {
-        let (code, letters, digits, (min, max), first) = WORD_ROWS[r];
+        let (code, letters, digits, range, first) = WORD_ROWS[r];
         let mut k = 0;
         while k < letters.len() {
             assert!(first + k < u8::MAX as usize);
-            words[at] = Word { code, letter: letters[k], digits, min, max, slot: (first + k) as u8 };
+            words[at] = Word { code, letter: letters[k], digits, range, slot: (first + k) as u8 };
             at += 1;
             k += 1;
         }
@@ -214,12 +220,6 @@ impl Default for Settings {
         Self::prusa_i3()
     }
 }
-
-/// [`Settings::prusa_i3`] in flash: the defaults of everything the
-/// machine file does not set (on the AVR a `const` this size would be
-/// copied from RAM).
-#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
-pub static PRUSA_I3: crate::progmem::Flash<Settings> = crate::progmem::Flash::new(Settings::prusa_i3());
 
 impl Settings {
     /// SPEC §1: the Cartesian Prusa i3 on RAMPS (A4988 at 1/16, GT2 16-tooth
@@ -522,10 +522,5 @@ mod tests {
         // storage::LAYOUT_VERSION 3: a change here is a new layout.
         assert_eq!(SLOTS, 33);
         assert_eq!((field::HOTEND_PID, field::BED_PID, field::DELTA_GEOMETRY, field::DELTA_TRIM), (21, 24, 27, 30));
-    }
-
-    #[test]
-    fn the_flash_copy_is_the_prusa_i3() {
-        assert_eq!(PRUSA_I3.load(), Settings::prusa_i3());
     }
 }

@@ -977,7 +977,8 @@ impl<'q> Machine<'q> {
         for index in 0..SETTING_WORDS.len() {
             let Some(word) = SETTING_WORDS.get(index).filter(|word| word.code == number) else { continue };
             let Some(value) = given.next() else { break };
-            set_scaled(command, word.letter, word.digits, word.min, word.max, value)?;
+            let Some((min, max)) = settings::RANGES.get(usize::from(word.range)) else { continue };
+            set_scaled(command, word.letter, word.digits, min, max, value)?;
         }
         let mut given = values.iter();
         for index in 0..SETTING_WORDS.len() {
@@ -1134,8 +1135,8 @@ const BOTH_ACCELERATIONS: u8 = u8::MAX;
 #[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
 static SETTING_WORDS: crate::progmem::Flash<[settings::Word; settings::WORDS + 1]> = crate::progmem::Flash::new({
     let declared = settings::words();
-    let (min, max) = settings::range::POSITIVE;
-    let mut words = [settings::Word { code: 204, letter: b'S', digits: 3, min, max, slot: BOTH_ACCELERATIONS }; settings::WORDS + 1];
+    let range = settings::range::POSITIVE;
+    let mut words = [settings::Word { code: 204, letter: b'S', digits: 3, range, slot: BOTH_ACCELERATIONS }; settings::WORDS + 1];
     let mut i = 0;
     while i < declared.len() {
         assert!(declared[i].slot != BOTH_ACCELERATIONS);
@@ -1148,12 +1149,17 @@ static SETTING_WORDS: crate::progmem::Flash<[settings::Word; settings::WORDS + 1
 /// The machine's default settings, in place: what its machine file's
 /// motion configuration says (steps/mm, feeds, accelerations, junction
 /// deviation, a delta's geometry) in milli-units, the rest as on the Prusa
-/// i3 ([`settings::PRUSA_I3`]); the heaters' gains follow in
+/// i3 ([`Settings::prusa_i3`]); the heaters' gains follow in
 /// [`Machine::use_machine_file`]. Here, above both the settings and the
 /// motion core, so that neither imports the other's.
+///
+/// The constant is written in place (stores of immediates, measured: no
+/// RAM); a copy loaded from a flash table went through a 132-byte
+/// temporary at boot, where the Prusa i3 with every option reaches its
+/// deepest stack (8 bytes more than this).
 fn init_defaults(slot: &mut MaybeUninit<Settings>, config: &MotionConfig) {
     let milli = |figure: f32| crate::motion::math::round_to_i32(figure * 1000.0);
-    let defaults = slot.write(settings::PRUSA_I3.load());
+    let defaults = slot.write(Settings::prusa_i3());
     defaults.steps_per_mm_milli = config.steps_per_mm.map(milli);
     defaults.max_feed_um_per_s = config.max_feed.map(milli);
     defaults.max_accel_um_per_s2 = config.max_accel.map(milli);
