@@ -221,6 +221,11 @@ impl Default for Settings {
     }
 }
 
+/// [`Settings::prusa_i3`] in flash: the defaults of everything the
+/// machine file does not set.
+#[cfg_attr(target_arch = "avr", link_section = ".progmem.data")]
+pub static PRUSA_I3: crate::progmem::Flash<Settings> = crate::progmem::Flash::new(Settings::prusa_i3());
+
 impl Settings {
     /// SPEC §1: the Cartesian Prusa i3 on RAMPS (A4988 at 1/16, GT2 16-tooth
     /// pulleys: 100 steps/mm on X and Y; M8 Z rods: 400 steps/mm; E 93).

@@ -1149,17 +1149,17 @@ static SETTING_WORDS: crate::progmem::Flash<[settings::Word; settings::WORDS + 1
 /// The machine's default settings, in place: what its machine file's
 /// motion configuration says (steps/mm, feeds, accelerations, junction
 /// deviation, a delta's geometry) in milli-units, the rest as on the Prusa
-/// i3 ([`Settings::prusa_i3`]); the heaters' gains follow in
+/// i3 ([`settings::PRUSA_I3`]); the heaters' gains follow in
 /// [`Machine::use_machine_file`]. Here, above both the settings and the
 /// motion core, so that neither imports the other's.
 ///
-/// The constant is written in place (stores of immediates, measured: no
-/// RAM); a copy loaded from a flash table went through a 132-byte
-/// temporary at boot, where the Prusa i3 with every option reaches its
-/// deepest stack (8 bytes more than this).
+/// The boot is where the Prusa i3 with every option reaches its deepest
+/// stack: `Settings::prusa_i3()` written in place would save 8 bytes
+/// there, but that build reset in a loop on QEMU's Mega 2560 right after
+/// boot (not understood yet; simavr ran it): the copy out of flash stays.
 fn init_defaults(slot: &mut MaybeUninit<Settings>, config: &MotionConfig) {
     let milli = |figure: f32| crate::motion::math::round_to_i32(figure * 1000.0);
-    let defaults = slot.write(Settings::prusa_i3());
+    let defaults = slot.write(settings::PRUSA_I3.load());
     defaults.steps_per_mm_milli = config.steps_per_mm.map(milli);
     defaults.max_feed_um_per_s = config.max_feed.map(milli);
     defaults.max_accel_um_per_s2 = config.max_accel.map(milli);
