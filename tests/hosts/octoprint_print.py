@@ -61,6 +61,16 @@ def fail(message):
     sys.exit(1)
 
 
+def die_with_parent():
+    """In the server's process: SIGTERM when this script dies (a test that
+    panics kills the script; the server must not outlive it)."""
+    import ctypes
+    import signal
+
+    PR_SET_PDEATHSIG = 1
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
 def configure():
     os.makedirs(BASEDIR, exist_ok=True)
     with open(os.path.join(BASEDIR, "config.yaml"), "w", encoding="utf-8") as f:
@@ -175,7 +185,7 @@ def main():
         # OctoPrint refuses root unless told (CI containers run as root).
         command.append("--iknowwhatimdoing")
     server_output = open(os.path.join(BASEDIR, "serve-output.txt"), "w", encoding="utf-8")
-    server = subprocess.Popen(command, stdout=server_output, stderr=subprocess.STDOUT)
+    server = subprocess.Popen(command, stdout=server_output, stderr=subprocess.STDOUT, preexec_fn=die_with_parent)
     try:
         wait_for_server(server)
         api = Api()
