@@ -9,6 +9,11 @@
 //! line is accepted as is (plain terminals), and a numbered line without a
 //! checksum is refused (a number without a checksum protects nothing).
 //!
+//! A line with a checksum but no `N` (its `N` was hit by line noise) is
+//! evidence of numbering: once the host has numbered its lines it is
+//! answered with `Resend:` for the next expected line, so a numbering host
+//! converges whichever byte a flip hits.
+//!
 //! A line that lost bytes in reception is refused the same way when it was
 //! numbered (or, when its start was lost, once the host has used line
 //! numbers); an unnumbered line is never answered with `Resend:` (the host
@@ -114,7 +119,15 @@ impl HostProtocol {
             }
             let (number, used) = parse_line_number(&text[start + 1..star]).ok_or(LineRejection::MalformedHeader)?;
             (&text[start + 1 + used..star], Some(number))
-        } else if star.is_some() {
+        } else if let Some(star) = star {
+            // A checksum field without an `N`: the host numbered this line
+            // and the line lost its number on the way (a flipped bit
+            // turned the `N` into another byte). If the host numbers its
+            // lines, ask for the next expected line as Marlin does, or the
+            // host never learns the line was lost. A lone `*` or one
+            // followed by anything but a checksum is no evidence of
+            // numbering: no resend (a terminal user typed it).
+            self.resend = self.numbered && parse_checksum(&text[star + 1..]).is_some();
             return Err(LineRejection::NoLineNumberWithChecksum);
         } else {
             (text, None)
@@ -320,7 +333,7 @@ mod tests {
         let cases: [(Line<'_>, LineRejection); 4] = [
             (Line::TooLong { numbered: false }, LineRejection::TooLong),
             (Line::Text(b"*"), LineRejection::NoLineNumberWithChecksum),
-            (Line::Text(b"G1 X5*12"), LineRejection::NoLineNumberWithChecksum),
+            (Line::Text(b"M118 JOB5*M118 JOB6"), LineRejection::NoLineNumberWithChecksum),
             (Line::Damaged { numbered: Some(false) }, LineRejection::Damaged),
         ];
         for (line, expected) in cases {
@@ -338,6 +351,34 @@ mod tests {
             p.write_rejection(rejection, &mut out).unwrap();
             assert!(out.0.contains("Resend: 2"), "{}", out.0);
         }
+    }
+
+    /// Issue 22: a flip that destroys the `N` of a numbered line left
+    /// `Error:No Line Number with checksum` without `Resend:`, and the host
+    /// never resent the line. Now the next expected line is asked for.
+    #[test]
+    fn a_numbered_line_that_lost_its_n_is_resent() {
+        let mut p = HostProtocol::new();
+        accept(&mut p, &with_checksum("N1 G28")).unwrap();
+        // `N` (0x4E) with bit 0 flipped is `O`.
+        let line = with_checksum("N2 G1 X5").replacen('N', "O", 1);
+        let rejection = accept(&mut p, &line).unwrap_err();
+        assert_eq!(rejection, LineRejection::NoLineNumberWithChecksum);
+        let mut out = Text::default();
+        p.write_rejection(rejection, &mut out).unwrap();
+        assert_eq!(out.0, "Error:No Line Number with checksum, Last Line: 1\nResend: 2\nok\n");
+        assert_eq!(accept(&mut p, &with_checksum("N2 G1 X5")), Ok(" G1 X5".into()));
+    }
+
+    /// Before any numbered line, a checksum alone is no evidence of
+    /// numbering: the error, no `Resend:`.
+    #[test]
+    fn a_checksum_without_number_from_a_host_that_never_numbered_is_not_resent() {
+        let mut p = HostProtocol::new();
+        let rejection = accept(&mut p, "G28*18").unwrap_err();
+        let mut out = Text::default();
+        p.write_rejection(rejection, &mut out).unwrap();
+        assert_eq!(out.0, "Error:No Line Number with checksum\nok\n");
     }
 
     #[test]

@@ -13,12 +13,10 @@
 use hal_sim::board::SimBoard;
 use proptest::prelude::*;
 
-/// A fixed seed: the same 48 streams on every run. With random seeds a
-/// flip that turns the `N` of the job's last line into another letter made
-/// a line without its number (`Error:No Line Number with checksum`, no
-/// `Resend:`): the host never learns that line was lost. Open finding for
-/// the protocol (Marlin asks for a resend there); until it is settled, CI
-/// runs the streams that pin down everything else.
+/// A fixed seed: the same 48 streams on every run (a failure in CI is then
+/// one that reproduces). The flip that made seeds unsafe before, one that
+/// turns a line's `N` into another letter, is pinned down on its own by
+/// [`a_line_that_lost_its_n_is_resent_even_the_last_one`].
 fn config() -> ProptestConfig {
     ProptestConfig { cases: 48, rng_seed: proptest::test_runner::RngSeed::Fixed(0x5eed_f00d), ..ProptestConfig::default() }
 }
@@ -70,6 +68,12 @@ struct Run {
 /// printcore's loop against the simulated board. `numbered`: N/checksum on
 /// every line (after `N-1 M110`); otherwise lines go out verbatim.
 fn stream(lines: usize, numbered: bool, seed: u64, per_million: u64, preamble: &[&str]) -> Run {
+    stream_losing_n(lines, numbered, seed, per_million, preamble, None)
+}
+
+/// [`stream`], and the first time job line `lose_n_of` goes out, its `N`
+/// becomes `O` (one bit flipped).
+fn stream_losing_n(lines: usize, numbered: bool, seed: u64, per_million: u64, preamble: &[&str], mut lose_n_of: Option<usize>) -> Run {
     let mut board = SimBoard::new();
     board.take_output();
     let mut noise = Noise { state: seed | 1, per_million };
@@ -92,7 +96,12 @@ fn stream(lines: usize, numbered: bool, seed: u64, per_million: u64, preamble: &
                 clear = false;
                 None
             } else if next < job.len() {
-                let text = if numbered { with_checksum(&format!("N{next} {}", job[next])) } else { job[next].clone() };
+                let mut text = if numbered { with_checksum(&format!("N{next} {}", job[next])) } else { job[next].clone() };
+                if lose_n_of == Some(next) {
+                    lose_n_of = None;
+                    text = text.replacen('N', "O", 1);
+                    run.flips += 1;
+                }
                 next += 1;
                 Some(text)
             } else {
@@ -164,6 +173,24 @@ proptest! {
         prop_assert!(!after_preamble.contains("Resend:"), "{}", run.output);
         // (Nothing protects an unnumbered line: a flipped digit runs as
         // another line, so order is not asserted here.)
+    }
+}
+
+/// A flip that turns a numbered line's `N` into `O` leaves a line with a
+/// checksum and no number (`Error:No Line Number with checksum`). The
+/// firmware asks for the next expected line, so the host resends it: the
+/// job still runs whole, once and in order — also when the line is the
+/// job's last, after which no other line would reveal the gap.
+#[test]
+fn a_line_that_lost_its_n_is_resent_even_the_last_one() {
+    for lost in [0, 57, 119] {
+        let run = stream_losing_n(120, true, 1, 0, &[], Some(lost));
+        assert_eq!(run.flips, 1);
+        assert_eq!(run.executed, (0..120).collect::<Vec<_>>(), "line {lost}\n{}", run.output);
+        assert!(run.finished, "line {lost}\n{}", run.output);
+        let refusal = format!("Error:No Line Number with checksum, Last Line: {}\nResend: {lost}\nok\n", lost as i64 - 1);
+        assert!(run.output.contains(&refusal), "line {lost}\n{}", run.output);
+        assert_eq!(run.resends, 1, "line {lost}\n{}", run.output);
     }
 }
 

@@ -2,6 +2,7 @@
 //! 2560 release ELF, and talking to it on an emulated board.
 
 pub mod emulated;
+pub mod octoprint;
 pub mod printcore;
 pub mod qemu;
 pub mod qemu_arm;

@@ -25,6 +25,12 @@ pub enum Flow {
     /// misbehaving host, or a paste into a terminal): tests receive
     /// overflow handling.
     Burst,
+    /// Up to this many lines sent and not yet acknowledged: a host that
+    /// sends faster than the firmware takes lines (OctoPrint after a
+    /// timeout, a streaming host that counts on the receive buffer). A
+    /// `Resend:` empties the window: the host goes back to the line asked
+    /// for and counts what it sent before as lost.
+    InFlight(usize),
 }
 
 #[derive(Clone, Debug)]
@@ -130,6 +136,8 @@ pub struct Host {
     /// The host's own frame, cycles (10 bits at `baud`).
     own_frame_cycles: f64,
     awaiting_ok: bool,
+    /// Lines sent and not yet acknowledged ([`Flow::InFlight`]).
+    in_flight: usize,
     rx_line: Vec<u8>,
     rx_line_first_cycle: u64,
     pub sent: Vec<SentLine>,
@@ -157,6 +165,7 @@ impl Host {
             frame_cycles,
             own_frame_cycles: frame_cycles,
             awaiting_ok: false,
+            in_flight: 0,
             rx_line: Vec::new(),
             rx_line_first_cycle: 0,
             sent: Vec::new(),
@@ -222,7 +231,11 @@ impl Host {
         self.next >= self.job.len()
             && !self.preamble_pending
             && self.wire.is_empty()
-            && (self.config.flow == Flow::Burst || !self.awaiting_ok)
+            && match self.config.flow {
+                Flow::Burst => true,
+                Flow::OkPerLine => !self.awaiting_ok,
+                Flow::InFlight(_) => self.in_flight == 0,
+            }
     }
 
     pub fn lines_acknowledged(&self) -> usize {
@@ -265,6 +278,9 @@ impl Host {
 
     fn load_next_line(&mut self, now: u64) -> bool {
         if self.config.flow == Flow::OkPerLine && self.awaiting_ok {
+            return false;
+        }
+        if matches!(self.config.flow, Flow::InFlight(window) if self.in_flight >= window) {
             return false;
         }
         let (text, job_index) = if self.preamble_pending {
@@ -310,6 +326,7 @@ impl Host {
             ok_reply: None,
         });
         self.awaiting_ok = true;
+        self.in_flight += 1;
         true
     }
 
@@ -352,6 +369,9 @@ impl Host {
                 self.resends.push(n);
                 if self.config.resend && self.config.numbering {
                     self.rewind_to(n);
+                    if matches!(self.config.flow, Flow::InFlight(_)) {
+                        self.in_flight = 0;
+                    }
                 }
                 if self.config.send_on_resend && self.config.flow == Flow::OkPerLine {
                     self.awaiting_ok = false;
@@ -364,6 +384,7 @@ impl Host {
             if let Some(line) = self.sent.iter_mut().find(|l| l.ok_reply.is_none()) {
                 line.ok_reply = Some(index);
             }
+            self.in_flight = self.in_flight.saturating_sub(1);
             if self.config.flow == Flow::OkPerLine && (self.wire.is_empty() || self.config.send_on_resend) {
                 self.awaiting_ok = false;
                 self.next_start = self.next_start.max(arrived as f64);
