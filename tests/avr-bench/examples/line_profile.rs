@@ -4,6 +4,9 @@
 //! (interrupt handlers listed by their own cycles):
 //!
 //!   cargo run --release -p avr-bench --example line_profile -- ELF [SEGMENTS] [LENGTH_MM]
+//!
+//! With `--parse` (`ELF --parse`): only `cargo benchmark`'s
+//! `parse_cycles_per_g1_line` and its parts.
 use avr_bench::bench;
 use avr_bench::board::RampsConfig;
 use avr_bench::host::HostConfig;
@@ -12,6 +15,19 @@ use std::path::PathBuf;
 fn main() {
     let mut args = std::env::args().skip(1);
     let elf = PathBuf::from(args.next().expect("ELF"));
+    let mut args = args.peekable();
+    if args.peek().is_some_and(|a| a == "--parse") {
+        let p = bench::parse_cycles(&elf, 4).unwrap_or_else(|e| panic!("{e}"));
+        println!(
+            "parse_cycles_per_g1_line: {:.0} (G1 to its ok {:.0} − empty line {:.0}, medians of {}; then planning {:.0})",
+            p.cycles_per_line(),
+            p.g1_median,
+            p.baseline_median,
+            p.lines,
+            p.planning_mean
+        );
+        return;
+    }
     let segments: usize = args.next().map_or(200, |a| a.parse().expect("a count"));
     let length: f64 = args.next().map_or(0.5, |a| a.parse().expect("a length in mm"));
     let mut config = RampsConfig::stock(115_200);
