@@ -215,12 +215,16 @@ fn image_crc(image: &[u8; SLOT_LEN]) -> u16 {
 
 /// CRC-16/CCITT-FALSE, bitwise: 30 bytes of code instead of a 512-byte
 /// table, and the image is only checked at boot and on `M500`/`M501`.
+/// The polynomial goes through `black_box`: from `opt-level=2` LLVM turns a
+/// bitwise CRC with a constant polynomial into a 512-byte table, which the
+/// AVR keeps in RAM (`.data`).
 #[inline(never)]
 fn crc16(mut crc: u16, bytes: &[u8]) -> u16 {
+    let polynomial = core::hint::black_box(0x1021u16);
     for &byte in bytes {
         crc ^= u16::from(byte) << 8;
         for _ in 0..8 {
-            crc = if crc & 0x8000 != 0 { (crc << 1) ^ 0x1021 } else { crc << 1 };
+            crc = if crc & 0x8000 != 0 { (crc << 1) ^ polynomial } else { crc << 1 };
         }
     }
     crc

@@ -218,16 +218,23 @@ impl ModalState {
         let mut residues = self.residue_nm;
         for (axis, &letter) in AXIS_LETTERS.iter().enumerate() {
             let Some(value) = command.value(letter)? else { continue };
-            let um = self.length_um(letter, value)?;
             let distance = if letter == b'E' { self.extruder_distance } else { self.distance };
             let relative = distance == Distance::Relative && !(self.machine_frame && letter != b'E');
             // The value in nm (millimetres only, and within `i32`: ±2 m);
             // otherwise µm as before, and no residue.
             let nm = if self.units == Units::Millimetres { value.to_scaled(6) } else { None };
+            let carried = if relative { residues[axis] } else { 0 };
             let (um, residue) = match nm {
-                Some(nm) if relative => split_nm(nm.saturating_add(i32::from(residues[axis]))),
-                Some(nm) => split_nm(nm),
-                None => (um, 0),
+                // A whole number of µm (≤ 3 decimals, a slicer's X and Y)
+                // with a residue strictly inside ±500 nm: the sum's split
+                // is that µm and that residue, without the division.
+                Some(_) if value.fraction_digits() <= 3 && carried.unsigned_abs() < 500 => {
+                    (value.to_scaled(3).ok_or(CommandError::OutOfRange(letter))?, carried)
+                }
+                Some(nm) => split_nm(nm.saturating_add(i32::from(carried))),
+                // Within ±2 147 mm in nm, the µm are far inside
+                // MAX_COORDINATE_UM: only the other values need the check.
+                None => (self.length_um(letter, value)?, 0),
             };
             residues[axis] = residue;
             // Checked `i32` rather than `i64` (half the code on the AVR): a
@@ -395,6 +402,29 @@ mod tests {
             state.commit(&t);
         }
         assert_eq!(state.position[3], 9_858 - 999);
+    }
+
+    /// Words of whole µm (≤ 3 decimals) take a fast path in `target`: they
+    /// must move and carry exactly as `split_nm` of the word plus the
+    /// residue left by finer words does, ±500 nm residues included.
+    #[test]
+    fn whole_micrometre_words_carry_the_residue_of_finer_ones() {
+        let mut state = ModalState::new();
+        state.extruder_distance = Distance::Relative;
+        let words: [(&[u8], i32); 7] =
+            [(b"G1 E.0005", 500), (b"G1 E.001", 1_000), (b"G1 E-.0015", -1_500), (b"G1 E.0004", 400), (b"G1 E-.002", -2_000), (b"G1 E-.0001", -100), (b"G1 E.003", 3_000)];
+        let (mut position, mut residue) = (0, 0);
+        let mut residues_seen = [false; 3];
+        for (line, nm) in words.iter().cycle().take(70) {
+            let target = state.target(&parse(line).unwrap()).unwrap();
+            state.commit(&target);
+            let (um, left) = split_nm(nm + i32::from(residue));
+            (position, residue) = (position + um, left);
+            assert_eq!((state.position[3], state.residue_nm[3]), (position, residue), "after {line:?}");
+            residues_seen[usize::from(residue == -500) + 2 * usize::from(residue == 500)] = true;
+        }
+        // Both ±500 nm residues were carried into a whole-µm word.
+        assert_eq!(residues_seen, [true; 3]);
     }
 
     #[test]
