@@ -47,7 +47,7 @@ use crate::closed_loop::tuning::{relay_ziegler_nichols, RelayGains};
 use crate::reply::Fixed;
 use crate::gcode::{Code, Command};
 use crate::machines::powder_bed::{
-    write_no_heaters, write_travel_report, CarriageEnd, LayerCommand, LayerCycle, LayerEvent, LayerSettings, Platform, PlatformAction,
+    write_no_heaters, write_travel_report, CarriageEnd, LayerCommand, LayerCycle, LayerEvent, Platform, PlatformAction,
     PlatformDriver, PlatformSwitches, TravelLimits, TravelMeasurement, Vertical,
 };
 use crate::closed_loop::output::ActiveLevel;
