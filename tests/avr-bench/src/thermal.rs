@@ -166,7 +166,7 @@ mod tests {
         // The first 10 s are dead time.
         assert!(((p.temperature_c - 25.0) / 100.0 - 0.07).abs() < 0.002, "{}", p.temperature_c);
         let mut p = ThermalPlant::slow_bed();
-        let mut t = 0.0;
+        let mut t = 0.0_f64;
         while p.temperature_c < 100.0 {
             p.step(1.0, 0.01);
             t += 0.01;
