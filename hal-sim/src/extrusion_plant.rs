@@ -22,7 +22,7 @@
 //!   Kp·d/(2·RPM): 0.07·132.9/(2·4) = 1.16 here (2.3 at 2 rpm). The tests
 //!   reproduce both regimes;
 //! - **transport delay 3 s** (die to camera), on the speeds;
-//! - **lag τ = 1 s** (draw-down and cooling: the strand does not change
+//! - **lag τ = 3 s** (draw-down and cooling: the strand does not change
 //!   diameter instantly when the puller speed changes);
 //! - **flow(t)**: the melt output varies slowly, ±1 % in a 90 s sine plus
 //!   a random walk of 0.1 %/√s bounded to ±2 % (the screw's own
@@ -36,12 +36,14 @@
 //!
 //! # The barrel
 //!
-//! The barrel heater plant (SPEC §4's 4.3·e^(−28s)/(549s+1)) and its PI on
-//! the SSR's slow PWM belong to the thermal module and do not exist yet:
-//! [`run_line`] **stubs the barrel temperature** as a first-order rise from
-//! 24 °C toward 210 °C (τ = 300 s, no dead time, [`BarrelStub`]), which is
-//! enough to exercise the 175 °C interlock. Replace it by the thermal
-//! plant and controller when they land.
+//! The barrel heater's plant (SPEC §4's 4.3·e^(−28s)/(549s+1),
+//! [`crate::thermal_plant::PlantModel::BARREL_PUBLISHED`]) and the thesis
+//! PI on the SSR's slow PWM are the thermal module's, tested in
+//! `thermal_plant`. [`run_line_gcode`] runs them with the whole firmware;
+//! [`run_line`] drives only the line's own module, so it **stubs the
+//! barrel temperature** as a first-order rise from 24 °C toward 210 °C
+//! (τ = 300 s, no dead time, [`BarrelStub`]), which is enough to exercise
+//! the 175 °C interlock.
 
 use crate::axis_plant::Rng;
 use firmware::machines::diameter::{ClosedLoopPi, DiameterError, THESIS_KI, THESIS_KP};

@@ -136,3 +136,15 @@ fn line_commands_check_their_values() {
     assert_eq!(board.reply_to("M407", 100), "echo:Diameter no measurement setpoint 1.750 mm (81.59 px) puller 0.000 rpm manual\nok\n");
     assert_eq!(board.reply_to("M406", 100), "echo:Diameter control off, puller 0.000 rpm\nok\n");
 }
+
+/// SPEC §4: the line's fans (D8) run from power-up, before any command
+/// (`fans_on_at_start`); `M107` stops them and `M106` starts them again.
+#[test]
+fn the_fans_run_from_power_up_until_m107() {
+    let mut board = SimBoard::extrusion_line();
+    assert_eq!(board.link.machine.fan_duty(), 255);
+    assert_eq!(board.reply_to("M107", 100), "ok\n");
+    assert_eq!(board.link.machine.fan_duty(), 0);
+    assert_eq!(board.reply_to("M106", 100), "ok\n");
+    assert_eq!(board.link.machine.fan_duty(), 255);
+}

@@ -8,7 +8,8 @@
 //! steppers (the screw on E0's pins, the puller on X's), so `G0`–`G3`,
 //! `G28` and `G92` are refused. The barrel is heater 0 (`M104`/`M109`,
 //! SPEC §4's thermistor and PI, a solid-state relay), the interlock is
-//! `M302` at 175 °C, fans are `M106`/`M107`.
+//! `M302` at 175 °C, fans (D8) run from power-on
+//! (`fans_on_at_start`) and are `M106`/`M107`.
 //!
 //! | command | effect |
 //! |---|---|
@@ -32,6 +33,7 @@ use super::error::CommandError;
 use super::commands::{Listing, Machines};
 use super::Machine;
 use crate::gcode::{Code, Command, Decimal};
+use crate::machines::config::EXTRUSION_LINE;
 use crate::machines::diameter::{write_milli, ClosedLoopPi, DiameterError, THESIS_KI, THESIS_KP};
 use crate::machines::extrusion_line::{write_mm_px, ExtrusionLine, ExtrusionLineConfig, ScrewError, RAMP_UPDATES_PER_S};
 use crate::machines::velocity::{DriveTrain, SpeedError, TimerChange};
@@ -113,6 +115,11 @@ impl Machine<'_> {
         self.hotend = HeaterChannel::new(&BARREL, Gains::THESIS_BARREL);
         self.cold_extrusion = ColdExtrusionGuard::EXTRUSION_LINE;
         self.line = Some(LineState { line, next_ramp_ms: 0, next_second_ms: 1000 });
+        // SPEC §4: the fans (D8) run from power-on, before any command;
+        // `M107` stops them.
+        if EXTRUSION_LINE.fans_on_at_start {
+            self.fan_duty = 255;
+        }
     }
 
     /// The line, if this machine is one.

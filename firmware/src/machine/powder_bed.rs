@@ -48,7 +48,7 @@ use crate::closed_loop::tuning::{relay_ziegler_nichols, RelayGains};
 use crate::reply::Fixed;
 use crate::gcode::{Code, Command};
 use crate::machines::powder_bed::{
-    write_no_heaters, write_travel_report, CarriageEnd, LayerCommand, LayerCycle, LayerEvent, LayerSettings, Platform, PlatformAction,
+    write_no_heaters, write_travel_report, CarriageEnd, LayerCommand, LayerCycle, LayerEvent, Platform, PlatformAction,
     PlatformDriver, PlatformSwitches, TravelLimits, TravelMeasurement, Vertical,
 };
 use crate::closed_loop::output::ActiveLevel;
@@ -174,7 +174,9 @@ impl BedState {
         let gains = LoopGains::servo_pid(&pid, CARRIAGE_TICK_S).unwrap_or(LoopGains::OPEN_LOOP);
         Self {
             job: Job::Idle,
-            cycle: LayerCycle::new(LayerSettings { thickness_um: 100, suction_while_spreading: false }),
+            // The machine's layer settings: suction runs while the roller
+            // spreads (config.rs), not only by hand (M10/M11).
+            cycle: LayerCycle::new(crate::machines::config::powder_bed().layer),
             carriage: AxisController::new(gains, 255, FollowingErrorLimit { limit: 4_000, hold_ticks: 1_000 }),
             carriage_y: AxisController::new(gains, 255, FollowingErrorLimit { limit: 4_000, hold_ticks: 1_000 }),
             stroke: None,
@@ -246,6 +248,45 @@ impl BedState {
                 StrokeResult::Failed
             }
         }
+    }
+
+    /// The 16×2 screen of the powder bed (`drivers::status_screen`): the
+    /// job on row 0, the layers done and the roller and suction on row 1.
+    /// No temperatures: the machine has no heaters (SPEC §5).
+    ///
+    /// ```text
+    /// Ready           | Layer 3   8 left | Travel feed
+    /// Done 0  R:0 S:0 | Done 2  R:1 S:1  | Done 2  R:0 S:0
+    /// ```
+    pub fn screen(&self, halted: bool) -> [u8; 32] {
+        use crate::drivers::status_screen::Row;
+        let (mut left, mut right) = (Row::new(), Row::new());
+        if halted {
+            left.push_str("Halted");
+        } else {
+            match self.job {
+                Job::Idle => left.push_str("Ready"),
+                Job::Travel { platform: Platform::Feed, .. } => left.push_str("Travel feed"),
+                Job::Travel { platform: Platform::Build, .. } => left.push_str("Travel build"),
+                Job::Layers { layers_left, .. } => {
+                    right.push_int(i32::from(layers_left) - 1).push_str(" left");
+                    left.push_str("Layer ").push_int(i32::from(self.cycle.layers_done()) + 1)
+                }
+                Job::Carriage => left.push_str("Carriage"),
+                Job::Move { .. } => left.push_str("Moving"),
+                Job::RelayTune { .. } => left.push_str("Relay tune"),
+            };
+        }
+        let mut screen = [b' '; 32];
+        screen[..16].copy_from_slice(left.bytes());
+        let start = 16 - right.len();
+        screen[start..16].copy_from_slice(&right.bytes()[..right.len()]);
+        let mut row = Row::new();
+        row.push_str("Done ").push_int(i32::from(self.cycle.layers_done()));
+        let flags = [b' ', b' ', b'R', b':', b'0' + u8::from(self.roller), b' ', b'S', b':', b'0' + u8::from(self.suction)];
+        row.push_bytes(&flags);
+        screen[16..].copy_from_slice(row.bytes());
+        screen
     }
 
     /// Roller, suction and carriage off (a finished or failed job).

@@ -148,6 +148,11 @@ impl<'q> Machine<'q> {
     /// is doing, Z, and the heaters (`Printing    Z0.20` /
     /// `T210/210 B60/60`).
     pub fn status_screen(&self) -> [u8; 32] {
+        // The powder bed shows its job, not heaters it does not have.
+        #[cfg(feature = "powder-bed")]
+        if let Some(bed) = &self.powder {
+            return bed.screen(self.halted);
+        }
         let state = if self.halted {
             "Halted"
         } else {

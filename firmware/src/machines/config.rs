@@ -222,6 +222,13 @@ pub const fn extrusion_line(puller: DriveTrain) -> Result<ExtrusionLineMachine, 
     })
 }
 
+/// The line the `machine-extrusion-line` build runs: the puller 6:1 as in
+/// the thesis' code.
+pub const EXTRUSION_LINE: ExtrusionLineMachine = match extrusion_line(DriveTrain::PULLER_6_TO_1) {
+    Ok(machine) => machine,
+    Err(_) => panic!("the thesis' drive trains fit the step timer"),
+};
+
 /// The diameter settings the line starts with.
 pub const EXTRUSION_DIAMETER: DiameterSettings = DiameterSettings::THESIS;
 

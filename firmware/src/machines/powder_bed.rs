@@ -139,9 +139,10 @@ pub struct TravelLimits {
 }
 
 impl TravelLimits {
-    /// 300 mm at 200 steps/mm, 10 mm of back-off, 500 ms pause at 1 kHz,
-    /// three readings (ours).
-    pub const DEFAULT: TravelLimits = TravelLimits { max_steps: 60_000, max_backoff_steps: 2_000, pause_ticks: 500, debounce_ticks: 3 };
+    /// 300 mm at 200 steps/mm, 10 mm of back-off, the thesis' 2 s pause at
+    /// the zero (2 000 ticks at 1 kHz: the platform settles on its lower
+    /// switch before the count starts), three readings (ours).
+    pub const DEFAULT: TravelLimits = TravelLimits { max_steps: 60_000, max_backoff_steps: 2_000, pause_ticks: 2_000, debounce_ticks: 3 };
 }
 
 /// What the board does this tick.

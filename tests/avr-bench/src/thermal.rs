@@ -41,6 +41,22 @@ impl ThermalPlant {
         Self::new(25.0, 120.0, 450.0, 5.0)
     }
 
+    /// SPEC §2's delta bed: a Ø320 nichrome disc under glass on mains
+    /// through a triac stage, ≈ 0.07 °C/s from cold at full power: 150 °C
+    /// above ambient at 100 % (1.5 °C per %), τ 2143 s, θ 10 s — hal-sim's
+    /// `PlantModel::BED_SLOW`. Full power takes it 25 → 100 °C in
+    /// 10 + 2143·ln 2 ≈ 1495 s; holding 100 °C takes 75/150 = 50 %.
+    pub fn slow_bed() -> Self {
+        Self::new(25.0, 150.0, 2143.0, 10.0)
+    }
+
+    /// The same plant, already at `celsius` (preheated, no power in the
+    /// dead time's pipeline yet).
+    pub fn at(mut self, celsius: f64) -> Self {
+        self.temperature_c = celsius;
+        self
+    }
+
     /// SPEC §4's barrel heater as published: 4.3 °C per % (430 °C at
     /// 100 %), τ 549 s, θ 28 s.
     pub fn extrusion_barrel() -> Self {
@@ -139,6 +155,23 @@ mod tests {
             p.step(0.5, 0.001);
         }
         assert!((p.temperature_c - 70.0).abs() < 0.01);
+    }
+
+    #[test]
+    fn the_slow_bed_heats_at_about_0_07_degrees_per_second_and_takes_1495_s_to_100() {
+        let mut p = ThermalPlant::slow_bed();
+        for _ in 0..110_000 {
+            p.step(1.0, 0.001);
+        }
+        // The first 10 s are dead time.
+        assert!(((p.temperature_c - 25.0) / 100.0 - 0.07).abs() < 0.002, "{}", p.temperature_c);
+        let mut p = ThermalPlant::slow_bed();
+        let mut t = 0.0_f64;
+        while p.temperature_c < 100.0 {
+            p.step(1.0, 0.01);
+            t += 0.01;
+        }
+        assert!((t - 1495.4).abs() < 0.5, "{t}");
     }
 
     #[test]
