@@ -72,6 +72,7 @@ fn the_table_has_every_strategy_at_every_speed_and_the_closed_loops_never_fault(
         }
     }
     let text = format_circle_table(&rows);
+    println!("{text}");
     assert!(text.contains("PID γ 0.50") && text.contains("0.0014 / 0.0033 / 0.0047"), "{text}");
 }
 
