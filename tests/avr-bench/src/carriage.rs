@@ -234,6 +234,8 @@ pub struct CircleRun {
     /// The largest distance of the carriage from where the path was, mm.
     pub max_error_mm: f64,
     pub samples: usize,
+    /// Every sample: seconds from the first step, X and Y error, mm.
+    pub errors: Vec<(f64, f64, f64)>,
     /// Index glitches the bench injected, and those the firmware counted
     /// as glitches (`M822`'s `glitch:`), X + Y.
     pub glitches_injected: u64,
@@ -264,11 +266,14 @@ fn m822_field(line: &str, field: &str) -> Option<i64> {
 /// with a fresh [`super::board::Nse5310Pair`] attached; the plant is put in
 /// here). The carriage starts at (60, 50) by `G92` where it stands at boot.
 pub fn run_circle(board: &mut crate::board::Board, strategy: &CircleStrategy, speed_mm_s: f64) -> Result<CircleRun, String> {
+    let plant = if strategy.thesis_plant { CarriagePlant::thesis() } else { CarriagePlant::rigid() };
+    run_circle_on(board, strategy, speed_mm_s, plant)
+}
+
+/// [`run_circle`] with other carriages than the strategy's.
+pub fn run_circle_on(board: &mut crate::board::Board, strategy: &CircleStrategy, speed_mm_s: f64, plant: CarriagePlant) -> Result<CircleRun, String> {
     use crate::bench::exchange;
-    {
-        let nse = board.nse5310().ok_or("no NSE-5310s attached")?;
-        nse.plant = Some(if strategy.thesis_plant { CarriagePlant::thesis() } else { CarriagePlant::rigid() });
-    }
+    board.nse5310().ok_or("no NSE-5310s attached")?.plant = Some(plant);
     let start = [board.encoder_carriage_mm(0).unwrap(), board.encoder_carriage_mm(1).unwrap()];
     exchange(board, &["G90", "G92 X60 Y50"], 5.0)?;
     let replies_before = board.host().replies.len();
@@ -308,6 +313,7 @@ pub fn run_circle(board: &mut crate::board::Board, strategy: &CircleStrategy, sp
     }
     let t0 = first_step.unwrap();
     let (mut sum_x, mut sum_y, mut max_error, mut count) = (0.0, 0.0, 0.0f64, 0usize);
+    let mut errors = Vec::with_capacity(samples.len());
     for &(cycle, x, y) in &samples {
         if cycle < t0 {
             continue;
@@ -321,6 +327,7 @@ pub fn run_circle(board: &mut crate::board::Board, strategy: &CircleStrategy, sp
         sum_x += ex * ex;
         sum_y += ey * ey;
         max_error = max_error.max((ex * ex + ey * ey).sqrt());
+        errors.push((t, ex, ey));
         count += 1;
     }
     let report = exchange(board, &["M822"], 5.0)?;
@@ -349,6 +356,7 @@ pub fn run_circle(board: &mut crate::board::Board, strategy: &CircleStrategy, sp
         mse_total: mse_x + mse_y,
         max_error_mm: max_error,
         samples: count,
+        errors,
         glitches_injected,
         glitches_counted,
         corrections,
