@@ -32,7 +32,7 @@ const LOST: [f64; 2] = [1.0 - THESIS_GAIN[0], 1.0 - THESIS_GAIN[1]];
 fn the_robust_pid_holds_the_5_mm_s_circle_ten_times_below_the_thesis_through_index_glitches() {
     let pid = circle(&PID_0_5, 5.0);
     assert_eq!(pid.error, None);
-    assert_eq!(pid.samples, 12_565, "12.566 s of circle at 1 kHz");
+    assert!((12_565..=12_567).contains(&pid.samples), "12.566 s of circle at 1 kHz: {}", pid.samples);
     // Required: below the thesis' 0.0047 mm²; goal: ten times below.
     assert!(pid.mse_total < THESIS_BEST_MSE_MM2 / 10.0, "{pid:?}");
     // What is left is the steps' own distance from the path (the planner's
