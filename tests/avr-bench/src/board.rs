@@ -427,6 +427,9 @@ pub struct Nse5310Pair {
     /// A jammed carriage: the encoder keeps reading this many counts (± 1
     /// of noise) whatever the steps do.
     pub jammed_at: [Option<f64>; 2],
+    /// The carriages behind the motors (`crate::carriage`); `None`: each
+    /// carriage is exactly where its steps put it.
+    pub plant: Option<crate::carriage::CarriagePlant>,
     /// Completed reads per chip.
     pub reads: [u64; 2],
     /// Index pulses sent per chip (pole-pair crossings and injected glitches).
@@ -450,10 +453,15 @@ pub struct Nse5310Pair {
 const INDEX_PULSE_CYCLES: u64 = 3200;
 
 impl Nse5310Pair {
-    /// Counts the X (0) or Y (1) chip reads now.
-    fn carriage_counts(&self, chip: usize, position: i64) -> f64 {
+    /// Counts the X (0) or Y (1) chip reads at cycle `now`, its motor at
+    /// `position` steps (the plant, if any, is advanced to `now`).
+    fn carriage_counts(&mut self, chip: usize, position: i64, now: u64) -> f64 {
         let noise = (self.reads[chip] % 2) as f64;
-        self.jammed_at[chip].map(|at| at + noise).unwrap_or(self.count_sign[chip] * position as f64 * self.units_per_step + self.slip_units[chip])
+        let carriage = match self.plant.as_mut() {
+            Some(plant) => plant.carriage_steps(chip, position, now),
+            None => position as f64,
+        };
+        self.jammed_at[chip].map(|at| at + noise).unwrap_or(self.count_sign[chip] * carriage * self.units_per_step + self.slip_units[chip])
     }
 }
 
@@ -467,6 +475,7 @@ impl Nse5310Pair {
             slip_units: [0.0; 2],
             answering: [true; 2],
             jammed_at: [None; 2],
+            plant: None,
             reads: [0; 2],
             index_pulses: [0; 2],
             index_irqs: [std::ptr::null_mut(); 2],
@@ -721,7 +730,7 @@ impl Board {
             pair.index_irqs = [port_irq(self.avr, pin(b'K', 1)), port_irq(self.avr, pin(b'K', 2))];
             for chip in 0..2 {
                 ffi::avr_raise_irq(pair.index_irqs[chip], 0);
-                let counts = pair.carriage_counts(chip, self.shared.axes[chip].position);
+                let counts = pair.carriage_counts(chip, self.shared.axes[chip].position, (*self.avr).cycle);
                 pair.pole[chip] = (counts / 4096.0).floor() as i64;
             }
             let output = ffi::avr_io_getirq(self.avr, twi, ffi::TWI_IRQ_OUTPUT as i32);
@@ -734,6 +743,16 @@ impl Board {
     /// The encoders, to read their counters or change a slip.
     pub fn nse5310(&mut self) -> Option<&mut Nse5310Pair> {
         self.shared.nse.as_mut()
+    }
+
+    /// Where chip `chip`'s carriage is now, mm along the firmware's axis
+    /// from where it was at boot (the encoder's view without its
+    /// quantisation); `None` without encoders.
+    pub fn encoder_carriage_mm(&mut self, chip: usize) -> Option<f64> {
+        let now = self.cycle();
+        let position = self.shared.axes[chip].position;
+        let nse = self.shared.nse.as_mut()?;
+        Some(nse.carriage_counts(chip, position, now) / 2048.0)
     }
 
     /// A spurious pulse on chip `chip`'s Index line (the noise the thesis
@@ -1561,11 +1580,12 @@ impl Shared {
     /// X's or Y's carriage stepped: an Index pulse when it entered another
     /// pole pair (the chip's Index fires at count 0 of each).
     unsafe fn index_on_step(&mut self, axis: usize, position: i64) {
+        let now = (*self.avr).cycle;
         let Some(nse) = self.nse.as_mut() else { return };
         if axis >= 2 || nse.jammed_at[axis].is_some() {
             return;
         }
-        let pole = (nse.carriage_counts(axis, position) / 4096.0).floor() as i64;
+        let pole = (nse.carriage_counts(axis, position, now) / 4096.0).floor() as i64;
         if pole != nse.pole[axis] {
             nse.pole[axis] = pole;
             self.pulse_index(axis);
@@ -1915,6 +1935,7 @@ unsafe extern "C" fn on_twi_output(_irq: *mut ffi::avr_irq_t, value: u32, param:
     const READ: u32 = 1 << 5;
     let shared = &mut *(param as *mut Shared);
     let positions = [shared.axes[0].position, shared.axes[1].position];
+    let now = (*shared.avr).cycle;
     let Some(nse) = shared.nse.as_mut() else { return };
     // avr_twi_msg_t: unused (bits 0-7), msg, addr, data.
     let msg = (value >> 8) & 0xFF;
@@ -1934,7 +1955,7 @@ unsafe extern "C" fn on_twi_output(_irq: *mut ffi::avr_irq_t, value: u32, param:
     }
     if msg & READ != 0 {
         let Some(chip) = nse.selected else { return };
-        let carriage = nse.carriage_counts(chip, positions[chip]);
+        let carriage = nse.carriage_counts(chip, positions[chip], now);
         let counts = (carriage.round() as i64).rem_euclid(4096) as u16;
         let data = if nse.byte == 0 { (counts >> 4) as u8 } else { ((counts & 0xF) << 4) as u8 | 0x08 };
         nse.byte = nse.byte.saturating_add(1);

@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod board;
 pub mod build;
+pub mod carriage;
 pub mod elf;
 pub mod host;
 pub mod steps;
