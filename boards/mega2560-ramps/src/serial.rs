@@ -120,10 +120,11 @@ static mut DRAINING: bool = false;
 
 // USART0 receive complete, in two parts.
 //
-// 1. Interrupts off, ≈ 50 cycles from the vector to its end or to part
-//    2's `sei`: the byte goes into `RAW` with its overrun flag (a second
-//    byte waiting is left to a nested run, after a moment with interrupts
-//    on). Hand-written (`__vector_25` below): the compiler's
+// 1. Interrupts off, ≈ 50 cycles from the vector to its `sei` (≈ 70
+//    until session 12, when the test-and-set of `DRAINING` and part 2's
+//    entry came before the `sei`): the byte goes into `RAW` with its
+//    overrun flag (a second byte waiting is left to a nested run).
+//    Hand-written (`__vector_25` below): the compiler's
 //    handler saved 15 registers first and took ≈ 110–150 cycles to its
 //    `sei`, and that much was a step's lateness when a byte arrived just
 //    before a step (11 % of the interval at 13 000 steps/s: the even-step
@@ -157,8 +158,7 @@ core::arch::global_asm!(
     "push r25",
     "push r30",
     "push r31",
-    // Part 1: one byte per turn while the UART holds any.
-    "1:",
+    // Part 1: one byte, interrupts off.
     "lds r24, {len}",
     "cpi r24, {slots}",
     "breq 3f",
@@ -182,22 +182,14 @@ core::arch::global_asm!(
     "st Z, r25",
     "inc r24",
     "sts {len}, r24",
-    // Another byte waiting (it came while interrupts were off): let the
-    // interrupts in for a moment instead of looping here, so a step due
-    // meanwhile goes first; a nested run of this handler takes the byte
-    // (and drains, if no run is at it yet). `sei` lets one instruction
-    // run before any interrupt: the `nop`.
-    "lds r25, 0xc0",
-    "sbrs r25, 7",
-    "rjmp 4f",
+    // Interrupts on at once: a step due meanwhile goes first, and another
+    // byte waiting in the UART (it came while interrupts were off) is
+    // taken by a nested run of this handler, which also drains if no run
+    // is at it yet. The test-and-set of DRAINING below may be interrupted:
+    // a nested run that finds it clear drains everything and clears it
+    // again before this run goes on, so one run drains at a time and the
+    // bytes keep their order.
     "sei",
-    "nop",
-    "cli",
-    // The UART's source was on all along, so the byte was taken unless
-    // RAW is full: then loop to switch the source off.
-    "lds r25, 0xc0",
-    "sbrc r25, 7",
-    "rjmp 1b",
     "rjmp 4f",
     // RAW is full: leave the bytes in the UART, the source off.
     "3:",
@@ -269,9 +261,10 @@ fn USART0_RX() {
 }
 
 // Part 2's way in: the call-clobbered registers of avr-gcc's convention
-// (r18–r27, r30, r31) saved around an ordinary call to `drain`, which
-// returns with interrupts off. Without the encoder loops interrupts go on
-// first, so the saves do not delay a step.
+// (r18–r27, r30, r31) saved around an ordinary call to `drain`. Without
+// the encoder loops interrupts go on first and stay on through the
+// restores (`drain` returns with them on), so neither delays a step; with
+// them `drain` returns with interrupts off.
 #[cfg(not(feature = "encoders"))]
 core::arch::global_asm!(
     ".section .text.ferrostep_rx_drain,\"ax\",@progbits",
@@ -299,7 +292,8 @@ core::arch::global_asm!(
 );
 
 /// The receive handler's part 2: the bytes of `RAW` through [`receive`]
-/// with interrupts on; returns with interrupts off and `DRAINING` clear.
+/// with interrupts on; returns with `DRAINING` clear, and interrupts on
+/// (off in encoder builds).
 extern "C" fn drain() {
     // Encoder builds: the tick is masked for part 2 (see `interrupts.rs`;
     // its long run on top of part 2 was found on simavr). Interrupts are
@@ -336,6 +330,18 @@ extern "C" fn drain() {
     crate::clock::release_tick(tick);
     // SAFETY: interrupts are off.
     unsafe { DRAINING = false };
+    // Without the encoder loops, interrupts go back on now, not at the
+    // `reti`: the register restores of part 2's way out and of part 1
+    // (≈ 50 cycles) held a step up by that much when it fell due meanwhile
+    // (8–12 % of the interval from 20 000 steps/s on the bench). A byte
+    // arriving now starts a run that finds DRAINING clear and drains it
+    // itself.
+    #[cfg(not(feature = "encoders"))]
+    // SAFETY: RAW is empty and DRAINING clear: nothing of this run is left
+    // that a nested run could disturb.
+    unsafe {
+        avr_device::interrupt::enable()
+    };
 }
 
 #[inline(never)]

@@ -325,9 +325,9 @@ fn cold_call(what: u8) -> u16 {
 /// returns the ticks to the next compare, or 0 when the running segment's
 /// next event is still to be computed (by the handler, inline).
 ///
-/// A block change in the same directions (prepared by the main loop,
-/// `StepGenerator::take_next_block`: ≈ 600 cycles from entry to `reti`)
-/// is taken first, with interrupts off. The general path (a start from
+/// A block change in the same directions is not here: it is as cheap as
+/// a segment change and inline in the handler
+/// (`StepGenerator::ordinary_ready`). The general path (a start from
 /// idle, a direction change: up to ≈ 1 000 cycles) lets the serial
 /// receive interrupt in: at 250 000 baud a byte arrives every 640 cycles
 /// and the UART holds two, so a step interrupt that long with interrupts
@@ -338,22 +338,6 @@ fn cold_call(what: u8) -> u16 {
 /// (the compare is set from the previous one).
 extern "C" fn cold_path(what: u8) -> u16 {
     // SAFETY: see above.
-    let Some(generator) = (unsafe { (*addr_of_mut!(GENERATOR)).as_mut() }) else { return IDLE_TICKS };
-    // The block change first, with interrupts off: the main loop prepared
-    // the block, so this is a pointer and a few bytes (≈ a segment change),
-    // and the first event is computed inline by the handler.
-    if what == COLD_GENERAL && generator.take_next_block() {
-        return 0;
-    }
-    general_path(what)
-}
-
-#[cfg(feature = "motion")]
-/// [`cold_path`]'s rare cases, out of its line so that the block change
-/// pays only for the few registers it uses.
-#[inline(never)]
-fn general_path(what: u8) -> u16 {
-    // SAFETY: as in `cold_path`.
     let Some(generator) = (unsafe { (*addr_of_mut!(GENERATOR)).as_mut() }) else { return IDLE_TICKS };
     if what == COLD_ENDSTOPS {
         // SAFETY: only the pin registers are read.
