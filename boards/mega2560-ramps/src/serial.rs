@@ -121,8 +121,8 @@ static mut DRAINING: bool = false;
 // USART0 receive complete, in two parts.
 //
 // 1. Interrupts off, ≈ 50 cycles from the vector to its `sei` (≈ 70
-//    until session 12, when the test-and-set of `DRAINING` and part 2's
-//    entry came before the `sei`): the byte goes into `RAW` with its
+//    while the test-and-set of `DRAINING` and part 2's entry came before
+//    it): the byte goes into `RAW` with its
 //    overrun flag (a second byte waiting is left to a nested run).
 //    Hand-written (`__vector_25` below): the compiler's
 //    handler saved 15 registers first and took ≈ 110–150 cycles to its

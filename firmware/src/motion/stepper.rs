@@ -26,17 +26,47 @@
 //!
 //! which is a handful of 8/16/32-bit additions on the AVR and no
 //! multiplication. A single-motor move or a 45° diagonal skips the
-//! Bresenham loop altogether. Taking the next segment of the running block
-//! is inline too (one flag byte, one queue-index read, a 10-byte copy);
-//! a new block, a direction change, a long wait and the end of the queue
-//! are out of line ([`StepGenerator::on_timer_general`]). A new block in
-//! the same directions costs about as much as a segment change: the main
-//! loop prepared it ([`StepFeeder::push_block`]) and the interrupt reads
-//! it in place in its queue slot ([`StepGenerator::take_next_block`]).
+//! Bresenham loop altogether. Taking the next segment is inline too, and
+//! so is a new block in the same directions (see "The hand-over"); a
+//! direction change, a homing block, a long wait, a start from idle and
+//! the end of the queue are out of line
+//! ([`StepGenerator::on_timer_general`]).
 //!
-//! On the ATmega2560 (simavr) an ordinary event costs the step interrupt
-//! 235 cycles from entry to `reti`, one that takes the block's next segment
-//! ≈ 335. The board splits `on_timer` into [`StepGenerator::ordinary_ready`]
+//! # The hand-over: a block change as cheap as a segment change
+//!
+//! As in Grbl's segment buffer, everything a block change needs is
+//! prepared in the main loop, and the interrupt only moves along:
+//!
+//! - [`StepFeeder::push_block`] turns the [`StepBlock`] into a
+//!   `PreparedBlock` (Bresenham thresholds, the motors that step on every
+//!   event and those that step on some, the endstops ahead) in the block
+//!   queue, and keeps its head;
+//! - [`StepFeeder::push_segment`] copies that head (a start marker, the
+//!   direction bits, the two motor classes, the endstops ahead: 5 bytes)
+//!   into the block's first segment;
+//! - the interrupt's segment change (inline, interrupts off) sees the
+//!   marker, checks that the block keeps the directions on the pins and
+//!   that no homing stop is pending, takes the head from the segment with
+//!   the segment's own fields, releases the finished block's slot (the
+//!   next block is already in place behind it: the running block is
+//!   always the front of the block queue) and, only for motors that run
+//!   the Bresenham, copies their steps and thresholds from the record.
+//!
+//! Invariants of the hand-over: a block is pushed before its first
+//! segment, so the record is there when its segment is; the running block
+//! is the front slot of the block queue from its first event to its last,
+//! and only the interrupt releases it; the segments of a block sum to its
+//! events (`prep` cuts them so), so at its end every Bresenham counter is
+//! 0 again (invariant 1) and the next block starts from there without a
+//! reset; a block that changes a direction, or a homing block, takes the
+//! general path, which gives the direction its set-up lead and resets
+//! the homing stops.
+//!
+//! On the ATmega2560 (simavr, the bench's `even_steps` example) an
+//! ordinary event costs the step interrupt ≈ 240 cycles from entry to
+//! `reti`, one that takes the block's next segment ≈ 340, one that takes
+//! the next block ≈ 400–420 (≈ 620 when it ran in the cold path). The
+//! board splits `on_timer` into [`StepGenerator::ordinary_ready`]
 //! and [`StepGenerator::ordinary_event`], inline, and
 //! `on_timer_general`, which it reaches through a call that saves
 //! registers on that path only: a call the compiler can see anywhere in an
@@ -129,12 +159,10 @@ pub struct StepBlock {
 /// A [`StepBlock`] as the interrupt consumes it, prepared by the main loop
 /// ([`StepFeeder::push_block`]): the Bresenham thresholds, which motors
 /// step on every event and which on some, the endstops ahead. The
-/// interrupt never copies it: the running block stays in its queue slot
-/// (the front of the block queue) until its last event, and the interrupt
-/// reads it there, as Grbl's segments point at their block's data. So a
-/// block change is a pointer, a few bytes and the counters' reset, as cheap
-/// as a segment change (it used to copy and derive all this in the
-/// interrupt: ≈ 1 600 cycles).
+/// interrupt never copies it whole: the running block stays in its queue
+/// slot (the front of the block queue) until its last event, and the
+/// interrupt reads it there, as Grbl's segments point at their block's
+/// data (see "The hand-over" in the module comment).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct PreparedBlock {
     /// Steps of every motor (≤ `events`).
@@ -1226,6 +1254,63 @@ mod tests {
         assert_eq!(events[4].2 & 1, 1);
         assert_eq!(events[5].2 & 1, 0);
         assert_eq!(generator.status().blocks_done, blocks.len() as u16 + 2);
+    }
+
+    /// The inline block change resets no Bresenham counter (they are back
+    /// at 0 at every block's end): a block taken that way steps each motor
+    /// on exactly the events it would step on when started from idle.
+    #[test]
+    fn a_block_taken_inline_steps_on_the_same_events_as_from_idle() {
+        let second = [23, 31, 0, 9];
+        let pattern = |events: &[(u64, u8, u8)]| events.iter().map(|e| e.1).collect::<Vec<u8>>();
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        assert!(feeder.push_block(block(second, 0b1011)));
+        assert!(feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 31, starts_block: true }));
+        let alone = run(&mut generator, 10_000);
+        assert_eq!(alone.len(), 31);
+
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        assert!(feeder.push_block(block([17, 40, 0, 3], 0b1011)));
+        assert!(feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 40, starts_block: true }));
+        assert!(feeder.push_block(block(second, 0b1011)));
+        assert!(feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 31, starts_block: true }));
+        let both = run(&mut generator, 20_000);
+        assert_eq!(both.len(), 71);
+        // Same rhythm straight through the boundary, and the second block's
+        // events exactly as alone.
+        assert!(both.windows(2).all(|w| w[1].0 - w[0].0 == 100));
+        assert_eq!(pattern(&both[40..]), pattern(&alone));
+        assert_eq!(generator.status().blocks_done, 2);
+    }
+
+    /// A homing block after an ordinary one takes the general path (its
+    /// endstops to watch), and an ordinary block after a homing block
+    /// whose motor stopped also does (the stops to reset): the counts stay
+    /// exact either way.
+    #[test]
+    fn homing_blocks_are_never_taken_inline() {
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        assert!(feeder.push_block(block([10, 0, 0, 0], 0b0001)));
+        assert!(feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 10, starts_block: true }));
+        let mut homing = block([50, 0, 0, 0], 0b0001);
+        homing.watch = 0b0001_0000;
+        assert!(feeder.push_block(homing));
+        assert!(feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 50, starts_block: true }));
+        assert!(feeder.push_block(block([7, 0, 0, 0], 0b0001)));
+        assert!(feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 7, starts_block: true }));
+        let mut fired = 0;
+        for _ in 0..500 {
+            if generator.endstop_mask() != 0 {
+                // The switch is 20 steps into the homing block.
+                generator.on_endstops(if fired >= 30 { 0b0001_0000 } else { 0 });
+            }
+            fired += generator.on_timer().step_mask.count_ones();
+        }
+        assert_eq!(fired, 10 + 20 + 7);
+        assert_eq!(generator.status().blocks_done, 3);
     }
 
     #[test]
