@@ -97,7 +97,7 @@
 //! | vector | build | own | run | with interrupts off |
 //! |---:|---|---:|---:|---|
 //! | 17 step | default | 1 551 | 1 771 | ordinary event ≈ 240–260, next segment ≈ 340–360, next block in the same directions 400–420 (`docs/step-timing.md`, `even_steps diag`, on this branch's ELF); the 1 551 is the general path (start from idle, direction change), whose window has interrupts on |
-//! | 25 receive | default | 643 | 1 627 | part 1 ≈ 50 to its `sei`, part 2 ≈ 30 a byte (`docs/step-timing.md`) |
+//! | 25 receive | default | 643 | 1 627 | part 1 ≈ 43 to its `sei`, part 2 ≈ 30 a byte (`docs/step-timing.md`) |
 //! | 25 receive | extrusion line, powder bed | 643 | 1 074 | as above |
 //! | 29 ADC | default / extrusion line / powder bed | 159 / 162 / 151 | 1 361 / 1 044 / 151 | none (`sei` first) |
 //! | 32 tick | default | 78 | 1 171 | part of the 78 (its critical section) |
