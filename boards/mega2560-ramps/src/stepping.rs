@@ -19,20 +19,22 @@
 //!
 //! # What an event costs, and why the handler looks as it does
 //!
-//! Measured on simavr (the bench's `step_trials`, one stepper): an
-//! ordinary event, entry to `reti`, takes 235 cycles (335 before this
-//! layout), one that also takes the next segment of the running block
-//! ≈ 335 (≈ 480). At 50 000 steps/s an interval is 320 cycles.
+//! Measured on simavr (the bench's `step_trials` and `even_steps diag`,
+//! one stepper): an ordinary event, entry to `reti`, takes 240–260 cycles
+//! (335 before this layout), one that also takes the next segment of the
+//! running block 340–360 (≈ 480), one that takes the next block in the
+//! same directions 400–420 (≈ 620 while it went through the cold path).
+//! At 50 000 steps/s an interval is 320 cycles.
 //!
 //! - The compiler saves, in the prologue of an interrupt handler that
 //!   contains a call, every register a call may clobber, on every run. So
 //!   the handler makes no call it can see: everything an ordinary event
 //!   needs is inline ([`StepGenerator::ordinary_ready`], which also takes
-//!   the next segment of the running block, and
+//!   the next segment of the running block, or the next block, and
 //!   [`StepGenerator::ordinary_event`]), and the rare work (reading the
-//!   endstops while homing or with hard limits on, a piece of a long wait,
-//!   a new block, a direction change's lead, the end of the queue) is in
-//!   [`cold_path`], reached through `ferrostep_step_cold`, which saves and
+//!   endstops while homing or with hard limits on, a piece of a long
+//!   wait, a start from idle or a homing block, a direction change's
+//!   lead, the end of the queue) is in [`cold_path`], reached through `ferrostep_step_cold`, which saves and
 //!   restores the call-clobbered registers itself, on that path only. The
 //!   prologue now saves the 12 registers the inline code uses (r18–r27,
 //!   r30, r31) instead of 24 and has no stack frame.
