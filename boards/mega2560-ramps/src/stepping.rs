@@ -34,10 +34,12 @@
 //!   [`StepGenerator::ordinary_event`]), and the rare work (reading the
 //!   endstops while homing or with hard limits on, a piece of a long
 //!   wait, a start from idle or a homing block, a direction change's
-//!   lead, the end of the queue) is in [`cold_path`], reached through `ferrostep_step_cold`, which saves and
-//!   restores the call-clobbered registers itself, on that path only. The
-//!   prologue now saves the 12 registers the inline code uses (r18–r27,
-//!   r30, r31) instead of 24 and has no stack frame.
+//!   lead, the end of the queue) is in [`cold_path`], reached through
+//!   `ferrostep_step_cold`, which saves and restores the call-clobbered
+//!   registers itself, on that path only. The prologue saves the 14
+//!   registers the inline code uses (r16–r27, r30, r31; r16/r17 since
+//!   the block change shares the path) instead of 24 and has no stack
+//!   frame.
 //! - STEP high on PORTF/PORTA (I/O space) is a skip-if-clear and an `sbi`
 //!   per pin; STEP low clears all four pins unconditionally, so the mask
 //!   is not held in a register across the computation.
