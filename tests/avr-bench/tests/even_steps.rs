@@ -10,7 +10,7 @@
 //! at 30 000 steps/s is 533 cycles).
 //!
 //! What is left between a step and its schedule is mostly where a
-//! received byte falls (the receive handler's ≈ 70 cycles with interrupts
+//! received byte falls (the receive handler's ≈ 43 cycles with interrupts
 //! off), so the even-step rates here keep a margin below the benchmark's
 //! figures; the block change itself is pinned by its cycle count.
 //!
@@ -32,14 +32,19 @@ fn judged(axes: usize, rate_hz: f64) {
     assert_eq!(trial.failure(), None, "{axes} axes at {rate_hz} steps/s: {:?}", trial.verdicts);
 }
 
+/// 27 500 steps/s (582 cycles between steps): the receive handler's
+/// ≈ 43 cycles with interrupts off, the timer's 8-cycle quantum and an
+/// instruction in progress keep every interval within ≈ 55 cycles, 9.5 %,
+/// wherever a byte falls (the benchmark finds 32 750 for the phases of
+/// its run).
 #[test]
-fn one_stepper_steps_evenly_at_20000_per_s_across_block_boundaries() {
-    judged(1, 20_000.0);
+fn one_stepper_steps_evenly_at_27500_per_s_across_block_boundaries() {
+    judged(1, 27_500.0);
 }
 
 #[test]
-fn three_steppers_step_evenly_at_20000_per_s_each_across_block_boundaries() {
-    judged(3, 20_000.0);
+fn three_steppers_step_evenly_at_27500_per_s_each_across_block_boundaries() {
+    judged(3, 27_500.0);
 }
 
 /// At 30 000 steps/s (533 cycles between steps) the cruise crosses three
