@@ -28,9 +28,9 @@
 //!
 //! # Nesting: who turns interrupts on, and who masks whom
 //!
-//! - **Step interrupt (17).** Interrupts off for an ordinary event and for
-//!   a block change (taken in `ferrostep_step_cold` before anything
-//!   else). Only the general path (start from idle, long wait, direction
+//! - **Step interrupt (17).** Interrupts off for an ordinary event, a
+//!   segment change and a block change in the same directions (all inline
+//!   in the handler). Only the general path (start from idle, long wait, direction
 //!   change's lead, end of the queue) turns them on, after switching its
 //!   own source off (OCIE1A, so it cannot re-enter) and, in encoder builds,
 //!   the tick's (`clock::hold_tick` … `clock::release_tick`): in that
@@ -38,10 +38,13 @@
 //!   None of them touches the generator. `stepping::stop_timer` (kill,
 //!   panic) leaves OCIE1A off even if it is called inside the window.
 //! - **Receive (25).** Part 1, interrupts off, moves the byte (and the
-//!   overrun flag) into the `RAW` buffer. Part 2 (`serial::drain`) runs
-//!   only in the outermost run of the handler (`DRAINING`), turns
-//!   interrupts on and feeds the bytes to the ring one by one; the step
-//!   interrupt and further receive part 1s nest inside it. The receive
+//!   overrun flag) into the `RAW` buffer, then turns interrupts on.
+//!   Part 2 (`serial::drain`) runs only in a run of the handler that
+//!   finds `DRAINING` clear, and feeds the bytes to the ring one by one
+//!   with interrupts on (off ≈ 30 cycles a byte, to take it from `RAW`);
+//!   the step interrupt and further receive runs nest inside it. It
+//!   returns with interrupts on (encoder builds: off), so the register
+//!   restores and `reti` of both parts do not hold a step up. The receive
 //!   source stays enabled except while `RAW` is full. In encoder builds
 //!   part 2 masks the tick (`clock::hold_tick`) before `sei`.
 //! - **ADC (29) and tick (32).** `avr-non-blocking-interrupt`: `sei` is
@@ -93,8 +96,8 @@
 //!
 //! | vector | build | own | run | with interrupts off |
 //! |---:|---|---:|---:|---|
-//! | 17 step | default | 1 551 | 1 771 | ordinary event ≈ 235, next segment ≈ 335, block change ≈ 600 (`docs/step-timing.md`, `step_trials`); the 1 551 is the general path, whose window has interrupts on |
-//! | 25 receive | default | 643 | 1 627 | part 1 ≈ 50 to its `sei` (`docs/step-timing.md`) |
+//! | 17 step | default | 1 551 | 1 771 | ordinary event ≈ 240–260, next segment ≈ 340–360, next block in the same directions 400–420 (`docs/step-timing.md`, `even_steps diag`, on this branch's ELF); the 1 551 is the general path (start from idle, direction change), whose window has interrupts on |
+//! | 25 receive | default | 643 | 1 627 | part 1 ≈ 43 to its `sei`, part 2 ≈ 30 a byte (`docs/step-timing.md`) |
 //! | 25 receive | extrusion line, powder bed | 643 | 1 074 | as above |
 //! | 29 ADC | default / extrusion line / powder bed | 159 / 162 / 151 | 1 361 / 1 044 / 151 | none (`sei` first) |
 //! | 32 tick | default | 78 | 1 171 | part of the 78 (its critical section) |
@@ -108,8 +111,10 @@
 //! | 1, 2, 5, 6 | powder bed | not measured: the bench does not drive the carriage's encoder pins | | all |
 //!
 //! The bench's own figures for the step interrupt (`cargo benchmark`,
-//! `docs/benchmarks.md`): `step_isr_longest_path_cycles` 2 178 (a run,
-//! nested receive part 2 included), 16.1 % of the CPU in handlers at
+//! `docs/benchmarks.md`): `step_isr_longest_path_cycles` 1 603 (a run of
+//! the general path, nested handlers included, in the chord stream; the
+//! longest run while cruising over block boundaries is ≈ 420, see
+//! `docs/step-timing.md`; 2 178 before issue 23), 16.1 % of the CPU in handlers at
 //! 10 000 steps/s. The main loop's longest interrupt lock seen in the
 //! default run was 106 cycles (`pins::make_output`), 120 in the powder bed
 //! and 910 in the extrusion line's main loop.

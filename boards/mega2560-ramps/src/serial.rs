@@ -104,26 +104,37 @@ pub fn init(dp: &Peripherals, producer: RxProducer<'static>) {
 /// handler's first, interrupts-off part fills it; the run of the handler
 /// that is draining it (`DRAINING`) empties it with interrupts on.
 const RAW_SLOTS: usize = 16;
-static mut RAW: [RawByte; RAW_SLOTS] = [RawByte { byte: 0, overrun: false }; RAW_SLOTS];
+static mut RAW: RawSlots = RawSlots([RawByte { byte: 0, status: 0 }; RAW_SLOTS]);
 
-/// One received byte and the UART's overrun flag for it (C layout: part 1
-/// writes it from assembly, the byte first).
+/// `RAW`'s 32 bytes aligned to 32, so that part 1 finds a slot's address
+/// with an 8-bit addition (no carry into the high byte).
+#[repr(C, align(32))]
+struct RawSlots([RawByte; RAW_SLOTS]);
+
+/// One received byte and UCSR0A as read just before it, whose DOR0 bit
+/// (3) is the UART's overrun flag for it (C layout: part 1 writes it from
+/// assembly; the register whole, so that part 1 does not spend
+/// interrupts-off cycles on extracting the bit).
 #[repr(C)]
 #[derive(Clone, Copy)]
 struct RawByte {
     byte: u8,
-    overrun: bool,
+    status: u8,
 }
+
+/// UCSR0A's data-overrun bit.
+const DOR0: u8 = 1 << 3;
 static mut RAW_HEAD: u8 = 0;
 static mut RAW_LEN: u8 = 0;
 static mut DRAINING: bool = false;
 
 // USART0 receive complete, in two parts.
 //
-// 1. Interrupts off, ≈ 50 cycles from the vector to its end or to part
-//    2's `sei`: the byte goes into `RAW` with its overrun flag (a second
-//    byte waiting is left to a nested run, after a moment with interrupts
-//    on). Hand-written (`__vector_25` below): the compiler's
+// 1. Interrupts off, ≈ 43 cycles from the vector to its `sei` (≈ 70
+//    while the test-and-set of `DRAINING` and part 2's entry came before
+//    it): the byte goes into `RAW` with its
+//    overrun flag (a second byte waiting is left to a nested run).
+//    Hand-written (`__vector_25` below): the compiler's
 //    handler saved 15 registers first and took ≈ 110–150 cycles to its
 //    `sei`, and that much was a step's lateness when a byte arrived just
 //    before a step (11 % of the interval at 13 000 steps/s: the even-step
@@ -141,7 +152,7 @@ static mut DRAINING: bool = false;
 // the source off and leave the bytes in the UART; part 2 switches it back
 // on as soon as it has taken one.
 //
-// Registers: part 1 uses r24, r25, r30, r31 and SREG's T flag, saved
+// Registers: part 1 uses r24, r25, r30, r31, saved
 // here. Part 2 is Rust: before calling it, r0 and r1 are saved and r1
 // cleared (the interrupted code may hold anything in them), and
 // `ferrostep_rx_drain` saves the other call-clobbered registers. UCSR0A
@@ -157,8 +168,7 @@ core::arch::global_asm!(
     "push r25",
     "push r30",
     "push r31",
-    // Part 1: one byte per turn while the UART holds any.
-    "1:",
+    // Part 1: one byte, interrupts off.
     "lds r24, {len}",
     "cpi r24, {slots}",
     "breq 3f",
@@ -166,38 +176,26 @@ core::arch::global_asm!(
     "add r25, r24",
     "andi r25, {slots} - 1",
     "lsl r25",
+    // (RAW is aligned to its 32 bytes: no carry into r31.)
     "ldi r30, lo8({raw})",
     "ldi r31, hi8({raw})",
     "add r30, r25",
-    "brcc 2f",
-    "inc r31",
-    "2:",
-    // The overrun flag belongs to the byte at the head: read it first.
+    // The overrun flag belongs to the byte at the head: read the status
+    // first, and keep it whole.
     "lds r25, 0xc0",
-    "bst r25, 3",
+    "std Z+1, r25",
     "lds r25, 0xc6",
-    "st Z+, r25",
-    "clr r25",
-    "bld r25, 0",
     "st Z, r25",
     "inc r24",
     "sts {len}, r24",
-    // Another byte waiting (it came while interrupts were off): let the
-    // interrupts in for a moment instead of looping here, so a step due
-    // meanwhile goes first; a nested run of this handler takes the byte
-    // (and drains, if no run is at it yet). `sei` lets one instruction
-    // run before any interrupt: the `nop`.
-    "lds r25, 0xc0",
-    "sbrs r25, 7",
-    "rjmp 4f",
+    // Interrupts on at once: a step due meanwhile goes first, and another
+    // byte waiting in the UART (it came while interrupts were off) is
+    // taken by a nested run of this handler, which also drains if no run
+    // is at it yet. The test-and-set of DRAINING below may be interrupted:
+    // a nested run that finds it clear drains everything and clears it
+    // again before this run goes on, so one run drains at a time and the
+    // bytes keep their order.
     "sei",
-    "nop",
-    "cli",
-    // The UART's source was on all along, so the byte was taken unless
-    // RAW is full: then loop to switch the source off.
-    "lds r25, 0xc0",
-    "sbrc r25, 7",
-    "rjmp 1b",
     "rjmp 4f",
     // RAW is full: leave the bytes in the UART, the source off.
     "3:",
@@ -248,10 +246,10 @@ fn USART0_RX() {
                 break;
             }
             // The overrun flag belongs to the byte at the head: read it first.
-            let overrun = usart.ucsr0a.read().dor0().bit_is_set();
+            let status = usart.ucsr0a.read().bits();
             let byte = usart.udr0.read().bits();
             let slot = (RAW_HEAD as usize + RAW_LEN as usize) % RAW_SLOTS;
-            (*addr_of_mut!(RAW))[slot] = RawByte { byte, overrun };
+            (*addr_of_mut!(RAW)).0[slot] = RawByte { byte, status };
             RAW_LEN += 1;
             if usart.ucsr0a.read().rxc0().bit_is_clear() {
                 break;
@@ -269,9 +267,10 @@ fn USART0_RX() {
 }
 
 // Part 2's way in: the call-clobbered registers of avr-gcc's convention
-// (r18–r27, r30, r31) saved around an ordinary call to `drain`, which
-// returns with interrupts off. Without the encoder loops interrupts go on
-// first, so the saves do not delay a step.
+// (r18–r27, r30, r31) saved around an ordinary call to `drain`. Without
+// the encoder loops interrupts go on first and stay on through the
+// restores (`drain` returns with them on), so neither delays a step; with
+// them `drain` returns with interrupts off.
 #[cfg(not(feature = "encoders"))]
 core::arch::global_asm!(
     ".section .text.ferrostep_rx_drain,\"ax\",@progbits",
@@ -299,7 +298,8 @@ core::arch::global_asm!(
 );
 
 /// The receive handler's part 2: the bytes of `RAW` through [`receive`]
-/// with interrupts on; returns with interrupts off and `DRAINING` clear.
+/// with interrupts on; returns with `DRAINING` clear, and interrupts on
+/// (off in encoder builds).
 extern "C" fn drain() {
     // Encoder builds: the tick is masked for part 2 (see `interrupts.rs`;
     // its long run on top of part 2 was found on simavr). Interrupts are
@@ -315,8 +315,8 @@ extern "C" fn drain() {
             if RAW_LEN == 0 {
                 None
             } else {
-                let RawByte { byte, overrun } = (*addr_of_mut!(RAW))[RAW_HEAD as usize % RAW_SLOTS];
-                let taken = (byte, overrun);
+                let RawByte { byte, status } = (*addr_of_mut!(RAW)).0[RAW_HEAD as usize % RAW_SLOTS];
+                let taken = (byte, status & DOR0 != 0);
                 RAW_HEAD = ((RAW_HEAD as usize + 1) % RAW_SLOTS) as u8;
                 RAW_LEN -= 1;
                 // Room again: the source back on (part 1 may have switched
@@ -336,6 +336,18 @@ extern "C" fn drain() {
     crate::clock::release_tick(tick);
     // SAFETY: interrupts are off.
     unsafe { DRAINING = false };
+    // Without the encoder loops, interrupts go back on now, not at the
+    // `reti`: the register restores of part 2's way out and of part 1
+    // (≈ 50 cycles) held a step up by that much when it fell due meanwhile
+    // (8–12 % of the interval from 20 000 steps/s on the bench). A byte
+    // arriving now starts a run that finds DRAINING clear and drains it
+    // itself.
+    #[cfg(not(feature = "encoders"))]
+    // SAFETY: RAW is empty and DRAINING clear: nothing of this run is left
+    // that a nested run could disturb.
+    unsafe {
+        avr_device::interrupt::enable()
+    };
 }
 
 #[inline(never)]

@@ -19,23 +19,27 @@
 //!
 //! # What an event costs, and why the handler looks as it does
 //!
-//! Measured on simavr (the bench's `step_trials`, one stepper): an
-//! ordinary event, entry to `reti`, takes 235 cycles (335 before this
-//! layout), one that also takes the next segment of the running block
-//! ≈ 335 (≈ 480). At 50 000 steps/s an interval is 320 cycles.
+//! Measured on simavr (the bench's `step_trials` and `even_steps diag`,
+//! one stepper): an ordinary event, entry to `reti`, takes 240–260 cycles
+//! (335 before this layout), one that also takes the next segment of the
+//! running block 340–360 (≈ 480), one that takes the next block in the
+//! same directions 400–420 (≈ 620 while it went through the cold path).
+//! At 50 000 steps/s an interval is 320 cycles.
 //!
 //! - The compiler saves, in the prologue of an interrupt handler that
 //!   contains a call, every register a call may clobber, on every run. So
 //!   the handler makes no call it can see: everything an ordinary event
 //!   needs is inline ([`StepGenerator::ordinary_ready`], which also takes
-//!   the next segment of the running block, and
+//!   the next segment of the running block, or the next block, and
 //!   [`StepGenerator::ordinary_event`]), and the rare work (reading the
-//!   endstops while homing or with hard limits on, a piece of a long wait,
-//!   a new block, a direction change's lead, the end of the queue) is in
-//!   [`cold_path`], reached through `ferrostep_step_cold`, which saves and
-//!   restores the call-clobbered registers itself, on that path only. The
-//!   prologue now saves the 12 registers the inline code uses (r18–r27,
-//!   r30, r31) instead of 24 and has no stack frame.
+//!   endstops while homing or with hard limits on, a piece of a long
+//!   wait, a start from idle or a homing block, a direction change's
+//!   lead, the end of the queue) is in [`cold_path`], reached through
+//!   `ferrostep_step_cold`, which saves and restores the call-clobbered
+//!   registers itself, on that path only. The prologue saves the 14
+//!   registers the inline code uses (r16–r27, r30, r31; r16/r17 since
+//!   the block change shares the path) instead of 24 and has no stack
+//!   frame.
 //! - STEP high on PORTF/PORTA (I/O space) is a skip-if-clear and an `sbi`
 //!   per pin; STEP low clears all four pins unconditionally, so the mask
 //!   is not held in a register across the computation.
@@ -325,9 +329,9 @@ fn cold_call(what: u8) -> u16 {
 /// returns the ticks to the next compare, or 0 when the running segment's
 /// next event is still to be computed (by the handler, inline).
 ///
-/// A block change in the same directions (prepared by the main loop,
-/// `StepGenerator::take_next_block`: ≈ 600 cycles from entry to `reti`)
-/// is taken first, with interrupts off. The general path (a start from
+/// A block change in the same directions is not here: it is as cheap as
+/// a segment change and inline in the handler
+/// (`StepGenerator::ordinary_ready`). The general path (a start from
 /// idle, a direction change: up to ≈ 1 000 cycles) lets the serial
 /// receive interrupt in: at 250 000 baud a byte arrives every 640 cycles
 /// and the UART holds two, so a step interrupt that long with interrupts
@@ -338,22 +342,6 @@ fn cold_call(what: u8) -> u16 {
 /// (the compare is set from the previous one).
 extern "C" fn cold_path(what: u8) -> u16 {
     // SAFETY: see above.
-    let Some(generator) = (unsafe { (*addr_of_mut!(GENERATOR)).as_mut() }) else { return IDLE_TICKS };
-    // The block change first, with interrupts off: the main loop prepared
-    // the block, so this is a pointer and a few bytes (≈ a segment change),
-    // and the first event is computed inline by the handler.
-    if what == COLD_GENERAL && generator.take_next_block() {
-        return 0;
-    }
-    general_path(what)
-}
-
-#[cfg(feature = "motion")]
-/// [`cold_path`]'s rare cases, out of its line so that the block change
-/// pays only for the few registers it uses.
-#[inline(never)]
-fn general_path(what: u8) -> u16 {
-    // SAFETY: as in `cold_path`.
     let Some(generator) = (unsafe { (*addr_of_mut!(GENERATOR)).as_mut() }) else { return IDLE_TICKS };
     if what == COLD_ENDSTOPS {
         // SAFETY: only the pin registers are read.

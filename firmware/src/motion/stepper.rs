@@ -26,17 +26,47 @@
 //!
 //! which is a handful of 8/16/32-bit additions on the AVR and no
 //! multiplication. A single-motor move or a 45° diagonal skips the
-//! Bresenham loop altogether. Taking the next segment of the running block
-//! is inline too (one flag byte, one queue-index read, a 10-byte copy);
-//! a new block, a direction change, a long wait and the end of the queue
-//! are out of line ([`StepGenerator::on_timer_general`]). A new block in
-//! the same directions costs about as much as a segment change: the main
-//! loop prepared it ([`StepFeeder::push_block`]) and the interrupt reads
-//! it in place in its queue slot ([`StepGenerator::take_next_block`]).
+//! Bresenham loop altogether. Taking the next segment is inline too, and
+//! so is a new block in the same directions (see "The hand-over"); a
+//! direction change, a homing block, a long wait, a start from idle and
+//! the end of the queue are out of line
+//! ([`StepGenerator::on_timer_general`]).
 //!
-//! On the ATmega2560 (simavr) an ordinary event costs the step interrupt
-//! 235 cycles from entry to `reti`, one that takes the block's next segment
-//! ≈ 335. The board splits `on_timer` into [`StepGenerator::ordinary_ready`]
+//! # The hand-over: a block change as cheap as a segment change
+//!
+//! As in Grbl's segment buffer, everything a block change needs is
+//! prepared in the main loop, and the interrupt only moves along:
+//!
+//! - [`StepFeeder::push_block`] turns the [`StepBlock`] into a
+//!   `PreparedBlock` (Bresenham thresholds, the motors that step on every
+//!   event and those that step on some, the endstops ahead) in the block
+//!   queue, and keeps its head;
+//! - [`StepFeeder::push_segment`] copies that head (a start marker, the
+//!   direction bits, the two motor classes, the endstops ahead: 5 bytes)
+//!   into the block's first segment;
+//! - the interrupt's segment change (inline, interrupts off) sees the
+//!   marker, checks that the block keeps the directions on the pins and
+//!   that no homing stop is pending, takes the head from the segment with
+//!   the segment's own fields, releases the finished block's slot (the
+//!   next block is already in place behind it: the running block is
+//!   always the front of the block queue) and, only for motors that run
+//!   the Bresenham, copies their steps and thresholds from the record.
+//!
+//! Invariants of the hand-over: a block is pushed before its first
+//! segment, so the record is there when its segment is; the running block
+//! is the front slot of the block queue from its first event to its last,
+//! and only the interrupt releases it; the segments of a block sum to its
+//! events (`prep` cuts them so), so at its end every Bresenham counter is
+//! 0 again (invariant 1) and the next block starts from there without a
+//! reset; a block that changes a direction, or a homing block, takes the
+//! general path, which gives the direction its set-up lead and resets
+//! the homing stops.
+//!
+//! On the ATmega2560 (simavr, the bench's `even_steps` example) an
+//! ordinary event costs the step interrupt ≈ 240 cycles from entry to
+//! `reti`, one that takes the block's next segment ≈ 340, one that takes
+//! the next block ≈ 400–420 (≈ 620 when it ran in the cold path). The
+//! board splits `on_timer` into [`StepGenerator::ordinary_ready`]
 //! and [`StepGenerator::ordinary_event`], inline, and
 //! `on_timer_general`, which it reaches through a call that saves
 //! registers on that path only: a call the compiler can see anywhere in an
@@ -129,12 +159,10 @@ pub struct StepBlock {
 /// A [`StepBlock`] as the interrupt consumes it, prepared by the main loop
 /// ([`StepFeeder::push_block`]): the Bresenham thresholds, which motors
 /// step on every event and which on some, the endstops ahead. The
-/// interrupt never copies it: the running block stays in its queue slot
-/// (the front of the block queue) until its last event, and the interrupt
-/// reads it there, as Grbl's segments point at their block's data. So a
-/// block change is a pointer, a few bytes and the counters' reset, as cheap
-/// as a segment change (it used to copy and derive all this in the
-/// interrupt: ≈ 1 600 cycles).
+/// interrupt never copies it whole: the running block stays in its queue
+/// slot (the front of the block queue) until its last event, and the
+/// interrupt reads it there, as Grbl's segments point at their block's
+/// data (see "The hand-over" in the module comment).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct PreparedBlock {
     /// Steps of every motor (≤ `events`).
@@ -176,6 +204,47 @@ impl PreparedBlock {
         prepared.ahead = negative | (prepared.direction << 4);
         prepared
     }
+}
+
+/// A [`Segment`] as it waits in the queue: the main loop's description,
+/// and for the first segment of a block the little the interrupt needs to
+/// change blocks without reading the block record first (copied in by
+/// [`StepFeeder::push_segment`] from the block pushed last). 15 bytes: 16
+/// slots stay within 256 bytes, so the AVR finds a slot with one 8-bit
+/// multiply.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct QueuedSegment {
+    interval: u32,
+    add: i32,
+    events: u16,
+    /// [`NOT_A_START`], [`CHEAP_START`] or [`GENERAL_START`].
+    start: u8,
+    /// The new block's direction bits, motor classes and endstops ahead
+    /// ([`PreparedBlock`]'s fields of the same names).
+    direction: u8,
+    always: u8,
+    minor: u8,
+    ahead: u8,
+}
+
+/// [`QueuedSegment::start`]: the segment continues the running block.
+const NOT_A_START: u8 = 0;
+/// It starts a block the interrupt may take inline (if its directions
+/// match the pins: the interrupt checks).
+const CHEAP_START: u8 = 1;
+/// It starts a block that needs the general path: a homing block (its
+/// endstops to watch and its stops to reset).
+const GENERAL_START: u8 = 2;
+
+/// The head of the block pushed last, kept by the feeder for its first
+/// segment.
+#[derive(Clone, Copy, Debug, Default)]
+struct BlockHead {
+    start: u8,
+    direction: u8,
+    always: u8,
+    minor: u8,
+    ahead: u8,
 }
 
 /// The interrupt's answer: what to do now and when to come back.
@@ -243,7 +312,7 @@ pub struct StepperStatus {
 
 /// The storage of both queues; the board keeps it in a `static`.
 pub struct StepQueues {
-    segments: Ring<Segment, SEGMENT_SLOTS>,
+    segments: Ring<QueuedSegment, SEGMENT_SLOTS>,
     blocks: Ring<PreparedBlock, BLOCK_SLOTS>,
 }
 
@@ -262,14 +331,16 @@ impl StepQueues {
     pub fn split(&mut self, config: StepperConfig) -> (StepFeeder<'_>, StepGenerator<'_>) {
         let (segment_in, segment_out) = self.segments.split();
         let (block_in, block_out) = self.blocks.split();
-        (StepFeeder { segments: segment_in, blocks: block_in }, StepGenerator::new(segment_out, block_out, config))
+        (StepFeeder { segments: segment_in, blocks: block_in, head: BlockHead::default() }, StepGenerator::new(segment_out, block_out, config))
     }
 }
 
 /// The main loop's end of the queues.
 pub struct StepFeeder<'a> {
-    segments: Producer<'a, Segment, SEGMENT_SLOTS>,
+    segments: Producer<'a, QueuedSegment, SEGMENT_SLOTS>,
     blocks: Producer<'a, PreparedBlock, BLOCK_SLOTS>,
+    /// The block pushed last, for its first segment.
+    head: BlockHead,
 }
 
 impl StepFeeder<'_> {
@@ -285,14 +356,34 @@ impl StepFeeder<'_> {
 
     /// Queue a segment (`false` if full).
     pub fn push_segment(&mut self, segment: Segment) -> bool {
-        self.segments.enqueue(segment).is_ok()
+        let mut queued = QueuedSegment { interval: segment.interval, add: segment.add, events: segment.events, ..QueuedSegment::default() };
+        if segment.starts_block {
+            let head = self.head;
+            queued.start = head.start;
+            queued.direction = head.direction;
+            queued.always = head.always;
+            queued.minor = head.minor;
+            queued.ahead = head.ahead;
+        }
+        self.segments.enqueue(queued).is_ok()
     }
 
     /// Queue a block; its first segment must follow with `starts_block`.
     /// The block's set-up for the interrupt (Bresenham thresholds, motor
     /// classes, endstops ahead) is computed here, in the main loop.
     pub fn push_block(&mut self, block: StepBlock) -> bool {
-        self.blocks.ready() && self.blocks.enqueue(PreparedBlock::prepare(&block)).is_ok()
+        let prepared = PreparedBlock::prepare(&block);
+        if !self.blocks.ready() || self.blocks.enqueue(prepared).is_err() {
+            return false;
+        }
+        self.head = BlockHead {
+            start: if prepared.watch == 0 { CHEAP_START } else { GENERAL_START },
+            direction: prepared.direction,
+            always: prepared.always,
+            minor: prepared.minor,
+            ahead: prepared.ahead,
+        };
+        true
     }
 
     /// Segments waiting for the interrupt.
@@ -303,12 +394,11 @@ impl StepFeeder<'_> {
 
 /// The interrupt's end: a pure state machine driven by [`Self::on_timer`].
 pub struct StepGenerator<'a> {
-    segments: Consumer<'a, Segment, SEGMENT_SLOTS>,
+    segments: Consumer<'a, QueuedSegment, SEGMENT_SLOTS>,
+    /// The running block stays in place at the front of this queue (while
+    /// `in_block`: its slot is released when the block finishes).
     blocks: Consumer<'a, PreparedBlock, BLOCK_SLOTS>,
     config: StepperConfig,
-    /// The running block, in place at the front of the block queue (valid
-    /// while `in_block`: its slot is released when the block finishes).
-    block: *const PreparedBlock,
 
     // The running segment.
     interval: u32,
@@ -327,7 +417,6 @@ pub struct StepGenerator<'a> {
     /// Bresenham needed. The others (`minor`) run the counters.
     always: u8,
     minor: u8,
-    events: u16,
     /// Events of the segments of this block taken so far: the events done
     /// are `events_started - events_left` ([`Self::events_done`]), so the
     /// per-event path counts only `events_left`.
@@ -363,14 +452,6 @@ pub struct StepGenerator<'a> {
     #[cfg(feature = "encoders")]
     origin: [i32; ENCODED_MOTORS],
 }
-
-// SAFETY: the only field that is not Send on its own is `block`, a
-// pointer into the block ring that `blocks` (this generator's consumer
-// end, borrowed for 'a) reads; the producer does not reuse that slot
-// before the generator releases it. Moving the generator to another
-// thread moves the pointer with the one consumer that may read through
-// it, exactly as moving the consumer alone (which is Send) would.
-unsafe impl Send for StepGenerator<'_> {}
 
 /// X and Y: the motors an encoder watches (SPEC §1).
 #[cfg(feature = "encoders")]
@@ -425,7 +506,7 @@ fn block_steps_done(progress: &AxisProgress, motor: usize) -> i32 {
 
 impl<'a> StepGenerator<'a> {
     fn new(
-        segments: Consumer<'a, Segment, SEGMENT_SLOTS>,
+        segments: Consumer<'a, QueuedSegment, SEGMENT_SLOTS>,
         blocks: Consumer<'a, PreparedBlock, BLOCK_SLOTS>,
         config: StepperConfig,
     ) -> Self {
@@ -433,7 +514,6 @@ impl<'a> StepGenerator<'a> {
             segments,
             blocks,
             config,
-            block: core::ptr::null(),
             interval: 0,
             add: 0,
             events_left: 0,
@@ -443,7 +523,6 @@ impl<'a> StepGenerator<'a> {
             counters: [0; MOTORS],
             always: 0,
             minor: 0,
-            events: 0,
             events_started: 0,
             direction: 0,
             endstops_to_read: 0,
@@ -472,7 +551,7 @@ impl<'a> StepGenerator<'a> {
         if self.in_block {
             let block = self.running_block();
             progress.steps = [block.steps[0], block.steps[1]];
-            progress.events = self.events;
+            progress.events = block.events;
             // The pending event has not fired yet.
             progress.fired = self.events_done() - (self.pending_mask != 0) as u16;
             progress.direction = self.direction;
@@ -541,7 +620,7 @@ impl<'a> StepGenerator<'a> {
         if self.long_waiting {
             return self.wait_longer();
         }
-        if self.events_left != 0 || self.take_next_block() {
+        if self.events_left != 0 {
             return 0;
         }
         self.next_segment()
@@ -614,13 +693,16 @@ impl<'a> StepGenerator<'a> {
         piece as u16
     }
 
-    /// The common segment change, kept cheap: the next segment continues
-    /// the running block (no new block, no direction change, no fault, not
-    /// discarding). Copies its three fields straight from the queue slot
-    /// and frees it; `false` leaves everything else to
-    /// [`Self::next_segment`]. Inline in the ordinary path (see
-    /// [`Self::ordinary_ready`]): behind a call it would cost the AVR's
-    /// interrupt its register saves on every event.
+    /// The segment change, kept cheap, and the block change with it: the
+    /// next segment continues the running block, or starts the next block
+    /// in the same directions (no fault, not discarding, no homing). Copies
+    /// the segment's fields straight from the queue slot and frees it; at a
+    /// block change the block's head comes with the segment and the block
+    /// record is only reached for its Bresenham figures, after the segment
+    /// is done with (see the module comment, "The hand-over"). `false`
+    /// leaves everything to [`Self::next_segment`]. Inline in the ordinary
+    /// path (see [`Self::ordinary_ready`]): behind a call it would cost the
+    /// AVR's interrupt its register saves on every event.
     #[inline(always)]
     fn take_next_segment_of_block(&mut self) -> bool {
         debug_assert_eq!(self.continuable, self.in_block && !self.discarding && self.fault.is_none());
@@ -628,51 +710,41 @@ impl<'a> StepGenerator<'a> {
             return false;
         }
         self.segments.take_front_if(|segment| {
-            if segment.starts_block || segment.events == 0 {
+            if segment.events == 0 {
                 return false;
+            }
+            let start = segment.start;
+            if start != NOT_A_START {
+                // The running block must have run to its end (then every
+                // Bresenham counter is back at 0: invariant 1), and the new
+                // one must keep the directions (else the general path gives
+                // the direction change its lead).
+                // (That the segments covered the block exactly is the main
+                // loop's promise: `prep` cuts every block into segments
+                // that sum to its events.)
+                if start != CHEAP_START || self.stopped != 0 {
+                    return false;
+                }
+                if (segment.direction ^ self.pending_dir) & (segment.always | segment.minor) != 0 {
+                    return false;
+                }
+                self.always = segment.always;
+                self.minor = segment.minor;
+                self.endstops_to_read = self.config.limit_endstops & segment.ahead;
+                self.events_started = 0;
             }
             // Events first: then no register holds them during the copy.
             self.events_left = segment.events;
             self.events_started = self.events_started.wrapping_add(segment.events);
             self.interval = segment.interval;
             self.add = segment.add;
-            true
-        })
-    }
-
-    /// The block change, as cheap as a segment change: the running block
-    /// has used up its segments and the next segment starts the next block,
-    /// which the main loop prepared ([`StepFeeder::push_block`]) and which
-    /// waits in place behind the running one. Takes both (then
-    /// [`Self::ordinary_event`] computes the first event) and returns true;
-    /// false leaves everything to [`Self::on_timer_general`]'s general
-    /// path: a direction change (its set-up lead), a homing block's stops
-    /// to reset, no block running, nothing queued, a fault.
-    ///
-    /// No loop, no division, a pointer and a dozen bytes: the board calls
-    /// this with interrupts off before the general path (which lets other
-    /// interrupts in), out of the handler's line so that the per-event path
-    /// keeps its few registers.
-    #[inline(always)]
-    pub fn take_next_block(&mut self) -> bool {
-        if !self.continuable || self.long_waiting || self.events_left != 0 || self.stopped != 0 {
-            return false;
-        }
-        self.segments.take_front_if(|segment| {
-            if !segment.starts_block || segment.events == 0 {
-                return false;
+            if start == NOT_A_START {
+                return true;
             }
-            let Some(next) = self.blocks.second() else { return false };
-            if (next.direction ^ self.pending_dir) & next.moving != 0 {
-                return false;
-            }
-            let next: *const PreparedBlock = next;
             // The encoder loops' origin moves by the whole block: two
             // additions, no division (the block ran to its end).
             #[cfg(feature = "encoders")]
-            {
-                // SAFETY: the running block, in place until released below.
-                let done = unsafe { &*self.block };
+            if let Some(done) = self.blocks.front() {
                 for motor in 0..ENCODED_MOTORS {
                     let steps = i32::from(done.steps[motor]);
                     self.origin[motor] = if self.direction & (1 << motor) != 0 {
@@ -682,27 +754,40 @@ impl<'a> StepGenerator<'a> {
                     };
                 }
             }
-            // The running block's slot goes back to the main loop; `next`
-            // stays put.
+            // The running block's slot goes back to the main loop; the next
+            // one, in place behind it (the feeder pushes a block before its
+            // first segment), is the running block from now on.
             self.blocks.release();
-            self.block = next;
-            // SAFETY: `next` is published and stays in its slot until this
-            // block finishes and releases it.
-            let next = unsafe { &*next };
-            self.always = next.always;
-            self.minor = next.minor;
-            self.events = next.events;
-            self.endstops_to_read = next.watch | (self.config.limit_endstops & next.ahead);
-            self.counters = [0; MOTORS];
-            if next.minor != 0 {
-                self.steps = next.steps;
-                self.thresholds = next.thresholds;
-            }
             self.blocks_done = self.blocks_done.wrapping_add(1);
-            self.events_left = segment.events;
-            self.events_started = segment.events;
-            self.interval = segment.interval;
-            self.add = segment.add;
+            if self.minor == 0 {
+                return true;
+            }
+            // The block record is needed only for the Bresenham's figures,
+            // and only after the segment is done with: the steps and
+            // thresholds of the motors that step on some events.
+            let Some(next) = self.blocks.front() else {
+                // If it is missing the queues are corrupt: stop rather than
+                // guess (the general path then drops everything).
+                // (`continuable` by hand: a call here would make the AVR's
+                // handler save more registers on every event.)
+                self.fault = Some(StepFault::Stopped);
+                self.continuable = false;
+                return false;
+            };
+            // A motor at a time, unrolled: every destination a fixed address
+            // and only the record's pointer held (a bulk copy holds 16
+            // registers or calls `memcpy`, a loop two more pointers: either
+            // makes the AVR's handler save more registers on every event).
+            macro_rules! copy_bresenham {
+                ($($motor:literal)*) => {$(
+                    if next.minor & (1 << $motor) != 0 {
+                        self.steps[$motor] = next.steps[$motor];
+                        self.thresholds[$motor] = next.thresholds[$motor];
+                    }
+                )*};
+            }
+            const _: () = assert!(MOTORS == 4);
+            copy_bresenham!(0 1 2 3);
             true
         })
     }
@@ -723,7 +808,7 @@ impl<'a> StepGenerator<'a> {
         }
         loop {
             let Some(segment) = self.segments.dequeue() else {
-                if self.in_block && self.events_done() != self.events {
+                if self.in_block && self.events_done() != self.running_block().events {
                     if !self.discarding {
                         self.underruns = self.underruns.wrapping_add(1);
                     }
@@ -732,19 +817,18 @@ impl<'a> StepGenerator<'a> {
                 }
                 return IDLE_POLL_TICKS;
             };
-            if segment.starts_block {
+            if segment.start != NOT_A_START {
                 if self.in_block {
                     self.finish_block();
                 }
-                let Some(block) = self.blocks.front() else {
+                if self.blocks.front().is_none() {
                     // The feeder pushes the block first; if it is missing
                     // the queues are corrupt: stop rather than guess.
                     self.fault = Some(StepFault::Stopped);
                     self.refresh_continuable();
                     return IDLE_POLL_TICKS;
-                };
-                let block: *const PreparedBlock = block;
-                self.start_block(block);
+                }
+                self.start_block();
             } else if self.discarding || !self.in_block {
                 continue;
             }
@@ -791,16 +875,13 @@ impl<'a> StepGenerator<'a> {
         }
     }
 
-    /// Start the block at the front of the block queue (`block` points
-    /// at it; it stays there until [`Self::finish_block`]).
-    fn start_block(&mut self, block: *const PreparedBlock) {
-        self.block = block;
-        // SAFETY: the front slot, published, released only by finish_block.
-        let block = unsafe { &*block };
+    /// Start the block at the front of the block queue (it stays there
+    /// until [`Self::finish_block`]; the caller checked that it is there).
+    fn start_block(&mut self) {
+        let Some(&block) = self.blocks.front() else { return };
         self.in_block = true;
         self.discarding = false;
         self.refresh_continuable();
-        self.events = block.events;
         self.events_started = 0;
         self.stopped = 0;
         self.stopped_steps = [0; MOTORS];
@@ -817,12 +898,12 @@ impl<'a> StepGenerator<'a> {
 
     /// The running block (only while `in_block`).
     #[inline(always)]
-    fn running_block(&self) -> &PreparedBlock {
-        debug_assert!(self.in_block && !self.block.is_null());
-        // SAFETY: while `in_block`, `block` points at the front slot of the
-        // block queue, which the producer does not reuse before
-        // `finish_block` releases it.
-        unsafe { &*self.block }
+    fn running_block(&self) -> PreparedBlock {
+        debug_assert!(self.in_block);
+        // While `in_block` the front slot of the block queue is the running
+        // block: the producer does not reuse it before `finish_block`
+        // releases it.
+        self.blocks.front().copied().unwrap_or_default()
     }
 
     fn finish_block(&mut self) {
@@ -839,7 +920,6 @@ impl<'a> StepGenerator<'a> {
         self.minor = 0;
         // The block's slot goes back to the main loop.
         self.blocks.release();
-        self.block = core::ptr::null();
         self.blocks_done = self.blocks_done.wrapping_add(1);
     }
 
@@ -905,10 +985,10 @@ impl<'a> StepGenerator<'a> {
     fn stop_motors(&mut self, motors: u8) {
         // The pending event has not fired: it is not counted.
         let fired = self.events_done() - (self.pending_mask != 0) as u16;
-        let block = *self.running_block();
+        let block = self.running_block();
         for motor in 0..MOTORS {
-            if motors & (1 << motor) != 0 && self.events != 0 {
-                let steps = (fired as u32 * block.steps[motor] as u32) / self.events as u32;
+            if motors & (1 << motor) != 0 && block.events != 0 {
+                let steps = (fired as u32 * block.steps[motor] as u32) / block.events as u32;
                 self.stopped_steps[motor] = steps as u16;
             }
         }
@@ -930,9 +1010,9 @@ impl<'a> StepGenerator<'a> {
         self.set_long_wait(0);
         self.discarding = true;
         self.refresh_continuable();
-        self.events_started = self.events;
+        self.events_started = self.running_block().events;
         while let Some(segment) = self.segments.front() {
-            if segment.starts_block {
+            if segment.start != NOT_A_START {
                 break;
             }
             self.segments.release();
@@ -1174,6 +1254,63 @@ mod tests {
         assert_eq!(events[4].2 & 1, 1);
         assert_eq!(events[5].2 & 1, 0);
         assert_eq!(generator.status().blocks_done, blocks.len() as u16 + 2);
+    }
+
+    /// The inline block change resets no Bresenham counter (they are back
+    /// at 0 at every block's end): a block taken that way steps each motor
+    /// on exactly the events it would step on when started from idle.
+    #[test]
+    fn a_block_taken_inline_steps_on_the_same_events_as_from_idle() {
+        let second = [23, 31, 0, 9];
+        let pattern = |events: &[(u64, u8, u8)]| events.iter().map(|e| e.1).collect::<Vec<u8>>();
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        assert!(feeder.push_block(block(second, 0b1011)));
+        assert!(feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 31, starts_block: true }));
+        let alone = run(&mut generator, 10_000);
+        assert_eq!(alone.len(), 31);
+
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        assert!(feeder.push_block(block([17, 40, 0, 3], 0b1011)));
+        assert!(feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 40, starts_block: true }));
+        assert!(feeder.push_block(block(second, 0b1011)));
+        assert!(feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 31, starts_block: true }));
+        let both = run(&mut generator, 20_000);
+        assert_eq!(both.len(), 71);
+        // Same rhythm straight through the boundary, and the second block's
+        // events exactly as alone.
+        assert!(both.windows(2).all(|w| w[1].0 - w[0].0 == 100));
+        assert_eq!(pattern(&both[40..]), pattern(&alone));
+        assert_eq!(generator.status().blocks_done, 2);
+    }
+
+    /// A homing block after an ordinary one takes the general path (its
+    /// endstops to watch), and an ordinary block after a homing block
+    /// whose motor stopped also does (the stops to reset): the counts stay
+    /// exact either way.
+    #[test]
+    fn homing_blocks_are_never_taken_inline() {
+        let mut queues = StepQueues::new();
+        let (mut feeder, mut generator) = queues.split(StepperConfig::default());
+        assert!(feeder.push_block(block([10, 0, 0, 0], 0b0001)));
+        assert!(feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 10, starts_block: true }));
+        let mut homing = block([50, 0, 0, 0], 0b0001);
+        homing.watch = 0b0001_0000;
+        assert!(feeder.push_block(homing));
+        assert!(feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 50, starts_block: true }));
+        assert!(feeder.push_block(block([7, 0, 0, 0], 0b0001)));
+        assert!(feeder.push_segment(Segment { interval: 100 << 8, add: 0, events: 7, starts_block: true }));
+        let mut fired = 0;
+        for _ in 0..500 {
+            if generator.endstop_mask() != 0 {
+                // The switch is 20 steps into the homing block.
+                generator.on_endstops(if fired >= 30 { 0b0001_0000 } else { 0 });
+            }
+            fired += generator.on_timer().step_mask.count_ones();
+        }
+        assert_eq!(fired, 10 + 20 + 7);
+        assert_eq!(generator.status().blocks_done, 3);
     }
 
     #[test]

@@ -30,7 +30,7 @@ fn main() {
         config.endstops = bench::far_endstops();
         let mut board = bench::boot(&elf, config).unwrap();
         let t = bench::even_trial(&mut board, axes, rate).unwrap();
-        println!("trial {axes} x {rate}: longest ISR {} {:?}", t.longest_step_isr, t.verdicts);
+        println!("trial {axes} x {rate}: longest ISR {} (cruise {}) {:?}", t.longest_step_isr, t.longest_cruise_step_isr, t.verdicts);
     }
     if let Some(i) = what.iter().position(|a| a == "diag") {
         // The longest runs of every interrupt during one trial, and where

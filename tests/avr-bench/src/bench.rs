@@ -951,6 +951,10 @@ pub struct EvenTrial {
     /// Longest run of the step interrupt during the moves, entry to
     /// `reti`, handlers nested in it included, cycles.
     pub longest_step_isr: u64,
+    /// Longest run of the step interrupt that began within X's judged
+    /// window (the cruise, block boundaries included), cycles: the
+    /// interrupt's longest path while cruising.
+    pub longest_cruise_step_isr: u64,
 }
 
 impl EvenTrial {
@@ -996,8 +1000,21 @@ pub fn even_trial(board: &mut Board, axes: usize, rate_hz: f64) -> Result<EvenTr
     }
     let verdicts = [X, Y, Z][..axes].iter().map(|&a| judge_even(board.step_edges(a), steps, rate_hz)).collect();
     let longest = longest_step_isr(board);
+    let rises: Vec<u64> = board.step_edges(X).iter().filter(|e| e.rising).map(|e| e.cycle).collect();
+    let window = (rises.get((steps as f64 * EVEN_WINDOW_FROM) as usize), rises.get((steps as f64 * (1.0 - EVEN_WINDOW_FROM)) as usize));
+    let longest_cruise = match window {
+        (Some(&from), Some(&to)) => board
+            .isr_intervals()
+            .iter()
+            .zip(board.isr_vector_numbers())
+            .filter(|&(&(a, _), v)| v == STEP_VECTOR && a >= from && a <= to)
+            .map(|(&(a, b), _)| b - a)
+            .max()
+            .unwrap_or(0),
+        _ => 0,
+    };
     board.record_isr_intervals(false);
-    Ok(EvenTrial { rate_hz, verdicts, longest_step_isr: longest })
+    Ok(EvenTrial { rate_hz, verdicts, longest_step_isr: longest, longest_cruise_step_isr: longest_cruise })
 }
 
 /// Rates the even-step search tries in order until one fails; then bisected.
