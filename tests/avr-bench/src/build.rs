@@ -199,3 +199,19 @@ pub fn build_variant(target: &Path, machine: &Machine, force: bool) -> Result<Pa
     Ok(elf)
 }
 
+
+/// The ELF of the shipped machine file `machines/{stem}.toml`: the one the
+/// test command built (with every option) into `$FERROSTEP_MACHINES_DIR`
+/// as `{stem}.elf`, else built here once under `target/machines/{stem}`.
+/// Panics with the build's error: a test cannot run without its ELF.
+pub fn shipped_elf(stem: &str) -> PathBuf {
+    if let Some(dir) = std::env::var_os("FERROSTEP_MACHINES_DIR") {
+        let elf = PathBuf::from(dir).join(format!("{stem}.elf"));
+        if elf.exists() {
+            return elf;
+        }
+    }
+    // `Machine::Shipped` names its file for the life of the test process.
+    let file: &'static str = Box::leak(format!("{stem}.toml").into_boxed_str());
+    build_variant(&target_dir().join("machines").join(stem), &Machine::Shipped(file), false).unwrap_or_else(|e| panic!("{e}"))
+}

@@ -11,7 +11,7 @@
 
 use avr_bench::bench::{self, exchange};
 use avr_bench::board::{Board, Endstop, RampsConfig, ARM_SAFETY_CLEAR, X, Y, Z};
-use avr_bench::build::{build_variant, target_dir, Machine};
+use avr_bench::build::shipped_elf;
 use avr_bench::host::HostConfig;
 use std::path::PathBuf;
 
@@ -42,13 +42,7 @@ fn exact_counts([x, y, z]: [f64; 3]) -> [i64; 3] {
 }
 
 fn elf() -> PathBuf {
-    if let Some(dir) = std::env::var_os("FERROSTEP_MACHINES_DIR") {
-        let elf = PathBuf::from(dir).join("arm.elf");
-        if elf.exists() {
-            return elf;
-        }
-    }
-    build_variant(&target_dir().join("machines").join("arm"), &Machine::Shipped("arm.toml"), false).unwrap_or_else(|e| panic!("{e}"))
+    shipped_elf("arm")
 }
 
 fn replies(board: &mut Board, lines: &[&str]) -> Vec<String> {

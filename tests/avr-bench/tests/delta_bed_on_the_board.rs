@@ -16,19 +16,13 @@
 
 use avr_bench::bench::{self, exchange};
 use avr_bench::board::{Board, RampsConfig};
-use avr_bench::build::{build_variant, target_dir, workspace_root, Machine};
+use avr_bench::build::{shipped_elf, workspace_root};
 use avr_bench::host::HostConfig;
 use avr_bench::thermal::ThermalPlant;
 use std::path::PathBuf;
 
 fn elf() -> PathBuf {
-    if let Some(dir) = std::env::var_os("FERROSTEP_MACHINES_DIR") {
-        let elf = PathBuf::from(dir).join("delta.elf");
-        if elf.exists() {
-            return elf;
-        }
-    }
-    build_variant(&target_dir().join("machines").join("delta"), &Machine::Shipped("delta.toml"), false).unwrap_or_else(|e| panic!("{e}"))
+    shipped_elf("delta")
 }
 
 /// The delta on the bench with its bed plant (ADC14, heated by D8) at

@@ -6,7 +6,7 @@
 
 use avr_bench::bench::{self, exchange};
 use avr_bench::board::{Board, Endstop, RampsConfig, X, Y, Z};
-use avr_bench::build::{build_variant, target_dir, Machine};
+use avr_bench::build::shipped_elf;
 use avr_bench::host::HostConfig;
 use std::path::PathBuf;
 
@@ -29,13 +29,7 @@ fn carriage_heights(x: f64, y: f64, z: f64) -> [f64; 3] {
 }
 
 fn elf() -> PathBuf {
-    if let Some(dir) = std::env::var_os("FERROSTEP_MACHINES_DIR") {
-        let elf = PathBuf::from(dir).join("delta.elf");
-        if elf.exists() {
-            return elf;
-        }
-    }
-    build_variant(&target_dir().join("machines").join("delta"), &Machine::Shipped("delta.toml"), false).unwrap_or_else(|e| panic!("{e}"))
+    shipped_elf("delta")
 }
 
 fn replies(board: &mut Board, lines: &[&str]) -> Vec<String> {

@@ -10,7 +10,7 @@
 use avr_bench::bench::{self, exchange, stack_budget, STACK_MARGIN_BYTES, STATIC_RAM_BUDGET_BYTES};
 use avr_bench::board::RampsConfig;
 use avr_bench::host::HostConfig;
-use avr_bench::build::{build_variant, target_dir, workspace_root, Machine};
+use avr_bench::build::{shipped_elf, workspace_root};
 use avr_bench::elf::{ElfInfo, RAM_BYTES};
 use std::path::PathBuf;
 
@@ -25,15 +25,7 @@ fn machine_files() -> Vec<String> {
 }
 
 fn elf_of(name: &str) -> PathBuf {
-    let stem = name.trim_end_matches(".toml");
-    if let Some(dir) = std::env::var_os("FERROSTEP_MACHINES_DIR") {
-        let elf = PathBuf::from(dir).join(format!("{stem}.elf"));
-        if elf.exists() {
-            return elf;
-        }
-    }
-    let leaked: &'static str = Box::leak(name.to_string().into_boxed_str());
-    build_variant(&target_dir().join("machines").join(stem), &Machine::Shipped(leaked), false).unwrap_or_else(|e| panic!("{e}"))
+    shipped_elf(name.trim_end_matches(".toml"))
 }
 
 #[test]

@@ -16,7 +16,7 @@
 
 use avr_bench::bench::{self, exchange};
 use avr_bench::board::{Board, RampsConfig, E0, X};
-use avr_bench::build::{build_variant, target_dir, Machine};
+use avr_bench::build::shipped_elf;
 use avr_bench::host::HostConfig;
 use std::collections::VecDeque;
 use std::path::PathBuf;
@@ -33,13 +33,7 @@ const DELAY_S: usize = 3;
 const LAG_S: f64 = 3.0;
 
 fn elf() -> PathBuf {
-    if let Some(dir) = std::env::var_os("FERROSTEP_MACHINES_DIR") {
-        let elf = PathBuf::from(dir).join("extrusion-line.elf");
-        if elf.exists() {
-            return elf;
-        }
-    }
-    build_variant(&target_dir().join("machines").join("extrusion-line"), &Machine::Shipped("extrusion-line.toml"), false).unwrap_or_else(|e| panic!("{e}"))
+    shipped_elf("extrusion-line")
 }
 
 fn replies(board: &mut Board, lines: &[&str]) -> Vec<String> {

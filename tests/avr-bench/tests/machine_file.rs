@@ -8,21 +8,14 @@ use avr_bench::bench::{self, exchange};
 use avr_bench::board::{Board, Endstop, RampsConfig, X, Y, Z};
 use avr_bench::host::HostConfig;
 use avr_bench::thermal::SensorInput;
-use avr_bench::build::{build_variant, target_dir, Machine};
+use avr_bench::build::shipped_elf;
 use avr_bench::thermal::Thermistor;
 use std::path::PathBuf;
 
 /// The ELF: CI's build of the file (test.sh keeps each machine's ELF in
 /// `$FERROSTEP_MACHINES_DIR`), else built here.
 fn elf() -> PathBuf {
-    if let Some(dir) = std::env::var_os("FERROSTEP_MACHINES_DIR") {
-        let elf = PathBuf::from(dir).join("e3d-i3-300.elf");
-        if elf.exists() {
-            return elf;
-        }
-    }
-    build_variant(&target_dir().join("machines").join("e3d-i3-300"), &Machine::Shipped("e3d-i3-300.toml"), false)
-        .unwrap_or_else(|e| panic!("{e}"))
+    shipped_elf("e3d-i3-300")
 }
 
 /// ATC Semitec 104GT-2 on RAMPS's 4.7 kΩ pull-up (β 4267 K).

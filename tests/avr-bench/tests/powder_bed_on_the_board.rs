@@ -6,18 +6,12 @@
 
 use avr_bench::bench::{self, exchange};
 use avr_bench::board::{Board, Endstop, RampsConfig, CPU_HZ, Z};
-use avr_bench::build::{build_variant, target_dir, Machine};
+use avr_bench::build::shipped_elf;
 use avr_bench::host::HostConfig;
 use std::path::PathBuf;
 
 fn elf() -> PathBuf {
-    if let Some(dir) = std::env::var_os("FERROSTEP_MACHINES_DIR") {
-        let elf = PathBuf::from(dir).join("powder-bed.elf");
-        if elf.exists() {
-            return elf;
-        }
-    }
-    build_variant(&target_dir().join("machines").join("powder-bed"), &Machine::Shipped("powder-bed.toml"), false).unwrap_or_else(|e| panic!("{e}"))
+    shipped_elf("powder-bed")
 }
 
 fn replies(board: &mut Board, lines: &[&str]) -> Vec<String> {
